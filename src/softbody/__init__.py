@@ -1,0 +1,76 @@
+"""softbody: pressure soft bodies (Matyka & Ollila) on a fast spring-mass engine.
+
+Closed triangle meshes with mass-carrying vertices, damped springs on the edges and an
+ideal gas inside whose pressure pushes every face outward along its normal.
+"""
+
+from softbody.diagnostics import (
+    Energies,
+    body_area,
+    body_center_of_mass,
+    body_centroid,
+    body_gas_value,
+    body_pressure,
+    body_volume,
+    energies,
+)
+from softbody.errors import MeshError, MeshWarning, SimulationError, StabilityWarning
+from softbody.gas import GAS_CONSTANT, Gas, GasLaw
+from softbody.integrators import Integrator
+from softbody.mesh import (
+    MeshReport,
+    TriMesh,
+    box,
+    capsule,
+    cylinder,
+    icosphere,
+    inspect_mesh,
+    load_mesh,
+    read_mesh,
+    save_mesh,
+    uv_sphere,
+    validate_mesh,
+)
+from softbody.sim import Control, Model, ModelBuilder, Simulator, State
+from softbody.stability import stable_dt
+from softbody.volume import VolumeMethod
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "GAS_CONSTANT",
+    "Control",
+    "Energies",
+    "Gas",
+    "GasLaw",
+    "Integrator",
+    "MeshError",
+    "MeshReport",
+    "MeshWarning",
+    "Model",
+    "ModelBuilder",
+    "SimulationError",
+    "Simulator",
+    "StabilityWarning",
+    "State",
+    "TriMesh",
+    "VolumeMethod",
+    "body_area",
+    "body_center_of_mass",
+    "body_centroid",
+    "body_gas_value",
+    "body_pressure",
+    "body_volume",
+    "box",
+    "capsule",
+    "cylinder",
+    "energies",
+    "icosphere",
+    "inspect_mesh",
+    "load_mesh",
+    "read_mesh",
+    "save_mesh",
+    "stable_dt",
+    "uv_sphere",
+    "validate_mesh",
+]

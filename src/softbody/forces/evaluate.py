@@ -1,0 +1,43 @@
+"""The total force on every particle: the list of physics terms, in the paper's order."""
+
+from __future__ import annotations
+
+from numba import njit
+
+from softbody.forces.external import eval_external_forces
+from softbody.forces.gravity import eval_gravity
+from softbody.forces.pressure import eval_pressure_forces
+from softbody.forces.springs import eval_attachment_forces, eval_spring_forces
+from softbody.gas import eval_body_pressure
+from softbody.volume import eval_body_volume
+
+
+@njit(cache=True)
+def eval_forces(m, c, t, q, qd, w, f):
+    """All forces at time ``t`` [s] for positions ``q`` and velocities ``qd`` (N, 3).
+
+    m : ModelData, c : ControlData, w : Workspace (its body_volume, body_pressure,
+    tri_normal, body_centroid/lo/hi are refreshed as a side product); f : (N, 3) output [N].
+    """
+    # weight, m g (initialises the accumulator)
+    eval_gravity(m.particle_mass, m.gravity, f)
+    # damped Hooke springs: mesh edges, bending springs, user springs
+    eval_spring_forces(q, qd, m.spring_indices, m.spring_rest_length, m.spring_stiffness,
+                       m.spring_damping, f)
+    # springs to fixed points (the paper's hanging ball)
+    eval_attachment_forces(q, qd, m.attachment_particle, c.attachment_anchor,
+                           m.attachment_rest_length, m.attachment_stiffness,
+                           m.attachment_damping, f)
+    # per-step external forces from Control
+    eval_external_forces(c.particle_f, f)
+    # body volumes (and the face normals the pressure force reuses)
+    eval_body_volume(q, m.tri_indices, m.body_particle_range, m.body_tri_range,
+                     m.body_volume_method, m.body_mc_range, m.mc_samples, w.body_centroid,
+                     w.body_lo, w.body_hi, w.tri_normal, w.body_volume)
+    # gas law: P(V, nRT(t))
+    eval_body_pressure(t, m.body_gas_law, m.body_gas_value, m.body_gas_gamma,
+                       m.body_gas_reference_volume, m.body_schedule_range, m.schedule_time,
+                       m.schedule_value, c.gas_override, w.body_volume, w.body_pressure)
+    # pressure force (P - P_ambient) A n / 3 on each face corner
+    eval_pressure_forces(m.tri_indices, m.body_tri_range, w.body_pressure,
+                         m.body_ambient_pressure, w.tri_normal, f)

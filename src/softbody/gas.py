@@ -1,0 +1,225 @@
+"""Gas laws: what pressure the gas in a body has at a given volume, and its energy.
+
+All quantities are SI: nRT in joules (J = Pa m^3), pressures in pascals, volumes in m^3.
+
+============== =============================== ============================================
+law            pressure P(V)                   potential energy E(V), with -dE/dV = P
+============== =============================== ============================================
+isothermal     P = nRT / V  (paper, eq. 5)     E = -nRT ln V
+fixed_pressure P = P0  (a regulated supply)    E = -P0 V
+adiabatic      P = nRT V_ref^(g-1) / V^g       E = nRT V_ref^(g-1) V^(1-g) / (g - 1)
+============== =============================== ============================================
+
+The adiabatic law keeps P V^gamma constant and is parameterised by nRT at a reference
+volume V_ref (default: the body's rest volume), so P(V_ref) = nRT / V_ref as for the
+isothermal law. An ambient pressure P_a outside the body adds P_a V to the energy and the
+force uses P - P_a. The driving value (nRT, or P0 for fixed pressure) may follow a
+piecewise-linear schedule in time or be overridden per step through ``Control``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+from numba import njit
+
+#: Molar gas constant R [J / (mol K)].
+GAS_CONSTANT = 8.314462618
+
+
+class GasLaw(IntEnum):
+    """The equation of state of a body's gas."""
+
+    ISOTHERMAL = 0
+    FIXED_PRESSURE = 1
+    ADIABATIC = 2
+
+
+def _finite(name: str, value: float, *, minimum: float = 0.0, strict: bool = False) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if value < minimum or (strict and value == minimum):
+        raise ValueError(f"{name} must be {'>' if strict else '>='} {minimum}, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class Gas:
+    """The gas inside one body. Build it with one of the class methods.
+
+    Attributes
+    ----------
+    law : GasLaw
+    value : float
+        The driving quantity: nRT [J] for isothermal and adiabatic gas, the pressure P0 [Pa]
+        for fixed pressure.
+    gamma : float
+        Heat capacity ratio for the adiabatic law (1.4 for air).
+    reference_volume : float or None
+        Adiabatic only: the volume [m^3] at which P = nRT / V; None means the rest volume.
+    ambient_pressure : float
+        Pressure outside the body [Pa]; the force uses P - ambient.
+    schedule : tuple of (time [s], value) pairs or None
+        Piecewise-linear ``value`` over time, held constant before the first and after the
+        last point (inflate, deflate, heat). Overrides ``value`` when given.
+    """
+
+    law: GasLaw
+    value: float
+    gamma: float = 1.4
+    reference_volume: float | None = None
+    ambient_pressure: float = 0.0
+    schedule: tuple[tuple[float, float], ...] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "law", GasLaw(self.law))
+        label = "pressure" if self.law == GasLaw.FIXED_PRESSURE else "nRT"
+        object.__setattr__(self, "value", _finite(f"gas {label}", self.value))
+        object.__setattr__(self, "gamma", _finite("gas gamma", self.gamma, minimum=1.0,
+                                                  strict=True))
+        if self.reference_volume is not None:
+            object.__setattr__(self, "reference_volume", _finite(
+                "gas reference_volume", self.reference_volume, strict=True))
+        object.__setattr__(self, "ambient_pressure",
+                           _finite("gas ambient_pressure", self.ambient_pressure))
+        if self.schedule is not None:
+            pts = np.asarray(self.schedule, dtype=np.float64)
+            if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:
+                raise ValueError("gas schedule must be a non-empty list of (time, value) pairs")
+            if not np.all(np.isfinite(pts)):
+                raise ValueError("gas schedule holds NaN or infinite numbers")
+            if np.any(np.diff(pts[:, 0]) <= 0):
+                raise ValueError("gas schedule times must increase strictly")
+            if np.any(pts[:, 1] < 0):
+                raise ValueError(f"gas schedule {label} values must be >= 0")
+            object.__setattr__(self, "schedule", tuple(map(tuple, pts.tolist())))
+
+    @classmethod
+    def isothermal(
+        cls,
+        nrt: float,
+        *,
+        ambient_pressure: float = 0.0,
+        schedule: Sequence[tuple[float, float]] | None = None,
+    ) -> Gas:
+        """Closed gas at constant temperature: P = nRT / V (the paper's model). nRT in J."""
+        return cls(GasLaw.ISOTHERMAL, nrt, ambient_pressure=ambient_pressure, schedule=schedule)
+
+    @classmethod
+    def ideal(
+        cls, moles: float, temperature: float, *, ambient_pressure: float = 0.0
+    ) -> Gas:
+        """Isothermal gas from amount [mol] and temperature [K]: nRT = moles * R * T."""
+        n = _finite("gas moles", moles)
+        temp = _finite("gas temperature", temperature, strict=True)
+        return cls.isothermal(n * GAS_CONSTANT * temp, ambient_pressure=ambient_pressure)
+
+    @classmethod
+    def fixed_pressure(
+        cls,
+        pressure: float,
+        *,
+        ambient_pressure: float = 0.0,
+        schedule: Sequence[tuple[float, float]] | None = None,
+    ) -> Gas:
+        """Gas held at pressure P0 [Pa] whatever the volume (a body on a regulator)."""
+        return cls(GasLaw.FIXED_PRESSURE, pressure, ambient_pressure=ambient_pressure,
+                   schedule=schedule)
+
+    @classmethod
+    def adiabatic(
+        cls,
+        nrt: float,
+        *,
+        gamma: float = 1.4,
+        reference_volume: float | None = None,
+        ambient_pressure: float = 0.0,
+        schedule: Sequence[tuple[float, float]] | None = None,
+    ) -> Gas:
+        """Gas compressed without heat exchange: P V^gamma constant, P(V_ref) = nRT / V_ref."""
+        return cls(GasLaw.ADIABATIC, nrt, gamma=gamma, reference_volume=reference_volume,
+                   ambient_pressure=ambient_pressure, schedule=schedule)
+
+
+@njit(cache=True)
+def gas_value_at(b, t, body_gas_value, body_schedule_range, schedule_time, schedule_value,
+                 override):
+    """The driving value (nRT [J] or P0 [Pa]) of body ``b`` at time ``t`` [s].
+
+    A finite ``override[b]`` wins; else the body's piecewise-linear schedule; else its value.
+    """
+    if np.isfinite(override[b]):
+        return override[b]
+    begin, end = body_schedule_range[b, 0], body_schedule_range[b, 1]
+    if end == begin:
+        return body_gas_value[b]
+    if t <= schedule_time[begin]:
+        return schedule_value[begin]
+    for s in range(begin + 1, end):
+        if t < schedule_time[s]:
+            w = (t - schedule_time[s - 1]) / (schedule_time[s] - schedule_time[s - 1])
+            return schedule_value[s - 1] + w * (schedule_value[s] - schedule_value[s - 1])
+    return schedule_value[end - 1]
+
+
+@njit(cache=True)
+def gas_pressure(law, value, gamma, reference_volume, volume):
+    """Absolute gas pressure [Pa] for one body at ``volume`` [m^3] (NaN if volume <= 0)."""
+    if law == 1:
+        return value
+    if not volume > 0.0:
+        return np.nan
+    if law == 0:
+        return value / volume
+    return value * reference_volume ** (gamma - 1.0) / volume**gamma
+
+
+@njit(cache=True)
+def eval_body_pressure(
+    t,
+    body_gas_law,
+    body_gas_value,
+    body_gas_gamma,
+    body_gas_reference_volume,
+    body_schedule_range,
+    schedule_time,
+    schedule_value,
+    gas_override,
+    body_volume,
+    body_pressure,
+):
+    """Gas pressure of every body [Pa] at time ``t`` from its volume (B,) [m^3]."""
+    for b in range(body_volume.shape[0]):
+        value = gas_value_at(b, t, body_gas_value, body_schedule_range, schedule_time,
+                             schedule_value, gas_override)
+        body_pressure[b] = gas_pressure(body_gas_law[b], value, body_gas_gamma[b],
+                                        body_gas_reference_volume[b], body_volume[b])
+
+
+def gas_energy(
+    law: np.ndarray,
+    value: np.ndarray,
+    gamma: np.ndarray,
+    reference_volume: np.ndarray,
+    ambient_pressure: np.ndarray,
+    volume: np.ndarray,
+) -> np.ndarray:
+    """Potential energy of each body's gas [J] (table in the module docstring), shape (B,).
+
+    Its negative derivative with respect to volume is the net pressure P - P_ambient.
+    """
+    law = np.asarray(law)
+    v = np.asarray(volume, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        iso = -value * np.log(v)
+        fixed = -value * v
+        adi = value * reference_volume ** (gamma - 1.0) * v ** (1.0 - gamma) / (gamma - 1.0)
+    e = np.where(law == GasLaw.ISOTHERMAL, iso, np.where(law == GasLaw.FIXED_PRESSURE, fixed, adi))
+    return e + ambient_pressure * v

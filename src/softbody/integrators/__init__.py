@@ -1,0 +1,53 @@
+"""Time integrators: explicit Euler, Midpoint (RK2), RK4, symplectic Euler, velocity Verlet."""
+
+from __future__ import annotations
+
+from enum import IntEnum
+
+import numpy as np
+
+
+class Integrator(IntEnum):
+    """Time-stepping schemes; ``order`` and ``force_evaluations`` describe each."""
+
+    EULER = 0
+    MIDPOINT = 1
+    RK4 = 2
+    SYMPLECTIC_EULER = 3
+    VELOCITY_VERLET = 4
+
+    @property
+    def order(self) -> int:
+        """Global order of accuracy for smooth problems."""
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2}[int(self)]
+
+    @property
+    def force_evaluations(self) -> int:
+        """Force evaluations per step."""
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2}[int(self)]
+
+    @property
+    def symplectic(self) -> bool:
+        """True for schemes that conserve a modified energy (no secular drift)."""
+        return self in (Integrator.SYMPLECTIC_EULER, Integrator.VELOCITY_VERLET)
+
+    @classmethod
+    def parse(cls, value: str | int | Integrator) -> Integrator:
+        """Accept an enum, its int value or its lowercase name (``"rk4"``, ``"midpoint"``)."""
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, str):
+            key = value.strip().lower().replace("-", "_")
+            aliases = {"rk2": "midpoint", "verlet": "velocity_verlet",
+                       "semi_implicit_euler": "symplectic_euler", "explicit_euler": "euler"}
+            key = aliases.get(key, key)
+            for member in cls:
+                if member.name.lower() == key:
+                    return member
+        elif isinstance(value, int | np.integer) and int(value) in {m.value for m in cls}:
+            return cls(int(value))
+        names = ", ".join(m.name.lower() for m in cls)
+        raise ValueError(f"unknown integrator {value!r}; choose one of: {names}")
+
+
+__all__ = ["Integrator"]

@@ -1,0 +1,97 @@
+"""The compiled time loop: many steps in one call, with blow-up detection after each."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from softbody.forces.evaluate import eval_forces
+from softbody.integrators.schemes import (
+    step_euler,
+    step_midpoint,
+    step_rk4,
+    step_symplectic_euler,
+    step_velocity_verlet,
+)
+
+#: Status codes returned by :func:`simulate`.
+OK = 0
+NONFINITE = 1  # a particle position or velocity became NaN or infinite
+RUNAWAY = 2  # a particle moved faster than the speed limit
+BAD_VOLUME = 3  # a body volume became NaN, zero or negative (inverted)
+SHRUNK = 4  # a body volume fell below the lower limit times its rest volume
+EXPLODED = 5  # a body volume grew past the upper limit times its rest volume
+
+
+@njit(cache=True)
+def _check_volumes(body_volume, body_rest_volume, ratio_min, ratio_max):
+    for b in range(body_volume.shape[0]):
+        v = body_volume[b]
+        if not (np.isfinite(v) and v > 0.0):
+            return BAD_VOLUME, b, v
+        r = v / body_rest_volume[b]
+        if r < ratio_min:
+            return SHRUNK, b, r
+        if r > ratio_max:
+            return EXPLODED, b, r
+    return OK, -1, 0.0
+
+
+@njit(cache=True)
+def _check_particles(q, qd, max_speed):
+    limit = max_speed * max_speed
+    for i in range(q.shape[0]):
+        s = 0.0
+        bad = False
+        for k in range(3):
+            if not (np.isfinite(q[i, k]) and np.isfinite(qd[i, k])):
+                bad = True
+            s += qd[i, k] * qd[i, k]
+        if bad:
+            return NONFINITE, i, np.nan
+        if s > limit:
+            return RUNAWAY, i, np.sqrt(s)
+    return OK, -1, 0.0
+
+
+@njit(cache=True)
+def simulate(integrator, steps, t0, dt, m, c, q, qd, w, max_speed, ratio_min, ratio_max):
+    """Advance ``q``, ``qd`` (N, 3) in place by ``steps`` steps of ``dt`` [s] from ``t0``.
+
+    integrator : int (``Integrator`` value). Returns (status, steps_done, index, value):
+    status 0 when all steps ran; otherwise ``steps_done`` steps completed, ``index`` is
+    the body or particle at fault and ``value`` the offending quantity. On a particle
+    failure the state is restored to the start of the failing step; on a volume failure
+    the state is the one whose volume failed (found before stepping from it).
+    """
+    if c.pin_active:
+        inv = 1.0 / (steps * dt)
+        for p in range(m.pin_particle.shape[0]):
+            i = m.pin_particle[p]
+            for k in range(3):
+                qd[i, k] = (c.pin_target[p, k] - q[i, k]) * inv
+    for s in range(steps):
+        t = t0 + s * dt
+        w.q0[:] = q
+        w.v0[:] = qd
+        eval_forces(m, c, t, q, qd, w, w.f)
+        status, index, value = _check_volumes(w.body_volume, m.body_rest_volume,
+                                              ratio_min, ratio_max)
+        if status != OK:
+            return status, s, index, value
+        if integrator == 0:
+            step_euler(m, c, t, dt, q, qd, w)
+        elif integrator == 1:
+            step_midpoint(m, c, t, dt, q, qd, w)
+        elif integrator == 2:
+            step_rk4(m, c, t, dt, q, qd, w)
+        elif integrator == 3:
+            step_symplectic_euler(m, c, t, dt, q, qd, w)
+        else:
+            step_velocity_verlet(m, c, t, dt, q, qd, w)
+        status, index, value = _check_particles(q, qd, max_speed)
+        if status != OK:
+            q[:] = w.q0
+            qd[:] = w.v0
+            return status, s, index, value
+    return OK, steps, -1, 0.0

@@ -1,0 +1,174 @@
+"""Closed mesh generators. All return outward-wound :class:`TriMesh` objects, y up."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from softbody.mesh.tri_mesh import TriMesh
+
+# trimesh builds capsules and cylinders along z; turn them to stand along y (our "up")
+_Z_TO_Y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+def _positive(name: str, value: float) -> float:
+    value = float(value)
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+    return value
+
+
+def _count(name: str, value: int, minimum: int) -> int:
+    if int(value) != value or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _center(center: ArrayLike) -> np.ndarray:
+    c = np.asarray(center, dtype=np.float64)
+    if c.shape != (3,) or not np.all(np.isfinite(c)):
+        raise ValueError(f"center must be 3 finite numbers, got {center!r}")
+    return c
+
+
+def icosphere(subdivisions: int, radius: float = 1.0, center: ArrayLike = (0, 0, 0)) -> TriMesh:
+    """Geodesic sphere: an icosahedron split ``subdivisions`` times, vertices on the sphere.
+
+    Vertex counts are 10 * 4**s + 2 (12, 42, 162, 642, 2562, 10242, 40962, 163842, ...);
+    ``subdivisions=2`` gives the paper's ball (162 vertices, 320 faces).
+
+    Parameters
+    ----------
+    subdivisions : int
+        Number of 1-to-4 triangle splits, >= 0.
+    radius : float
+        Circumradius [m]: every vertex lies at this distance from ``center``.
+    center : (3,) array of float
+        Center [m].
+    """
+    import trimesh.creation
+
+    s = _count("subdivisions", subdivisions, 0)
+    r = _positive("radius", radius)
+    m = trimesh.creation.icosphere(subdivisions=s, radius=1.0)
+    v = np.asarray(m.vertices, dtype=np.float64)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)  # exactly on the sphere
+    return TriMesh(v * r + _center(center), m.faces)
+
+
+def uv_sphere(
+    rings: int = 16, segments: int = 32, radius: float = 1.0, center: ArrayLike = (0, 0, 0)
+) -> TriMesh:
+    """Latitude-longitude sphere with one vertex at each pole (on the y axis).
+
+    Parameters
+    ----------
+    rings : int
+        Number of latitude bands, >= 2.
+    segments : int
+        Number of longitude segments, >= 3. A multiple of 4 puts vertices on the x and z axes.
+    radius : float
+        Radius [m]; every vertex lies on the sphere.
+    center : (3,) array of float
+        Center [m].
+    """
+    n_r = _count("rings", rings, 2)
+    n_s = _count("segments", segments, 3)
+    r = _positive("radius", radius)
+    theta = np.linspace(0.0, np.pi, n_r + 1)[1:-1]  # polar angle of the inner rings
+    phi = np.linspace(0.0, 2.0 * np.pi, n_s, endpoint=False)
+    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
+    ring = np.stack(
+        [st * np.cos(phi), np.broadcast_to(ct, (n_r - 1, n_s)), -st * np.sin(phi)], axis=2
+    ).reshape(-1, 3)
+    v = np.vstack([[0.0, 1.0, 0.0], ring, [0.0, -1.0, 0.0]])
+    north, south = 0, len(v) - 1
+
+    def idx(i, j):  # ring i (0 = nearest north), segment j
+        return 1 + i * n_s + (j % n_s)
+
+    j = np.arange(n_s)
+    faces = [np.stack([np.full(n_s, north), idx(0, j), idx(0, j + 1)], axis=1)]
+    for i in range(n_r - 2):
+        a, b, c, d = idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)
+        faces += [np.stack([a, b, c], axis=1), np.stack([a, c, d], axis=1)]
+    faces.append(np.stack([idx(n_r - 2, j + 1), idx(n_r - 2, j), np.full(n_s, south)], axis=1))
+    return TriMesh(v * r + _center(center), np.vstack(faces))
+
+
+def box(
+    extents: ArrayLike = (1.0, 1.0, 1.0), center: ArrayLike = (0, 0, 0), subdivisions: int = 0
+) -> TriMesh:
+    """Axis-aligned box, each side split into a grid of ``2**subdivisions`` squares per edge.
+
+    Parameters
+    ----------
+    extents : (3,) array of float
+        Side lengths along x, y, z [m].
+    center : (3,) array of float
+        Center [m].
+    subdivisions : int
+        Grid refinement level, >= 0 (0 gives 8 vertices and 12 triangles).
+    """
+    ext = np.asarray(extents, dtype=np.float64)
+    if ext.shape != (3,) or not np.all(np.isfinite(ext)) or np.any(ext <= 0):
+        raise ValueError(f"extents must be 3 finite numbers > 0, got {extents!r}")
+    n = 2 ** _count("subdivisions", subdivisions, 0)
+    t = np.linspace(-0.5, 0.5, n + 1)
+    u, w = np.meshgrid(t, t, indexing="ij")
+    u, w = u.reshape(-1), w.reshape(-1)
+    grid_faces = []
+    k = np.arange(n)
+    ii, jj = np.meshgrid(k, k, indexing="ij")
+    ii, jj = ii.reshape(-1), jj.reshape(-1)
+    a = ii * (n + 1) + jj
+    b, c, d = a + (n + 1), a + (n + 1) + 1, a + 1
+    quad = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    verts = []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            p = np.zeros((len(u), 3))
+            p1, p2 = (axis + 1) % 3, (axis + 2) % 3
+            p[:, axis], p[:, p1], p[:, p2] = 0.5 * sign, u, w
+            # (p1, p2) grid with normal +axis is counter-clockwise; flip for the -axis side
+            f = quad if sign > 0 else quad[:, ::-1]
+            grid_faces.append(f + sum(len(x) for x in verts))
+            verts.append(p)
+    mesh = TriMesh(np.vstack(verts) * ext + _center(center), np.vstack(grid_faces))
+    from softbody.mesh.validate import inspect_mesh
+
+    return inspect_mesh(mesh).mesh  # weld the shared edges of the six sides
+
+
+def capsule(
+    radius: float = 0.5,
+    length: float = 1.0,
+    rings: int = 8,
+    segments: int = 16,
+    center: ArrayLike = (0, 0, 0),
+) -> TriMesh:
+    """Capsule along y: a cylinder of ``length`` [m] capped by two hemispheres of ``radius`` [m].
+
+    ``rings`` latitude bands per hemisphere and ``segments`` around the axis.
+    """
+    import trimesh.creation
+
+    r = _positive("radius", radius)
+    h = _positive("length", length)
+    n_r = _count("rings", rings, 2)
+    n_s = _count("segments", segments, 3)
+    m = trimesh.creation.capsule(height=h, radius=r, count=[n_s, 2 * n_r])
+    return TriMesh(np.asarray(m.vertices) @ _Z_TO_Y.T + _center(center), m.faces)
+
+
+def cylinder(
+    radius: float = 0.5, height: float = 1.0, segments: int = 32, center: ArrayLike = (0, 0, 0)
+) -> TriMesh:
+    """Closed cylinder along y with flat caps: ``segments`` sides, ``radius`` and ``height`` [m]."""
+    import trimesh.creation
+
+    r = _positive("radius", radius)
+    h = _positive("height", height)
+    n_s = _count("segments", segments, 3)
+    m = trimesh.creation.cylinder(radius=r, height=h, sections=n_s)
+    return TriMesh(np.asarray(m.vertices) @ _Z_TO_Y.T + _center(center), m.faces)

@@ -1,0 +1,77 @@
+"""Reading and writing mesh files through trimesh (OBJ, PLY, STL, OFF, GLB/GLTF)."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from softbody.errors import MeshError
+from softbody.mesh.tri_mesh import TriMesh
+from softbody.mesh.validate import validate_mesh
+
+#: File suffixes :func:`load_mesh` reads.
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+
+
+def read_mesh(path: str | os.PathLike) -> TriMesh:
+    """Read a triangle mesh file as stored, without validation or repair.
+
+    Multi-object files (a GLB scene, an OBJ with several groups) are merged into one mesh
+    with their transforms applied. Polygons are triangulated by trimesh.
+    """
+    import trimesh
+
+    p = Path(path)
+    if not p.is_file():
+        raise MeshError(f"{p}: no such file")
+    if p.suffix.lower() not in MESH_SUFFIXES:
+        raise MeshError(
+            f"{p}: unsupported mesh format {p.suffix!r}; use one of {', '.join(MESH_SUFFIXES)}"
+        )
+    try:
+        loaded = trimesh.load(str(p), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise MeshError(f"{p}: could not read mesh ({exc})") from exc
+    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
+    if faces.size == 0:
+        raise MeshError(f"{p}: file holds no triangles")
+    return TriMesh(np.asarray(loaded.vertices, dtype=np.float64), faces)
+
+
+def load_mesh(path: str | os.PathLike, *, validate: bool = True) -> TriMesh:
+    """Read a mesh file and make sure it can hold gas.
+
+    With ``validate=True`` (default) the mesh goes through
+    :func:`softbody.validate_mesh`: duplicate seam vertices are welded, an inward-wound
+    mesh is flipped (with a warning), and an open, non-manifold or degenerate mesh raises
+    :class:`MeshError` naming the problem and its count.
+    """
+    mesh = read_mesh(path)
+    return validate_mesh(mesh, name=str(path)) if validate else mesh
+
+
+def save_mesh(mesh: TriMesh, path: str | os.PathLike) -> Path:
+    """Write ``mesh`` to ``path`` (format from the suffix), whole or not at all.
+
+    The file is written to a temporary name beside the target and renamed into place,
+    so a failed write never leaves a truncated file.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise ValueError(f"unsupported mesh format {p.suffix!r}; use one of {MESH_SUFFIXES}")
+    data = mesh.to_trimesh().export(file_type=suffix[1:])
+    if isinstance(data, str):
+        data = data.encode()
+    fd, tmp = tempfile.mkstemp(dir=p.parent, prefix=f".{p.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return p

@@ -1,0 +1,395 @@
+"""``ModelBuilder``: collect particles, springs and soft bodies, then ``finalize`` a Model."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from softbody.errors import MeshError
+from softbody.gas import Gas
+from softbody.mesh.topology import bending_pairs, unique_edges, vertex_areas
+from softbody.mesh.tri_mesh import TriMesh
+from softbody.mesh.validate import validate_mesh
+from softbody.sim.model import Model
+from softbody.volume import VolumeMethod, eval_body_volume
+
+
+def _number(name: str, value, *, minimum: float | None = 0.0, strict: bool = False) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(x):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if minimum is not None and (x < minimum or (strict and x == minimum)):
+        raise ValueError(f"{name} must be {'>' if strict else '>='} {minimum:g}, got {value!r}")
+    return x
+
+
+def _vec3(name: str, value) -> np.ndarray:
+    v = np.asarray(value, dtype=np.float64)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
+    return v
+
+
+@dataclass
+class _Body:
+    particle_begin: int
+    particle_end: int
+    faces: np.ndarray  # (F, 3) global particle indices
+    mass: float
+    gas: Gas
+    volume_method: VolumeMethod
+    mc_samples: np.ndarray  # (S, 2)
+
+
+class ModelBuilder:
+    """Collects the pieces of a model. Everything is validated as it is added.
+
+    Parameters
+    ----------
+    gravity : (3,) array of float
+        Gravitational acceleration [m/s^2]; default -9.81 along y.
+
+    Examples
+    --------
+    >>> import softbody
+    >>> builder = softbody.ModelBuilder()
+    >>> ball = builder.add_soft_body(softbody.icosphere(2), mass=1.0, stiffness=500.0,
+    ...                              damping=1.0, gas=softbody.Gas.isothermal(200.0))
+    >>> model = builder.finalize()
+    """
+
+    def __init__(self, *, gravity: ArrayLike = (0.0, -9.81, 0.0)):
+        self.gravity = _vec3("gravity", gravity)
+        self._q: list[np.ndarray] = []
+        self._qd: list[np.ndarray] = []
+        self._mass: list[np.ndarray] = []
+        self._pinned: list[np.ndarray] = []
+        self._particle_body: list[np.ndarray] = []
+        self._particle_count = 0
+        self._springs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._attachments: list[tuple[int, np.ndarray, float, float, float]] = []
+        self._bodies: list[_Body] = []
+
+    # -- sizes ---------------------------------------------------------------------------
+    @property
+    def particle_count(self) -> int:
+        """Particles added so far."""
+        return self._particle_count
+
+    @property
+    def body_count(self) -> int:
+        """Soft bodies added so far."""
+        return len(self._bodies)
+
+    def body_particles(self, body: int) -> range:
+        """Particle indices of ``body``'s vertices (vertex k is particle ``range[k]``)."""
+        b = self._bodies[body]
+        return range(b.particle_begin, b.particle_end)
+
+    # -- particles and springs -----------------------------------------------------------
+    def _append_particles(self, q, qd, mass, pinned, body):
+        n = len(q)
+        self._q.append(q)
+        self._qd.append(qd)
+        self._mass.append(mass)
+        self._pinned.append(pinned)
+        self._particle_body.append(np.full(n, body, dtype=np.int64))
+        begin = self._particle_count
+        self._particle_count += n
+        return begin
+
+    def add_particle(
+        self,
+        position: ArrayLike,
+        *,
+        mass: float,
+        velocity: ArrayLike = (0.0, 0.0, 0.0),
+        pinned: bool = False,
+    ) -> int:
+        """Add one free particle; returns its index.
+
+        position [m], mass [kg] (> 0), velocity [m/s]; a pinned particle does not respond
+        to forces (it moves only through ``Control.pin_target``).
+        """
+        q = _vec3("position", position)[None]
+        qd = _vec3("velocity", velocity)[None]
+        m = _number("mass", mass, strict=True)
+        return self._append_particles(q, qd, np.array([m]), np.array([bool(pinned)]), -1)
+
+    def _check_particles(self, name: str, idx) -> np.ndarray:
+        a = np.asarray(idx)
+        if a.size and not np.issubdtype(a.dtype, np.integer):
+            raise ValueError(f"{name} must be integer particle indices")
+        a = a.astype(np.int64)
+        if a.size and (a.min() < 0 or a.max() >= self._particle_count):
+            raise ValueError(
+                f"{name} must lie in [0, {self._particle_count - 1}], "
+                f"got range [{a.min()}, {a.max()}]"
+            )
+        return a
+
+    def add_spring(
+        self,
+        i: int,
+        j: int,
+        *,
+        stiffness: float,
+        damping: float = 0.0,
+        rest_length: float | None = None,
+    ) -> int:
+        """Add a damped Hooke spring between particles ``i`` and ``j``; returns its index.
+
+        stiffness [N/m] >= 0, damping [N s/m] >= 0; rest_length [m] defaults to the
+        current distance.
+        """
+        pair = self._check_particles("spring particle", [i, j])
+        if pair[0] == pair[1]:
+            raise ValueError(f"a spring needs two different particles, got {i} twice")
+        k = _number("stiffness", stiffness)
+        c = _number("damping", damping)
+        if rest_length is None:
+            rest = np.array([np.nan])  # measured at finalize
+        else:
+            rest = np.array([_number("rest_length", rest_length)])
+        self._springs.append((pair[None], rest, np.array([k]), np.array([c]), np.array([-1])))
+        return sum(len(s[0]) for s in self._springs) - 1
+
+    def add_attachment(
+        self,
+        particle: int,
+        anchor: ArrayLike,
+        *,
+        stiffness: float,
+        damping: float = 0.0,
+        rest_length: float = 0.0,
+    ) -> int:
+        """Tie ``particle`` to the fixed point ``anchor`` [m] with a damped spring.
+
+        stiffness [N/m] > 0, damping [N s/m] >= 0, rest_length [m] >= 0. Returns the
+        attachment index (``Control.attachment_anchor`` moves its anchor).
+        """
+        (p,) = self._check_particles("attachment particle", [particle])
+        self._attachments.append((
+            int(p), _vec3("anchor", anchor), _number("rest_length", rest_length),
+            _number("stiffness", stiffness, strict=True), _number("damping", damping),
+        ))
+        return len(self._attachments) - 1
+
+    # -- soft bodies ---------------------------------------------------------------------
+    def add_soft_body(
+        self,
+        mesh: TriMesh,
+        *,
+        mass: float,
+        stiffness: float,
+        damping: float,
+        gas: Gas | float,
+        volume_method: str | VolumeMethod = "exact",
+        pinned: Sequence[int] | np.ndarray | None = None,
+        bend_stiffness: float = 0.0,
+        bend_damping: float = 0.0,
+        mass_distribution: Literal["uniform", "area"] = "uniform",
+        velocity: ArrayLike = (0.0, 0.0, 0.0),
+        monte_carlo_samples: int = 4096,
+        seed: int = 0,
+    ) -> int:
+        """Add a closed mesh filled with gas as a soft body; returns the body index.
+
+        Parameters
+        ----------
+        mesh : TriMesh
+            Closed surface. It is validated (welded, oriented; open or non-manifold meshes
+            raise :class:`MeshError`). Vertex k becomes particle ``body_particles(b)[k]``.
+        mass : float
+            Total mass [kg], > 0.
+        stiffness, damping : float
+            Hooke stiffness [N/m] and damping [N s/m] of the spring on every mesh edge.
+        gas : Gas or float
+            The gas inside; a number means an isothermal gas with that nRT [J].
+        volume_method : str
+            ``"exact"`` (default), ``"bounding_box"``, ``"bounding_sphere"``,
+            ``"bounding_ellipsoid"`` or ``"monte_carlo"``.
+        pinned : sequence of int, optional
+            Mesh vertex indices held in place (kinematic).
+        bend_stiffness, bend_damping : float
+            Springs across each pair of adjacent triangles [N/m], [N s/m]; 0 adds none.
+        mass_distribution : {"uniform", "area"}
+            Equal particle masses, or proportional to each vertex's share of the area.
+        velocity : (3,) array of float
+            Initial velocity of every particle [m/s].
+        monte_carlo_samples : int
+            Lines per Monte Carlo volume estimate (``volume_method="monte_carlo"``).
+        seed : int
+            Seed of the Monte Carlo sample lines, so runs repeat.
+        """
+        if isinstance(mesh, TriMesh):
+            source = mesh
+        elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
+            source = TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+        else:
+            raise TypeError(f"mesh must be a TriMesh, got {type(mesh).__name__}")
+        body = len(self._bodies)
+        mesh = validate_mesh(source, name=f"body {body} mesh")
+        if mesh.vertex_count != source.vertex_count and pinned is not None:
+            warnings.warn(
+                f"body {body}: welding renumbered the mesh vertices; pinned indices refer "
+                "to the welded mesh", stacklevel=2)
+        total_mass = _number("mass", mass, strict=True)
+        k = _number("stiffness", stiffness)
+        c = _number("damping", damping)
+        kb = _number("bend_stiffness", bend_stiffness)
+        cb = _number("bend_damping", bend_damping)
+        if not isinstance(gas, Gas):
+            gas = Gas.isothermal(_number("gas nRT", gas))
+        method = VolumeMethod.parse(volume_method)
+        v = mesh.vertex_count
+        if mass_distribution == "uniform":
+            m = np.full(v, total_mass / v)
+        elif mass_distribution == "area":
+            areas = vertex_areas(mesh.vertices, mesh.faces)
+            m = total_mass * areas / areas.sum()
+        else:
+            raise ValueError(
+                f"mass_distribution must be 'uniform' or 'area', got {mass_distribution!r}"
+            )
+        pin_mask = np.zeros(v, dtype=bool)
+        if pinned is not None:
+            p = np.asarray(pinned)
+            if p.size and not np.issubdtype(p.dtype, np.integer):
+                raise ValueError("pinned must be integer vertex indices")
+            p = p.astype(np.int64).reshape(-1)
+            if p.size and (p.min() < 0 or p.max() >= v):
+                raise ValueError(f"pinned vertex indices must lie in [0, {v - 1}]")
+            pin_mask[p] = True
+        vel = np.broadcast_to(_vec3("velocity", velocity), (v, 3)).copy()
+        samples_n = int(monte_carlo_samples)
+        if method == VolumeMethod.MONTE_CARLO and samples_n < 1:
+            raise ValueError(f"monte_carlo_samples must be >= 1, got {monte_carlo_samples!r}")
+        samples = (np.random.default_rng(seed).random((samples_n, 2))
+                   if method == VolumeMethod.MONTE_CARLO else np.zeros((0, 2)))
+
+        begin = self._append_particles(mesh.vertices.copy(), vel, m, pin_mask, body)
+        edges = unique_edges(mesh.faces) + begin
+        self._springs.append((edges, np.full(len(edges), np.nan), np.full(len(edges), k),
+                              np.full(len(edges), c), np.full(len(edges), body)))
+        if kb > 0:
+            bend = bending_pairs(mesh.faces) + begin
+            self._springs.append((bend, np.full(len(bend), np.nan), np.full(len(bend), kb),
+                                  np.full(len(bend), cb), np.full(len(bend), body)))
+        self._bodies.append(_Body(begin, begin + v, mesh.faces + begin, total_mass, gas,
+                                  method, samples))
+        return body
+
+    # -- finalize ------------------------------------------------------------------------
+    def finalize(self) -> Model:
+        """Freeze everything into an immutable :class:`Model`."""
+        if self._particle_count == 0:
+            raise ValueError("the model is empty: add a soft body or particles first")
+        q = np.vstack(self._q)
+        qd = np.vstack(self._qd)
+        mass = np.concatenate(self._mass)
+        pinned = np.concatenate(self._pinned)
+        inv_mass = np.where(pinned, 0.0, 1.0 / mass)
+        particle_body = np.concatenate(self._particle_body)
+
+        if self._springs:
+            idx = np.vstack([s[0] for s in self._springs]).astype(np.int64)
+            rest = np.concatenate([s[1] for s in self._springs])
+            k = np.concatenate([s[2] for s in self._springs])
+            c = np.concatenate([s[3] for s in self._springs])
+            spring_body = np.concatenate([s[4] for s in self._springs]).astype(np.int64)
+        else:
+            idx = np.zeros((0, 2), dtype=np.int64)
+            rest = k = c = np.zeros(0)
+            spring_body = np.zeros(0, dtype=np.int64)
+        measured = np.linalg.norm(q[idx[:, 1]] - q[idx[:, 0]], axis=1)
+        rest = np.where(np.isnan(rest), measured, rest)
+
+        att = self._attachments
+        att_particle = np.array([a[0] for a in att], dtype=np.int64)
+        att_anchor = np.array([a[1] for a in att], dtype=np.float64).reshape(-1, 3)
+        att_rest = np.array([a[2] for a in att], dtype=np.float64)
+        att_k = np.array([a[3] for a in att], dtype=np.float64)
+        att_c = np.array([a[4] for a in att], dtype=np.float64)
+
+        bodies = self._bodies
+        bcount = len(bodies)
+        tri = (np.vstack([b.faces for b in bodies]).astype(np.int64) if bodies
+               else np.zeros((0, 3), dtype=np.int64))
+        tri_counts = np.array([len(b.faces) for b in bodies], dtype=np.int64)
+        tri_end = np.cumsum(tri_counts)
+        body_tri_range = np.stack([tri_end - tri_counts, tri_end], axis=1).reshape(-1, 2)
+        body_particle_range = np.array([[b.particle_begin, b.particle_end] for b in bodies],
+                                       dtype=np.int64).reshape(-1, 2)
+        mc_counts = np.array([len(b.mc_samples) for b in bodies], dtype=np.int64)
+        mc_end = np.cumsum(mc_counts)
+        body_mc_range = np.stack([mc_end - mc_counts, mc_end], axis=1).reshape(-1, 2)
+        mc_samples = (np.vstack([b.mc_samples for b in bodies]) if bodies
+                      else np.zeros((0, 2))).reshape(-1, 2)
+        method = np.array([b.volume_method for b in bodies], dtype=np.int64)
+        schedules = [np.asarray(b.gas.schedule or np.zeros((0, 2))).reshape(-1, 2)
+                     for b in bodies]
+        sched_counts = np.array([len(s) for s in schedules], dtype=np.int64)
+        sched_end = np.cumsum(sched_counts)
+        body_schedule_range = np.stack([sched_end - sched_counts, sched_end],
+                                       axis=1).reshape(-1, 2)
+        sched = np.vstack(schedules) if schedules else np.zeros((0, 2))
+
+        # rest volume by each body's own method, at the initial positions
+        rest_volume = np.zeros(bcount)
+        eval_body_volume(q, tri, body_particle_range, body_tri_range, method, body_mc_range,
+                         mc_samples, np.zeros((bcount, 3)), np.zeros((bcount, 3)),
+                         np.zeros((bcount, 3)), np.zeros((len(tri), 3)), rest_volume)
+        for b in range(bcount):
+            if not rest_volume[b] > 0:
+                raise MeshError(f"body {b} encloses no volume ({rest_volume[b]:.3g} m^3)")
+        ref_volume = np.array([
+            b.gas.reference_volume if b.gas.reference_volume is not None else rest_volume[i]
+            for i, b in enumerate(bodies)], dtype=np.float64)
+
+        return Model(
+            gravity=self.gravity.copy(),
+            particle_q=q,
+            particle_qd=qd,
+            particle_mass=mass,
+            particle_inv_mass=inv_mass,
+            particle_body=particle_body,
+            spring_indices=idx,
+            spring_rest_length=rest,
+            spring_stiffness=k,
+            spring_damping=c,
+            spring_body=spring_body,
+            attachment_particle=att_particle,
+            attachment_anchor=att_anchor,
+            attachment_rest_length=att_rest,
+            attachment_stiffness=att_k,
+            attachment_damping=att_c,
+            tri_indices=tri,
+            body_particle_range=body_particle_range,
+            body_tri_range=body_tri_range,
+            body_mass=np.array([b.mass for b in bodies], dtype=np.float64),
+            body_volume_method=method,
+            body_mc_range=body_mc_range,
+            mc_samples=np.ascontiguousarray(mc_samples),
+            body_gas_law=np.array([int(b.gas.law) for b in bodies], dtype=np.int64),
+            body_gas_value=np.array([b.gas.value for b in bodies], dtype=np.float64),
+            body_gas_gamma=np.array([b.gas.gamma for b in bodies], dtype=np.float64),
+            body_gas_reference_volume=ref_volume,
+            body_ambient_pressure=np.array([b.gas.ambient_pressure for b in bodies],
+                                           dtype=np.float64),
+            body_schedule_range=body_schedule_range,
+            schedule_time=np.ascontiguousarray(sched[:, 0]),
+            schedule_value=np.ascontiguousarray(sched[:, 1]),
+            body_rest_volume=rest_volume,
+            pin_particle=np.flatnonzero(pinned).astype(np.int64),
+        )
+
+

@@ -1,0 +1,105 @@
+"""Per-step inputs: gas amount, external forces, kinematic targets."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+
+from softbody.gas import GasLaw
+
+if TYPE_CHECKING:
+    from softbody.sim.model import Model
+
+
+class ControlData(NamedTuple):
+    """The control arrays the compiled kernels read."""
+
+    gas_override: np.ndarray  # (B,) driving gas value, NaN = the model's value or schedule
+    particle_f: np.ndarray  # (N, 3) external forces [N]
+    attachment_anchor: np.ndarray  # (A, 3) anchor points [m]
+    pin_target: np.ndarray  # (P, 3) pinned-particle targets at the end of the call [m]
+    pin_active: bool  # whether pin_target is used
+
+
+@dataclass(eq=False)
+class Control:
+    """Inputs for one call of ``Simulator.step`` (held constant over the call).
+
+    Make one with ``model.control()`` and change what you need. NaN in a gas array means
+    "use the model's value (or its schedule)".
+    """
+
+    body_gas_nrt: np.ndarray
+    """nRT [J] of isothermal and adiabatic bodies, shape (B,); NaN keeps the model's."""
+    body_gas_pressure: np.ndarray
+    """Pressure P0 [Pa] of fixed-pressure bodies, shape (B,); NaN keeps the model's."""
+    particle_f: np.ndarray
+    """External force on each particle [N], shape (N, 3)."""
+    attachment_anchor: np.ndarray
+    """Anchor point of each attachment spring [m], shape (A, 3)."""
+    pin_target: np.ndarray | None = None
+    """Where each pinned particle (``model.pin_particle`` order) should be at the end of
+    the call [m], shape (P, 3); it moves there at constant velocity. None leaves pins
+    moving with their current velocity (at rest unless set)."""
+
+    @classmethod
+    def neutral(cls, model: Model) -> Control:
+        """Inputs that change nothing about ``model``."""
+        b = model.body_count
+        return cls(
+            body_gas_nrt=np.full(b, np.nan),
+            body_gas_pressure=np.full(b, np.nan),
+            particle_f=np.zeros((model.particle_count, 3)),
+            attachment_anchor=model.attachment_anchor.copy(),
+        )
+
+    def write(self, model: Model, out: ControlData) -> ControlData:
+        """Check this control against ``model`` and copy it into the kernel arrays ``out``."""
+        b = model.body_count
+
+        def arr(name, value, shape):
+            a = np.asarray(value, dtype=np.float64)
+            if a.shape != shape:
+                raise ValueError(f"Control.{name} must have shape {shape}, got {a.shape}")
+            return a
+
+        nrt = arr("body_gas_nrt", self.body_gas_nrt, (b,))
+        pressure = arr("body_gas_pressure", self.body_gas_pressure, (b,))
+        fixed = model.body_gas_law == GasLaw.FIXED_PRESSURE
+        for name, values, wrong in (("body_gas_nrt", nrt, fixed),
+                                    ("body_gas_pressure", pressure, ~fixed)):
+            if np.any(np.isinf(values)) or np.any(values < 0):
+                raise ValueError(f"Control.{name} must be >= 0 and finite (NaN = unchanged)")
+            if np.any(np.isfinite(values) & wrong):
+                kind = "fixed-pressure" if name == "body_gas_nrt" else "isothermal/adiabatic"
+                bodies = np.flatnonzero(np.isfinite(values) & wrong).tolist()
+                raise ValueError(f"Control.{name} set for {kind} bodies {bodies}")
+        np.copyto(out.gas_override, np.where(fixed, pressure, nrt))
+        for name, value, target in (
+            ("particle_f", self.particle_f, out.particle_f),
+            ("attachment_anchor", self.attachment_anchor, out.attachment_anchor),
+        ):
+            a = arr(name, value, target.shape)
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"Control.{name} holds NaN or infinite values")
+            np.copyto(target, a)
+        active = self.pin_target is not None
+        if active:
+            a = arr("pin_target", self.pin_target, out.pin_target.shape)
+            if not np.all(np.isfinite(a)):
+                raise ValueError("Control.pin_target holds NaN or infinite values")
+            np.copyto(out.pin_target, a)
+        return out._replace(pin_active=active)
+
+
+def control_data(model: Model) -> ControlData:
+    """Fresh kernel control arrays for ``model`` holding neutral inputs."""
+    return ControlData(
+        gas_override=np.full(model.body_count, np.nan),
+        particle_f=np.zeros((model.particle_count, 3)),
+        attachment_anchor=model.attachment_anchor.copy(),
+        pin_target=model.particle_q[model.pin_particle].copy(),
+        pin_active=False,
+    )

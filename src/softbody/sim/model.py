@@ -1,0 +1,188 @@
+"""The immutable model: topology and parameters, fixed after ``ModelBuilder.finalize``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from softbody.gas import GasLaw
+from softbody.volume import VolumeMethod
+
+
+class ModelData(NamedTuple):
+    """The arrays the compiled kernels read, in one bundle (one dispatch per call)."""
+
+    particle_mass: np.ndarray
+    particle_inv_mass: np.ndarray
+    gravity: np.ndarray
+    spring_indices: np.ndarray
+    spring_rest_length: np.ndarray
+    spring_stiffness: np.ndarray
+    spring_damping: np.ndarray
+    attachment_particle: np.ndarray
+    attachment_rest_length: np.ndarray
+    attachment_stiffness: np.ndarray
+    attachment_damping: np.ndarray
+    tri_indices: np.ndarray
+    body_particle_range: np.ndarray
+    body_tri_range: np.ndarray
+    body_volume_method: np.ndarray
+    body_mc_range: np.ndarray
+    mc_samples: np.ndarray
+    body_gas_law: np.ndarray
+    body_gas_value: np.ndarray
+    body_gas_gamma: np.ndarray
+    body_gas_reference_volume: np.ndarray
+    body_ambient_pressure: np.ndarray
+    body_schedule_range: np.ndarray
+    schedule_time: np.ndarray
+    schedule_value: np.ndarray
+    body_rest_volume: np.ndarray
+    pin_particle: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """Particles, springs, triangles, bodies and their gas, pins. All arrays are read-only.
+
+    Build one with :class:`softbody.ModelBuilder`. Units are SI. N particles, S springs,
+    A attachments, T triangles, B bodies, P pinned particles.
+    """
+
+    gravity: np.ndarray
+    """Gravitational acceleration [m/s^2], shape (3,)."""
+    particle_q: np.ndarray
+    """Initial particle positions [m], shape (N, 3)."""
+    particle_qd: np.ndarray
+    """Initial particle velocities [m/s], shape (N, 3)."""
+    particle_mass: np.ndarray
+    """Particle masses [kg], shape (N,)."""
+    particle_inv_mass: np.ndarray
+    """Inverse masses [1/kg], shape (N,); 0 for pinned particles."""
+    particle_body: np.ndarray
+    """Body of each particle, shape (N,); -1 for free particles."""
+    spring_indices: np.ndarray
+    """Particle pair of each spring, shape (S, 2)."""
+    spring_rest_length: np.ndarray
+    """Spring rest lengths [m], shape (S,)."""
+    spring_stiffness: np.ndarray
+    """Spring stiffnesses [N/m], shape (S,)."""
+    spring_damping: np.ndarray
+    """Spring damping coefficients [N s/m], shape (S,)."""
+    spring_body: np.ndarray
+    """Body of each spring, shape (S,); -1 for springs between free particles."""
+    attachment_particle: np.ndarray
+    """Particle tied by each attachment spring, shape (A,)."""
+    attachment_anchor: np.ndarray
+    """Default anchor points [m], shape (A, 3); ``Control.attachment_anchor`` moves them."""
+    attachment_rest_length: np.ndarray
+    """Attachment rest lengths [m], shape (A,)."""
+    attachment_stiffness: np.ndarray
+    """Attachment stiffnesses [N/m], shape (A,)."""
+    attachment_damping: np.ndarray
+    """Attachment damping coefficients [N s/m], shape (A,)."""
+    tri_indices: np.ndarray
+    """Particle indices of each surface triangle, outward-wound, shape (T, 3)."""
+    body_particle_range: np.ndarray
+    """[begin, end) particle indices of each body, shape (B, 2)."""
+    body_tri_range: np.ndarray
+    """[begin, end) triangle indices of each body, shape (B, 2)."""
+    body_mass: np.ndarray
+    """Total mass of each body [kg], shape (B,)."""
+    body_volume_method: np.ndarray
+    """``VolumeMethod`` of each body, shape (B,)."""
+    body_mc_range: np.ndarray
+    """[begin, end) rows of ``mc_samples`` used by each Monte Carlo body, shape (B, 2)."""
+    mc_samples: np.ndarray
+    """Seeded sample points in [0, 1)^2 for Monte Carlo volumes, shape (M, 2)."""
+    body_gas_law: np.ndarray
+    """``GasLaw`` of each body, shape (B,)."""
+    body_gas_value: np.ndarray
+    """Driving gas value: nRT [J] (isothermal, adiabatic) or P0 [Pa] (fixed), shape (B,)."""
+    body_gas_gamma: np.ndarray
+    """Adiabatic exponent, shape (B,)."""
+    body_gas_reference_volume: np.ndarray
+    """Volume at which an adiabatic gas has P = nRT / V [m^3], shape (B,)."""
+    body_ambient_pressure: np.ndarray
+    """Pressure outside each body [Pa], shape (B,)."""
+    body_schedule_range: np.ndarray
+    """[begin, end) rows of the gas schedule of each body (empty: none), shape (B, 2)."""
+    schedule_time: np.ndarray
+    """Gas schedule times [s], shape (K,)."""
+    schedule_value: np.ndarray
+    """Gas schedule values (nRT [J] or P0 [Pa]), shape (K,)."""
+    body_rest_volume: np.ndarray
+    """Volume of each body at its initial positions by its own method [m^3], shape (B,)."""
+    pin_particle: np.ndarray
+    """Pinned (kinematic) particles, shape (P,); ``Control.pin_target`` moves them."""
+    data: ModelData = field(init=False, repr=False)
+    """The same arrays bundled for the compiled kernels."""
+
+    def __post_init__(self):
+        for name in self.__dataclass_fields__:
+            value = getattr(self, name, None)
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+        data = ModelData(**{name: getattr(self, name) for name in ModelData._fields})
+        object.__setattr__(self, "data", data)
+
+    # -- counts --------------------------------------------------------------------------
+    @property
+    def particle_count(self) -> int:
+        """Number of particles N."""
+        return int(self.particle_q.shape[0])
+
+    @property
+    def spring_count(self) -> int:
+        """Number of springs S (edges, bending and user springs)."""
+        return int(self.spring_indices.shape[0])
+
+    @property
+    def attachment_count(self) -> int:
+        """Number of attachment springs A."""
+        return int(self.attachment_particle.shape[0])
+
+    @property
+    def tri_count(self) -> int:
+        """Number of surface triangles T."""
+        return int(self.tri_indices.shape[0])
+
+    @property
+    def body_count(self) -> int:
+        """Number of soft bodies B."""
+        return int(self.body_particle_range.shape[0])
+
+    @property
+    def pin_count(self) -> int:
+        """Number of pinned particles P."""
+        return int(self.pin_particle.shape[0])
+
+    def body_gas_law_of(self, body: int) -> GasLaw:
+        """The gas law of ``body``."""
+        return GasLaw(int(self.body_gas_law[body]))
+
+    def body_volume_method_of(self, body: int) -> VolumeMethod:
+        """The volume method of ``body``."""
+        return VolumeMethod(int(self.body_volume_method[body]))
+
+    # -- factories -----------------------------------------------------------------------
+    def state(self):
+        """A new :class:`State` at the initial positions and velocities, time 0."""
+        from softbody.sim.state import State
+
+        return State(self.particle_q.copy(), self.particle_qd.copy())
+
+    def control(self):
+        """A :class:`Control` that changes nothing: model gas, no forces, anchors in place."""
+        from softbody.sim.control import Control
+
+        return Control.neutral(self)
+
+    def __repr__(self) -> str:
+        return (
+            f"Model(particle_count={self.particle_count}, spring_count={self.spring_count}, "
+            f"tri_count={self.tri_count}, body_count={self.body_count}, "
+            f"attachment_count={self.attachment_count}, pin_count={self.pin_count})"
+        )

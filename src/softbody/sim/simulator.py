@@ -1,0 +1,142 @@
+"""``Simulator``: advance a State with one of the integrators."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from softbody.errors import SimulationError, StabilityWarning
+from softbody.integrators import Integrator
+from softbody.integrators import loop as _loop
+from softbody.integrators.workspace import Workspace
+from softbody.sim.control import Control, control_data
+from softbody.sim.model import Model
+from softbody.sim.state import State
+from softbody.stability import largest_stable_step, stiffest_mode
+
+
+class Simulator:
+    """Steps a :class:`Model`'s states forward in time.
+
+    Parameters
+    ----------
+    model : Model
+    integrator : str
+        ``"midpoint"`` (default, the paper's choice), ``"euler"``, ``"rk4"``,
+        ``"symplectic_euler"`` or ``"velocity_verlet"``.
+    dt : float
+        Time step [s], > 0. A :class:`StabilityWarning` is issued when it exceeds
+        :attr:`stable_dt`.
+    max_speed : float
+        A particle faster than this [m/s] means the run blew up (runaway energy).
+    volume_limits : (float, float)
+        A body whose volume leaves [low, high] times its rest volume blew up.
+
+    A step that blows up raises :class:`SimulationError` naming the body or particle, the
+    step and the time; the state is left at the last good step.
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        *,
+        integrator: str | Integrator = "midpoint",
+        dt: float,
+        max_speed: float = 1.0e4,
+        volume_limits: tuple[float, float] = (1.0e-3, 1.0e3),
+    ):
+        if not isinstance(model, Model):
+            raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
+        self.model = model
+        self.integrator = Integrator.parse(integrator)
+        try:
+            dt = float(dt)
+        except (TypeError, ValueError):
+            raise ValueError(f"dt must be a number of seconds, got {dt!r}") from None
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be finite and > 0 seconds, got {dt!r}")
+        self.dt = dt
+        if not (np.isfinite(max_speed) and max_speed > 0):
+            raise ValueError(f"max_speed must be finite and > 0, got {max_speed!r}")
+        self.max_speed = float(max_speed)
+        lo, hi = (float(x) for x in volume_limits)
+        if not (0 < lo < 1 < hi):
+            raise ValueError(f"volume_limits must satisfy 0 < low < 1 < high, got {volume_limits}")
+        self.volume_limits = (lo, hi)
+        self.stiffest_mode = stiffest_mode(model)
+        self.stable_dt = largest_stable_step(self.integrator, self.stiffest_mode.omega,
+                                             self.stiffest_mode.zeta)
+        self._work = Workspace.for_model(model)
+        self._neutral = control_data(model)
+        self._control = control_data(model)
+        if dt > self.stable_dt:
+            warnings.warn(self.stability_note(), StabilityWarning, stacklevel=2)
+
+    def stability_note(self) -> str:
+        """One line comparing ``dt`` with the stability estimate, with advice."""
+        mode = self.stiffest_mode
+        name = self.integrator.name.lower()
+        text = (f"dt = {self.dt:.3g} s exceeds the stable estimate {self.stable_dt:.3g} s for "
+                f"{name} (stiffest mode {mode.omega:.3g} rad/s, damping ratio {mode.zeta:.2g})")
+        if self.integrator in (Integrator.EULER, Integrator.MIDPOINT) and mode.zeta < 1e-3:
+            text += ("; euler and midpoint amplify undamped vibration at any dt: add spring "
+                     "damping or use rk4, symplectic_euler or velocity_verlet")
+        else:
+            text += "; reduce dt, stiffness or pressure, or add mass"
+        return text
+
+    def step(self, state: State, control: Control | None = None) -> State:
+        """Advance ``state`` by one step of ``dt`` in place; returns it."""
+        return self.run(state, 1, control)
+
+    def run(self, state: State, steps: int, control: Control | None = None) -> State:
+        """Advance ``state`` in place by ``steps`` steps with the same ``control``.
+
+        One compiled call does all the steps, so this is the fast path for long runs.
+        """
+        model = self.model
+        if int(steps) != steps or steps < 0:
+            raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
+        steps = int(steps)
+        if state.particle_q.shape != (model.particle_count, 3):
+            raise ValueError(f"state has {state.particle_q.shape[0]} particles, the model "
+                             f"{model.particle_count}")
+        if steps == 0:
+            return state
+        data = self._neutral if control is None else control.write(model, self._control)
+        lo, hi = self.volume_limits
+        status, done, index, value = _loop.simulate(
+            int(self.integrator), steps, float(state.time), self.dt, model.data, data,
+            state.particle_q, state.particle_qd, self._work, self.max_speed, lo, hi)
+        start_step = state.step_count
+        state.step_count = start_step + done
+        state.time = float(state.time) + done * self.dt
+        if status != _loop.OK:
+            raise self._blow_up(status, start_step + done, state.time, index, value)
+        return state
+
+    def _blow_up(self, status, step, time, index, value) -> SimulationError:
+        model = self.model
+        where = f"at step {step} (t = {time:.6g} s)"
+        if status in (_loop.NONFINITE, _loop.RUNAWAY):
+            body = int(model.particle_body[index])
+            who = f"body {body}" if body >= 0 else "free particle"
+            what = ("position or velocity became NaN or infinite"
+                    if status == _loop.NONFINITE else
+                    f"speed {value:.3g} m/s exceeds max_speed {self.max_speed:.3g} m/s "
+                    "(runaway kinetic energy)")
+            msg = f"{who} blew up {where}: particle {index} {what}"
+            particle = int(index)
+        else:
+            body, particle = int(index), -1
+            lo, hi = self.volume_limits
+            what = {
+                _loop.BAD_VOLUME: f"volume became {value:.3g} m^3 (collapsed or inverted)",
+                _loop.SHRUNK: f"volume fell to {value:.3g} of its rest volume (limit {lo:g})",
+                _loop.EXPLODED: f"volume grew to {value:.3g} times its rest volume (limit {hi:g})",
+            }[status]
+            msg = f"body {body} blew up {where}: {what}"
+        if self.dt > self.stable_dt:
+            msg += "; " + self.stability_note()
+        return SimulationError(msg, step=step, time=time, body=body, particle=particle)
