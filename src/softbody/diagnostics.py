@@ -18,18 +18,40 @@ from softbody.volume import eval_body_volume
 def _volumes(model: Model, q: np.ndarray) -> Workspace:
     w = Workspace.for_model(model)
     m = model.data
-    eval_body_volume(q, m.tri_indices, m.body_particle_range, m.body_tri_range,
-                     m.body_volume_method, m.body_mc_range, m.mc_samples, w.body_centroid,
-                     w.body_lo, w.body_hi, w.tri_normal, w.body_volume)
+    eval_body_volume(
+        q,
+        m.tri_indices,
+        m.body_particle_range,
+        m.body_tri_range,
+        m.body_volume_method,
+        m.body_mc_range,
+        m.mc_samples,
+        w.body_centroid,
+        w.body_lo,
+        w.body_hi,
+        w.tri_normal,
+        w.body_volume,
+    )
     return w
 
 
 def _gas_values(model: Model, time: float, control: Control | None) -> np.ndarray:
     data = control_data(model) if control is None else control.write(model, control_data(model))
     m = model.data
-    return np.array([gas_value_at(b, time, m.body_gas_value, m.body_schedule_range,
-                                  m.schedule_time, m.schedule_value, data.gas_override)
-                     for b in range(model.body_count)])
+    return np.array(
+        [
+            gas_value_at(
+                b,
+                time,
+                m.body_gas_value,
+                m.body_schedule_range,
+                m.schedule_time,
+                m.schedule_value,
+                data.gas_override,
+            )
+            for b in range(model.body_count)
+        ]
+    )
 
 
 def body_volume(model: Model, state: State) -> np.ndarray:
@@ -42,9 +64,19 @@ def body_pressure(model: Model, state: State, control: Control | None = None) ->
     w = _volumes(model, state.particle_q)
     data = control_data(model) if control is None else control.write(model, control_data(model))
     m = model.data
-    eval_body_pressure(float(state.time), m.body_gas_law, m.body_gas_value, m.body_gas_gamma,
-                       m.body_gas_reference_volume, m.body_schedule_range, m.schedule_time,
-                       m.schedule_value, data.gas_override, w.body_volume, w.body_pressure)
+    eval_body_pressure(
+        float(state.time),
+        m.body_gas_law,
+        m.body_gas_value,
+        m.body_gas_gamma,
+        m.body_gas_reference_volume,
+        m.body_schedule_range,
+        m.schedule_time,
+        m.schedule_value,
+        data.gas_override,
+        w.body_volume,
+        w.body_pressure,
+    )
     return w.body_pressure.copy()
 
 
@@ -82,8 +114,12 @@ def body_centroid(model: Model, state: State) -> np.ndarray:
 def body_center_of_mass(model: Model, state: State) -> np.ndarray:
     """Mass-weighted mean position of each body's particles [m], shape (B, 3)."""
     q, m = state.particle_q, model.particle_mass
-    return np.array([(m[p0:p1, None] * q[p0:p1]).sum(axis=0) / m[p0:p1].sum()
-                     for p0, p1 in model.body_particle_range]).reshape(-1, 3)
+    return np.array(
+        [
+            (m[p0:p1, None] * q[p0:p1]).sum(axis=0) / m[p0:p1].sum()
+            for p0, p1 in model.body_particle_range
+        ]
+    ).reshape(-1, 3)
 
 
 @dataclass(frozen=True)
@@ -126,12 +162,19 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
 
     kin = 0.5 * m * np.einsum("ij,ij->i", qd, qd)
     grav = -m * (q @ model.gravity)
-    spr = spring_energy(q, model.spring_indices, model.spring_rest_length,
-                        model.spring_stiffness)
-    anchors = model.attachment_anchor if control is None else np.asarray(
-        control.attachment_anchor, dtype=np.float64)
-    att = attachment_energy(q, model.attachment_particle, anchors,
-                            model.attachment_rest_length, model.attachment_stiffness)
+    spr = spring_energy(q, model.spring_indices, model.spring_rest_length, model.spring_stiffness)
+    anchors = (
+        model.attachment_anchor
+        if control is None
+        else np.asarray(control.attachment_anchor, dtype=np.float64)
+    )
+    att = attachment_energy(
+        q,
+        model.attachment_particle,
+        anchors,
+        model.attachment_rest_length,
+        model.attachment_stiffness,
+    )
     att_body = pb[model.attachment_particle]
 
     def per_body(values, owner):
@@ -140,8 +183,14 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
 
     volume = _volumes(model, q).body_volume
     values = _gas_values(model, float(state.time), control)
-    gas = gas_energy(model.body_gas_law, values, model.body_gas_gamma,
-                     model.body_gas_reference_volume, model.body_ambient_pressure, volume)
+    gas = gas_energy(
+        model.body_gas_law,
+        values,
+        model.body_gas_gamma,
+        model.body_gas_reference_volume,
+        model.body_ambient_pressure,
+        volume,
+    )
     return Energies(
         kinetic=float(kin.sum()),
         gravitational=float(grav.sum()),

@@ -82,13 +82,18 @@ class Gas:
         object.__setattr__(self, "law", GasLaw(self.law))
         label = "pressure" if self.law == GasLaw.FIXED_PRESSURE else "nRT"
         object.__setattr__(self, "value", _finite(f"gas {label}", self.value))
-        object.__setattr__(self, "gamma", _finite("gas gamma", self.gamma, minimum=1.0,
-                                                  strict=True))
+        object.__setattr__(
+            self, "gamma", _finite("gas gamma", self.gamma, minimum=1.0, strict=True)
+        )
         if self.reference_volume is not None:
-            object.__setattr__(self, "reference_volume", _finite(
-                "gas reference_volume", self.reference_volume, strict=True))
-        object.__setattr__(self, "ambient_pressure",
-                           _finite("gas ambient_pressure", self.ambient_pressure))
+            object.__setattr__(
+                self,
+                "reference_volume",
+                _finite("gas reference_volume", self.reference_volume, strict=True),
+            )
+        object.__setattr__(
+            self, "ambient_pressure", _finite("gas ambient_pressure", self.ambient_pressure)
+        )
         if self.schedule is not None:
             pts = np.asarray(self.schedule, dtype=np.float64)
             if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:
@@ -113,9 +118,7 @@ class Gas:
         return cls(GasLaw.ISOTHERMAL, nrt, ambient_pressure=ambient_pressure, schedule=schedule)
 
     @classmethod
-    def ideal(
-        cls, moles: float, temperature: float, *, ambient_pressure: float = 0.0
-    ) -> Gas:
+    def ideal(cls, moles: float, temperature: float, *, ambient_pressure: float = 0.0) -> Gas:
         """Isothermal gas from amount [mol] and temperature [K]: nRT = moles * R * T."""
         n = _finite("gas moles", moles)
         temp = _finite("gas temperature", temperature, strict=True)
@@ -130,8 +133,9 @@ class Gas:
         schedule: Sequence[tuple[float, float]] | None = None,
     ) -> Gas:
         """Gas held at pressure P0 [Pa] whatever the volume (a body on a regulator)."""
-        return cls(GasLaw.FIXED_PRESSURE, pressure, ambient_pressure=ambient_pressure,
-                   schedule=schedule)
+        return cls(
+            GasLaw.FIXED_PRESSURE, pressure, ambient_pressure=ambient_pressure, schedule=schedule
+        )
 
     @classmethod
     def adiabatic(
@@ -144,13 +148,20 @@ class Gas:
         schedule: Sequence[tuple[float, float]] | None = None,
     ) -> Gas:
         """Gas compressed without heat exchange: P V^gamma constant, P(V_ref) = nRT / V_ref."""
-        return cls(GasLaw.ADIABATIC, nrt, gamma=gamma, reference_volume=reference_volume,
-                   ambient_pressure=ambient_pressure, schedule=schedule)
+        return cls(
+            GasLaw.ADIABATIC,
+            nrt,
+            gamma=gamma,
+            reference_volume=reference_volume,
+            ambient_pressure=ambient_pressure,
+            schedule=schedule,
+        )
 
 
 @njit(cache=True)
-def gas_value_at(b, t, body_gas_value, body_schedule_range, schedule_time, schedule_value,
-                 override):
+def gas_value_at(
+    b, t, body_gas_value, body_schedule_range, schedule_time, schedule_value, override
+):
     """The driving value (nRT [J] or P0 [Pa]) of body ``b`` at time ``t`` [s].
 
     A finite ``override[b]`` wins; else the body's piecewise-linear schedule; else its value.
@@ -197,10 +208,12 @@ def eval_body_pressure(
 ):
     """Gas pressure of every body [Pa] at time ``t`` from its volume (B,) [m^3]."""
     for b in range(body_volume.shape[0]):
-        value = gas_value_at(b, t, body_gas_value, body_schedule_range, schedule_time,
-                             schedule_value, gas_override)
-        body_pressure[b] = gas_pressure(body_gas_law[b], value, body_gas_gamma[b],
-                                        body_gas_reference_volume[b], body_volume[b])
+        value = gas_value_at(
+            b, t, body_gas_value, body_schedule_range, schedule_time, schedule_value, gas_override
+        )
+        body_pressure[b] = gas_pressure(
+            body_gas_law[b], value, body_gas_gamma[b], body_gas_reference_volume[b], body_volume[b]
+        )
 
 
 def gas_energy(

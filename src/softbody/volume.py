@@ -199,11 +199,21 @@ def eval_body_volume(
             continue
         if method == 4:
             body_volume[b] = eval_monte_carlo_volume(
-                q, tri_indices, body_tri_range[b, 0], body_tri_range[b, 1], tri_normal,
-                body_lo[b], body_hi[b], mc_samples[body_mc_range[b, 0]:body_mc_range[b, 1]],
+                q,
+                tri_indices,
+                body_tri_range[b, 0],
+                body_tri_range[b, 1],
+                tri_normal,
+                body_lo[b],
+                body_hi[b],
+                mc_samples[body_mc_range[b, 0] : body_mc_range[b, 1]],
             )
         else:
             body_volume[b] = eval_bounding_volume(
-                q, body_particle_range[b, 0], body_particle_range[b, 1], method,
-                body_lo[b], body_hi[b],
+                q,
+                body_particle_range[b, 0],
+                body_particle_range[b, 1],
+                method,
+                body_lo[b],
+                body_hi[b],
             )

@@ -22,22 +22,52 @@ def eval_forces(m, c, t, q, qd, w, f):
     # weight, m g (initialises the accumulator)
     eval_gravity(m.particle_mass, m.gravity, f)
     # damped Hooke springs: mesh edges, bending springs, user springs
-    eval_spring_forces(q, qd, m.spring_indices, m.spring_rest_length, m.spring_stiffness,
-                       m.spring_damping, f)
+    eval_spring_forces(
+        q, qd, m.spring_indices, m.spring_rest_length, m.spring_stiffness, m.spring_damping, f
+    )
     # springs to fixed points (the paper's hanging ball)
-    eval_attachment_forces(q, qd, m.attachment_particle, c.attachment_anchor,
-                           m.attachment_rest_length, m.attachment_stiffness,
-                           m.attachment_damping, f)
+    eval_attachment_forces(
+        q,
+        qd,
+        m.attachment_particle,
+        c.attachment_anchor,
+        m.attachment_rest_length,
+        m.attachment_stiffness,
+        m.attachment_damping,
+        f,
+    )
     # per-step external forces from Control
     eval_external_forces(c.particle_f, f)
     # body volumes (and the face normals the pressure force reuses)
-    eval_body_volume(q, m.tri_indices, m.body_particle_range, m.body_tri_range,
-                     m.body_volume_method, m.body_mc_range, m.mc_samples, w.body_centroid,
-                     w.body_lo, w.body_hi, w.tri_normal, w.body_volume)
+    eval_body_volume(
+        q,
+        m.tri_indices,
+        m.body_particle_range,
+        m.body_tri_range,
+        m.body_volume_method,
+        m.body_mc_range,
+        m.mc_samples,
+        w.body_centroid,
+        w.body_lo,
+        w.body_hi,
+        w.tri_normal,
+        w.body_volume,
+    )
     # gas law: P(V, nRT(t))
-    eval_body_pressure(t, m.body_gas_law, m.body_gas_value, m.body_gas_gamma,
-                       m.body_gas_reference_volume, m.body_schedule_range, m.schedule_time,
-                       m.schedule_value, c.gas_override, w.body_volume, w.body_pressure)
+    eval_body_pressure(
+        t,
+        m.body_gas_law,
+        m.body_gas_value,
+        m.body_gas_gamma,
+        m.body_gas_reference_volume,
+        m.body_schedule_range,
+        m.schedule_time,
+        m.schedule_value,
+        c.gas_override,
+        w.body_volume,
+        w.body_pressure,
+    )
     # pressure force (P - P_ambient) A n / 3 on each face corner
-    eval_pressure_forces(m.tri_indices, m.body_tri_range, w.body_pressure,
-                         m.body_ambient_pressure, w.tri_normal, f)
+    eval_pressure_forces(
+        m.tri_indices, m.body_tri_range, w.body_pressure, m.body_ambient_pressure, w.tri_normal, f
+    )

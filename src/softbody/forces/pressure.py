@@ -14,8 +14,9 @@ from numba import njit
 
 
 @njit(cache=True)
-def eval_pressure_forces(tri_indices, body_tri_range, body_pressure, body_ambient_pressure,
-                         tri_normal, f):
+def eval_pressure_forces(
+    tri_indices, body_tri_range, body_pressure, body_ambient_pressure, tri_normal, f
+):
     """Accumulate pressure forces into ``f`` (N, 3) [N].
 
     tri_indices (T, 3); body_tri_range (B, 2); body_pressure, body_ambient_pressure (B,) [Pa];

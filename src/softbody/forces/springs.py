@@ -13,8 +13,9 @@ from numba import njit
 
 
 @njit(cache=True)
-def eval_spring_forces(q, qd, spring_indices, spring_rest_length, spring_stiffness,
-                       spring_damping, f):
+def eval_spring_forces(
+    q, qd, spring_indices, spring_rest_length, spring_stiffness, spring_damping, f
+):
     """Accumulate damped spring forces into ``f``.
 
     q, qd : (N, 3) positions [m] and velocities [m/s]; spring_indices : (S, 2);
@@ -29,8 +30,7 @@ def eval_spring_forces(q, qd, spring_indices, spring_rest_length, spring_stiffne
             continue  # direction undefined; the force is a saddle point here
         inv = 1.0 / length
         ux, uy, uz = dx * inv, dy * inv, dz * inv
-        rel = ((qd[j, 0] - qd[i, 0]) * ux + (qd[j, 1] - qd[i, 1]) * uy
-               + (qd[j, 2] - qd[i, 2]) * uz)
+        rel = (qd[j, 0] - qd[i, 0]) * ux + (qd[j, 1] - qd[i, 1]) * uy + (qd[j, 2] - qd[i, 2]) * uz
         mag = spring_stiffness[s] * (length - spring_rest_length[s]) + spring_damping[s] * rel
         f[i, 0] += mag * ux
         f[i, 1] += mag * uy
@@ -41,8 +41,16 @@ def eval_spring_forces(q, qd, spring_indices, spring_rest_length, spring_stiffne
 
 
 @njit(cache=True)
-def eval_attachment_forces(q, qd, attachment_particle, attachment_anchor,
-                           attachment_rest_length, attachment_stiffness, attachment_damping, f):
+def eval_attachment_forces(
+    q,
+    qd,
+    attachment_particle,
+    attachment_anchor,
+    attachment_rest_length,
+    attachment_stiffness,
+    attachment_damping,
+    f,
+):
     """Accumulate forces of damped springs tying particles to fixed anchor points.
 
     attachment_particle (A,); attachment_anchor (A, 3) [m]; rest length (A,) [m];
@@ -59,22 +67,30 @@ def eval_attachment_forces(q, qd, attachment_particle, attachment_anchor,
         inv = 1.0 / length
         ux, uy, uz = dx * inv, dy * inv, dz * inv
         rel = -(qd[i, 0] * ux + qd[i, 1] * uy + qd[i, 2] * uz)
-        mag = (attachment_stiffness[a] * (length - attachment_rest_length[a])
-               + attachment_damping[a] * rel)
+        mag = (
+            attachment_stiffness[a] * (length - attachment_rest_length[a])
+            + attachment_damping[a] * rel
+        )
         f[i, 0] += mag * ux
         f[i, 1] += mag * uy
         f[i, 2] += mag * uz
 
 
-def spring_energy(q: np.ndarray, indices: np.ndarray, rest_length: np.ndarray,
-                  stiffness: np.ndarray) -> np.ndarray:
+def spring_energy(
+    q: np.ndarray, indices: np.ndarray, rest_length: np.ndarray, stiffness: np.ndarray
+) -> np.ndarray:
     """Elastic energy 1/2 k (L - L0)^2 of each spring [J], shape (S,). NumPy reference."""
     length = np.linalg.norm(q[indices[:, 1]] - q[indices[:, 0]], axis=1)
     return 0.5 * stiffness * (length - rest_length) ** 2
 
 
-def attachment_energy(q: np.ndarray, particle: np.ndarray, anchor: np.ndarray,
-                      rest_length: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+def attachment_energy(
+    q: np.ndarray,
+    particle: np.ndarray,
+    anchor: np.ndarray,
+    rest_length: np.ndarray,
+    stiffness: np.ndarray,
+) -> np.ndarray:
     """Elastic energy of each attachment spring [J], shape (A,)."""
     length = np.linalg.norm(anchor - q[particle], axis=1)
     return 0.5 * stiffness * (length - rest_length) ** 2

@@ -38,8 +38,12 @@ class Integrator(IntEnum):
             return value
         if isinstance(value, str):
             key = value.strip().lower().replace("-", "_")
-            aliases = {"rk2": "midpoint", "verlet": "velocity_verlet",
-                       "semi_implicit_euler": "symplectic_euler", "explicit_euler": "euler"}
+            aliases = {
+                "rk2": "midpoint",
+                "verlet": "velocity_verlet",
+                "semi_implicit_euler": "symplectic_euler",
+                "explicit_euler": "euler",
+            }
             key = aliases.get(key, key)
             for member in cls:
                 if member.name.lower() == key:

@@ -75,8 +75,9 @@ def simulate(integrator, steps, t0, dt, m, c, q, qd, w, max_speed, ratio_min, ra
         w.q0[:] = q
         w.v0[:] = qd
         eval_forces(m, c, t, q, qd, w, w.f)
-        status, index, value = _check_volumes(w.body_volume, m.body_rest_volume,
-                                              ratio_min, ratio_max)
+        status, index, value = _check_volumes(
+            w.body_volume, m.body_rest_volume, ratio_min, ratio_max
+        )
         if status != OK:
             return status, s, index, value
         if integrator == 0:

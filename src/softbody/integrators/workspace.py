@@ -28,5 +28,12 @@ class Workspace(NamedTuple):
     def for_model(cls, model) -> Workspace:
         """Allocate scratch sized for ``model``."""
         n, t, b = model.particle_count, model.tri_count, model.body_count
-        return cls(*(np.zeros((n, 3)) for _ in range(7)), np.zeros((t, 3)), np.zeros(b),
-                   np.zeros(b), np.zeros((b, 3)), np.zeros((b, 3)), np.zeros((b, 3)))
+        return cls(
+            *(np.zeros((n, 3)) for _ in range(7)),
+            np.zeros((t, 3)),
+            np.zeros(b),
+            np.zeros(b),
+            np.zeros((b, 3)),
+            np.zeros((b, 3)),
+            np.zeros((b, 3)),
+        )

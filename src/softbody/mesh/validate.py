@@ -83,9 +83,7 @@ class MeshReport:
                 "surface sheets touch"
             )
         if self.shell_count > 1:
-            out.append(
-                f"{self.shell_count} separate shells; add each closed piece as its own body"
-            )
+            out.append(f"{self.shell_count} separate shells; add each closed piece as its own body")
         if not out and not abs(self.signed_volume) > 0:
             out.append("encloses zero volume")
         return out
@@ -112,7 +110,7 @@ class MeshReport:
 
 def _weld(vertices: np.ndarray, faces: np.ndarray, tolerance: float):
     """Merge vertices within ``tolerance`` [m] (grid snapping), keeping first-seen order."""
-    if len(vertices) == 0:
+    if len(vertices) == 0 or not tolerance > 0:
         return vertices, faces, 0
     lo = vertices.min(axis=0)
     keys = np.round((vertices - lo) / tolerance).astype(np.int64)
@@ -174,9 +172,12 @@ def inspect_mesh(mesh: TriMesh, *, weld_tolerance: float = WELD_TOLERANCE) -> Me
     v, f = v[used], remap[f]
     vertex_count = len(v)
 
-    edges, counts, order = edge_half_edge_groups(f) if len(f) else (np.zeros((0, 2)),) * 3
-    boundary = int(np.count_nonzero(counts == 1)) if len(f) else 0
-    nonmanifold = int(np.count_nonzero(counts > 2)) if len(f) else 0
+    if len(f):
+        _, counts, order = edge_half_edge_groups(f)
+    else:
+        counts = order = np.zeros(0, dtype=np.int64)
+    boundary = int(np.count_nonzero(counts == 1))
+    nonmanifold = int(np.count_nonzero(counts > 2))
     inconsistent = 0
     if len(f):
         he = half_edges(f)
@@ -189,8 +190,15 @@ def inspect_mesh(mesh: TriMesh, *, weld_tolerance: float = WELD_TOLERANCE) -> Me
         a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
         cross_len = np.linalg.norm(np.cross(b - a, c - a), axis=1)
         longest = np.max(
-            np.stack([np.linalg.norm(b - a, axis=1), np.linalg.norm(c - b, axis=1),
-                      np.linalg.norm(a - c, axis=1)]), axis=0)
+            np.stack(
+                [
+                    np.linalg.norm(b - a, axis=1),
+                    np.linalg.norm(c - b, axis=1),
+                    np.linalg.norm(a - c, axis=1),
+                ]
+            ),
+            axis=0,
+        )
         degenerate = int(np.count_nonzero(cross_len <= DEGENERATE_TOLERANCE * longest**2))
     else:
         degenerate = 0

@@ -177,10 +177,15 @@ class ModelBuilder:
         attachment index (``Control.attachment_anchor`` moves its anchor).
         """
         (p,) = self._check_particles("attachment particle", [particle])
-        self._attachments.append((
-            int(p), _vec3("anchor", anchor), _number("rest_length", rest_length),
-            _number("stiffness", stiffness, strict=True), _number("damping", damping),
-        ))
+        self._attachments.append(
+            (
+                int(p),
+                _vec3("anchor", anchor),
+                _number("rest_length", rest_length),
+                _number("stiffness", stiffness, strict=True),
+                _number("damping", damping),
+            )
+        )
         return len(self._attachments) - 1
 
     # -- soft bodies ---------------------------------------------------------------------
@@ -241,7 +246,9 @@ class ModelBuilder:
         if mesh.vertex_count != source.vertex_count and pinned is not None:
             warnings.warn(
                 f"body {body}: welding renumbered the mesh vertices; pinned indices refer "
-                "to the welded mesh", stacklevel=2)
+                "to the welded mesh",
+                stacklevel=2,
+            )
         total_mass = _number("mass", mass, strict=True)
         k = _number("stiffness", stiffness)
         c = _number("damping", damping)
@@ -273,19 +280,37 @@ class ModelBuilder:
         samples_n = int(monte_carlo_samples)
         if method == VolumeMethod.MONTE_CARLO and samples_n < 1:
             raise ValueError(f"monte_carlo_samples must be >= 1, got {monte_carlo_samples!r}")
-        samples = (np.random.default_rng(seed).random((samples_n, 2))
-                   if method == VolumeMethod.MONTE_CARLO else np.zeros((0, 2)))
+        samples = (
+            np.random.default_rng(seed).random((samples_n, 2))
+            if method == VolumeMethod.MONTE_CARLO
+            else np.zeros((0, 2))
+        )
 
         begin = self._append_particles(mesh.vertices.copy(), vel, m, pin_mask, body)
         edges = unique_edges(mesh.faces) + begin
-        self._springs.append((edges, np.full(len(edges), np.nan), np.full(len(edges), k),
-                              np.full(len(edges), c), np.full(len(edges), body)))
+        self._springs.append(
+            (
+                edges,
+                np.full(len(edges), np.nan),
+                np.full(len(edges), k),
+                np.full(len(edges), c),
+                np.full(len(edges), body),
+            )
+        )
         if kb > 0:
             bend = bending_pairs(mesh.faces) + begin
-            self._springs.append((bend, np.full(len(bend), np.nan), np.full(len(bend), kb),
-                                  np.full(len(bend), cb), np.full(len(bend), body)))
-        self._bodies.append(_Body(begin, begin + v, mesh.faces + begin, total_mass, gas,
-                                  method, samples))
+            self._springs.append(
+                (
+                    bend,
+                    np.full(len(bend), np.nan),
+                    np.full(len(bend), kb),
+                    np.full(len(bend), cb),
+                    np.full(len(bend), body),
+                )
+            )
+        self._bodies.append(
+            _Body(begin, begin + v, mesh.faces + begin, total_mass, gas, method, samples)
+        )
         return body
 
     # -- finalize ------------------------------------------------------------------------
@@ -322,38 +347,56 @@ class ModelBuilder:
 
         bodies = self._bodies
         bcount = len(bodies)
-        tri = (np.vstack([b.faces for b in bodies]).astype(np.int64) if bodies
-               else np.zeros((0, 3), dtype=np.int64))
+        tri = (
+            np.vstack([b.faces for b in bodies]).astype(np.int64)
+            if bodies
+            else np.zeros((0, 3), dtype=np.int64)
+        )
         tri_counts = np.array([len(b.faces) for b in bodies], dtype=np.int64)
         tri_end = np.cumsum(tri_counts)
         body_tri_range = np.stack([tri_end - tri_counts, tri_end], axis=1).reshape(-1, 2)
-        body_particle_range = np.array([[b.particle_begin, b.particle_end] for b in bodies],
-                                       dtype=np.int64).reshape(-1, 2)
+        body_particle_range = np.array(
+            [[b.particle_begin, b.particle_end] for b in bodies], dtype=np.int64
+        ).reshape(-1, 2)
         mc_counts = np.array([len(b.mc_samples) for b in bodies], dtype=np.int64)
         mc_end = np.cumsum(mc_counts)
         body_mc_range = np.stack([mc_end - mc_counts, mc_end], axis=1).reshape(-1, 2)
-        mc_samples = (np.vstack([b.mc_samples for b in bodies]) if bodies
-                      else np.zeros((0, 2))).reshape(-1, 2)
+        mc_samples = (
+            np.vstack([b.mc_samples for b in bodies]) if bodies else np.zeros((0, 2))
+        ).reshape(-1, 2)
         method = np.array([b.volume_method for b in bodies], dtype=np.int64)
-        schedules = [np.asarray(b.gas.schedule or np.zeros((0, 2))).reshape(-1, 2)
-                     for b in bodies]
+        schedules = [np.asarray(b.gas.schedule or np.zeros((0, 2))).reshape(-1, 2) for b in bodies]
         sched_counts = np.array([len(s) for s in schedules], dtype=np.int64)
         sched_end = np.cumsum(sched_counts)
-        body_schedule_range = np.stack([sched_end - sched_counts, sched_end],
-                                       axis=1).reshape(-1, 2)
+        body_schedule_range = np.stack([sched_end - sched_counts, sched_end], axis=1).reshape(-1, 2)
         sched = np.vstack(schedules) if schedules else np.zeros((0, 2))
 
         # rest volume by each body's own method, at the initial positions
         rest_volume = np.zeros(bcount)
-        eval_body_volume(q, tri, body_particle_range, body_tri_range, method, body_mc_range,
-                         mc_samples, np.zeros((bcount, 3)), np.zeros((bcount, 3)),
-                         np.zeros((bcount, 3)), np.zeros((len(tri), 3)), rest_volume)
+        eval_body_volume(
+            q,
+            tri,
+            body_particle_range,
+            body_tri_range,
+            method,
+            body_mc_range,
+            mc_samples,
+            np.zeros((bcount, 3)),
+            np.zeros((bcount, 3)),
+            np.zeros((bcount, 3)),
+            np.zeros((len(tri), 3)),
+            rest_volume,
+        )
         for b in range(bcount):
             if not rest_volume[b] > 0:
                 raise MeshError(f"body {b} encloses no volume ({rest_volume[b]:.3g} m^3)")
-        ref_volume = np.array([
-            b.gas.reference_volume if b.gas.reference_volume is not None else rest_volume[i]
-            for i, b in enumerate(bodies)], dtype=np.float64)
+        ref_volume = np.array(
+            [
+                b.gas.reference_volume if b.gas.reference_volume is not None else rest_volume[i]
+                for i, b in enumerate(bodies)
+            ],
+            dtype=np.float64,
+        )
 
         return Model(
             gravity=self.gravity.copy(),
@@ -383,13 +426,12 @@ class ModelBuilder:
             body_gas_value=np.array([b.gas.value for b in bodies], dtype=np.float64),
             body_gas_gamma=np.array([b.gas.gamma for b in bodies], dtype=np.float64),
             body_gas_reference_volume=ref_volume,
-            body_ambient_pressure=np.array([b.gas.ambient_pressure for b in bodies],
-                                           dtype=np.float64),
+            body_ambient_pressure=np.array(
+                [b.gas.ambient_pressure for b in bodies], dtype=np.float64
+            ),
             body_schedule_range=body_schedule_range,
             schedule_time=np.ascontiguousarray(sched[:, 0]),
             schedule_value=np.ascontiguousarray(sched[:, 1]),
             body_rest_volume=rest_volume,
             pin_particle=np.flatnonzero(pinned).astype(np.int64),
         )
-
-

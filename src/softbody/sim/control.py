@@ -68,8 +68,10 @@ class Control:
         nrt = arr("body_gas_nrt", self.body_gas_nrt, (b,))
         pressure = arr("body_gas_pressure", self.body_gas_pressure, (b,))
         fixed = model.body_gas_law == GasLaw.FIXED_PRESSURE
-        for name, values, wrong in (("body_gas_nrt", nrt, fixed),
-                                    ("body_gas_pressure", pressure, ~fixed)):
+        for name, values, wrong in (
+            ("body_gas_nrt", nrt, fixed),
+            ("body_gas_pressure", pressure, ~fixed),
+        ):
             if np.any(np.isinf(values)) or np.any(values < 0):
                 raise ValueError(f"Control.{name} must be >= 0 and finite (NaN = unchanged)")
             if np.any(np.isfinite(values) & wrong):

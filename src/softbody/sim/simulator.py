@@ -65,8 +65,9 @@ class Simulator:
             raise ValueError(f"volume_limits must satisfy 0 < low < 1 < high, got {volume_limits}")
         self.volume_limits = (lo, hi)
         self.stiffest_mode = stiffest_mode(model)
-        self.stable_dt = largest_stable_step(self.integrator, self.stiffest_mode.omega,
-                                             self.stiffest_mode.zeta)
+        self.stable_dt = largest_stable_step(
+            self.integrator, self.stiffest_mode.omega, self.stiffest_mode.zeta
+        )
         self._work = Workspace.for_model(model)
         self._neutral = control_data(model)
         self._control = control_data(model)
@@ -77,11 +78,15 @@ class Simulator:
         """One line comparing ``dt`` with the stability estimate, with advice."""
         mode = self.stiffest_mode
         name = self.integrator.name.lower()
-        text = (f"dt = {self.dt:.3g} s exceeds the stable estimate {self.stable_dt:.3g} s for "
-                f"{name} (stiffest mode {mode.omega:.3g} rad/s, damping ratio {mode.zeta:.2g})")
+        text = (
+            f"dt = {self.dt:.3g} s exceeds the stable estimate {self.stable_dt:.3g} s for "
+            f"{name} (stiffest mode {mode.omega:.3g} rad/s, damping ratio {mode.zeta:.2g})"
+        )
         if self.integrator in (Integrator.EULER, Integrator.MIDPOINT) and mode.zeta < 1e-3:
-            text += ("; euler and midpoint amplify undamped vibration at any dt: add spring "
-                     "damping or use rk4, symplectic_euler or velocity_verlet")
+            text += (
+                "; euler and midpoint amplify undamped vibration at any dt: add spring "
+                "damping or use rk4, symplectic_euler or velocity_verlet"
+            )
         else:
             text += "; reduce dt, stiffness or pressure, or add mass"
         return text
@@ -100,15 +105,27 @@ class Simulator:
             raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
         steps = int(steps)
         if state.particle_q.shape != (model.particle_count, 3):
-            raise ValueError(f"state has {state.particle_q.shape[0]} particles, the model "
-                             f"{model.particle_count}")
+            raise ValueError(
+                f"state has {state.particle_q.shape[0]} particles, the model {model.particle_count}"
+            )
         if steps == 0:
             return state
         data = self._neutral if control is None else control.write(model, self._control)
         lo, hi = self.volume_limits
         status, done, index, value = _loop.simulate(
-            int(self.integrator), steps, float(state.time), self.dt, model.data, data,
-            state.particle_q, state.particle_qd, self._work, self.max_speed, lo, hi)
+            int(self.integrator),
+            steps,
+            float(state.time),
+            self.dt,
+            model.data,
+            data,
+            state.particle_q,
+            state.particle_qd,
+            self._work,
+            self.max_speed,
+            lo,
+            hi,
+        )
         start_step = state.step_count
         state.step_count = start_step + done
         state.time = float(state.time) + done * self.dt
@@ -122,10 +139,12 @@ class Simulator:
         if status in (_loop.NONFINITE, _loop.RUNAWAY):
             body = int(model.particle_body[index])
             who = f"body {body}" if body >= 0 else "free particle"
-            what = ("position or velocity became NaN or infinite"
-                    if status == _loop.NONFINITE else
-                    f"speed {value:.3g} m/s exceeds max_speed {self.max_speed:.3g} m/s "
-                    "(runaway kinetic energy)")
+            what = (
+                "position or velocity became NaN or infinite"
+                if status == _loop.NONFINITE
+                else f"speed {value:.3g} m/s exceeds max_speed {self.max_speed:.3g} m/s "
+                "(runaway kinetic energy)"
+            )
             msg = f"{who} blew up {where}: particle {index} {what}"
             particle = int(index)
         else:

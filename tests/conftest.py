@@ -1,0 +1,79 @@
+"""Shared helpers: small models with known physics."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import settings
+
+import softbody as sb
+
+# fixed seeds: hypothesis draws the same examples every run
+settings.register_profile("softbody", derandomize=True, deadline=None, print_blob=True)
+settings.load_profile("softbody")
+
+
+def ball_model(
+    *,
+    subdivisions: int = 2,
+    radius: float = 1.0,
+    mass: float = 1.0,
+    stiffness: float = 500.0,
+    damping: float = 0.0,
+    gas: sb.Gas | float = 300.0,
+    gravity=(0.0, 0.0, 0.0),
+    volume_method: str = "exact",
+    center=(0.0, 0.0, 0.0),
+    **kwargs,
+) -> sb.Model:
+    """One icosphere ball; no gravity unless asked."""
+    builder = sb.ModelBuilder(gravity=gravity)
+    builder.add_soft_body(
+        sb.icosphere(subdivisions, radius=radius, center=center),
+        mass=mass,
+        stiffness=stiffness,
+        damping=damping,
+        gas=gas,
+        volume_method=volume_method,
+        **kwargs,
+    )
+    return builder.finalize()
+
+
+def deformed(model: sb.Model, seed: int, amplitude: float) -> sb.State:
+    """The model's state with every particle moved randomly by up to ``amplitude`` [m]."""
+    rng = np.random.default_rng(seed)
+    state = model.state()
+    state.particle_q += rng.uniform(-amplitude, amplitude, state.particle_q.shape)
+    return state
+
+
+def forces(model: sb.Model, state: sb.State, control: sb.Control | None = None) -> np.ndarray:
+    """Total force on each particle (N, 3) [N] from the compiled force kernels."""
+    from softbody.forces.evaluate import eval_forces
+    from softbody.integrators.workspace import Workspace
+    from softbody.sim.control import control_data
+
+    w = Workspace.for_model(model)
+    c = control_data(model) if control is None else control.write(model, control_data(model))
+    f = np.zeros((model.particle_count, 3))
+    eval_forces(model.data, c, float(state.time), state.particle_q, state.particle_qd, w, f)
+    return f
+
+
+def settle(
+    model: sb.Model, *, dt: float = 5e-4, speed: float = 1e-11, max_steps: int = 40_000
+) -> sb.State:
+    """Run a damped model with RK4 until every particle is slower than ``speed`` [m/s]."""
+    sim = sb.Simulator(model, integrator="rk4", dt=dt)
+    state = model.state()
+    while np.abs(state.particle_qd).max() > speed or state.step_count == 0:
+        if state.step_count >= max_steps:
+            raise AssertionError(f"did not settle in {max_steps} steps")
+        sim.run(state, 500)
+    return state
+
+
+def uniform_scaling_stationary(stiffness: float, rest_lengths: np.ndarray, nrt: float) -> float:
+    """Scale s where E(s) = 1/2 k (s - 1)^2 sum L0^2 - nRT ln(s^3 V0) is stationary:
+    k s (s - 1) sum L0^2 = 3 nRT, so s = (1 + sqrt(1 + 12 nRT / (k sum L0^2))) / 2."""
+    return (1 + np.sqrt(1 + 12 * nrt / (stiffness * np.sum(rest_lengths**2)))) / 2

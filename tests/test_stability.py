@@ -1,0 +1,120 @@
+"""Stable time-step estimate and blow-up detection."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import softbody as sb
+from conftest import ball_model
+from softbody.integrators import Integrator
+from softbody.stability import amplification_matrix, largest_stable_step
+
+
+def two_masses(m1=1.0, m2=3.0, k=400.0, rest_length=0.0):
+    """Two particles on a spring; with rest length 0 the force k (x_j - x_i) is linear, so
+    an unstable step grows without bound instead of saturating."""
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    i = builder.add_particle((0, 0, 0), mass=m1)
+    j = builder.add_particle((1.05, 0, 0), mass=m2)
+    builder.add_spring(i, j, stiffness=k, rest_length=rest_length)
+    return builder.finalize()
+
+
+def test_two_mass_frequency_bound_is_exact():
+    """For one spring the Gershgorin bound is the true frequency w^2 = k (1/m1 + 1/m2)
+    (geometric stiffness |1 - L0/L| < 1 here)."""
+    mode = sb.Simulator(two_masses(rest_length=1.0), integrator="rk4", dt=1e-4).stiffest_mode
+    assert mode.omega == pytest.approx(np.sqrt(400.0 * (1 + 1 / 3)), rel=1e-14)
+
+
+@pytest.mark.parametrize(
+    "integrator,limit",
+    [("symplectic_euler", 2.0), ("velocity_verlet", 2.0), ("rk4", 2.0 * np.sqrt(2.0))],
+)
+def test_undamped_limits_match_theory(integrator, limit):
+    """Known stability limits on an undamped oscillator: w dt <= 2 for symplectic Euler and
+    Verlet, w dt <= 2 sqrt(2) for RK4."""
+    h = largest_stable_step(Integrator.parse(integrator), 1.0, 0.0)
+    assert h == pytest.approx(limit, rel=1e-6)
+
+
+def test_euler_needs_damping():
+    """Explicit Euler on x'' = -w^2 x - 2 z w x': |1 + h lambda| <= 1 needs w h <= 2 z for
+    light damping, and no step is stable without damping."""
+    assert largest_stable_step(Integrator.EULER, 1.0, 0.0) < 1e-5
+    assert largest_stable_step(Integrator.EULER, 1.0, 0.05) == pytest.approx(0.1, rel=1e-6)
+    g = amplification_matrix(Integrator.EULER, 0.05, 1.0, 0.0)
+    assert np.max(np.abs(np.linalg.eigvals(g))) > 1
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "velocity_verlet", "rk4"])
+def test_estimate_separates_stable_from_unstable(integrator):
+    """Just below the estimate the linear oscillator stays bounded for 20,000 steps (near
+    the limit a symplectic scheme's orbit is an ellipse stretched by up to
+    1 / sqrt(1 - (w dt / 2)^2) = 7 for w dt = 1.98: allow 10x the initial separation);
+    5% above it the run blows up, and the error names the particle and the step."""
+    model = two_masses()
+    sim = sb.Simulator(model, integrator=integrator, dt=1e-3)
+    dt = sim.stable_dt
+    state = model.state()
+    slow = sb.Simulator(model, integrator=integrator, dt=0.99 * dt)
+    for _ in range(100):
+        slow.run(state, 200)
+        separation = np.linalg.norm(state.particle_q[1] - state.particle_q[0])
+        assert separation < 10 * 1.05
+    with pytest.warns(sb.StabilityWarning, match="exceeds the stable estimate"):
+        fast = sb.Simulator(model, integrator=integrator, dt=1.05 * dt)
+    state = model.state()
+    with pytest.raises(sb.SimulationError, match=r"free particle blew up at step \d+") as info:
+        fast.run(state, 20_000)
+    assert info.value.particle in (0, 1)
+    assert np.all(np.isfinite(state.particle_q))  # left at the last good step
+
+
+def test_ball_estimate_is_conservative():
+    """For the paper's ball the estimate is an upper bound on the frequency, so the
+    estimated step is safe: 2,000 steps at it stay round (volume within 10% of start)."""
+    model = ball_model(damping=0.5)
+    sim = sb.Simulator(model, integrator="midpoint", dt=1e-4)
+    state = model.state()
+    sb.Simulator(model, integrator="midpoint", dt=sim.stable_dt).run(state, 2000)
+    ratio = sb.body_volume(model, state)[0] / model.body_rest_volume[0]
+    assert 0.9 < ratio < 1.3
+
+
+def test_blow_up_names_body_and_step():
+    """Explicit Euler far above its limit on a stiff ball: SimulationError names body 0,
+    the step and the time, and mentions the stability estimate."""
+    model = ball_model(stiffness=5e4, damping=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sb.StabilityWarning)
+        sim = sb.Simulator(model, integrator="euler", dt=5e-3)
+    state = model.state()
+    with pytest.raises(
+        sb.SimulationError,
+        match=r"body 0 blew up at step \d+ \(t = .* s\).*"
+        r"exceeds the stable estimate",
+    ) as info:
+        sim.run(state, 10_000)
+    assert info.value.body == 0 and info.value.step > 0
+    assert np.all(np.isfinite(state.particle_q)) and np.all(np.isfinite(state.particle_qd))
+
+
+def test_collapse_is_detected():
+    """A ball with no gas and a strong inward pull collapses: the volume check stops it
+    when V falls below 1e-3 of its rest volume and names the body."""
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.add_soft_body(
+        sb.icosphere(1),
+        mass=1.0,
+        stiffness=0.0,
+        damping=0.0,
+        gas=sb.Gas.fixed_pressure(0.0, ambient_pressure=1e4),
+    )
+    model = builder.finalize()
+    sim = sb.Simulator(model, integrator="rk4", dt=1e-4, max_speed=1e9)
+    with pytest.raises(sb.SimulationError, match="body 0 blew up .*volume"):
+        sim.run(model.state(), 100_000)
