@@ -26,7 +26,6 @@ def _volumes(model: Model, q: np.ndarray) -> Workspace:
         m.body_volume_method,
         m.body_mc_range,
         m.mc_samples,
-        w.body_centroid,
         w.body_lo,
         w.body_hi,
         w.tri_normal,

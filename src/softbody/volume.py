@@ -2,10 +2,12 @@
 
 Kernels take flat arrays, inputs first and outputs last, and allocate nothing.
 
-* ``exact``: V = 1/6 sum_t (a_t - c) . ((b_t - a_t) x (c_t - a_t)) over the body's
-  triangles, relative to the vertex centroid c so round-off stays small far from the
-  origin. Its gradient is exactly sum_t n_t / 6, the area-weighted face normals the
-  pressure force uses, which is what makes the pressure force conservative.
+* ``exact``: V = 1/6 sum_t (a_t - r) . ((b_t - a_t) x (c_t - a_t)) over the body's
+  triangles, relative to a point r of the body (its first vertex), so the terms are of
+  the body's size and round-off stays small far from the origin (a sum about the origin
+  loses digits in proportion to distance / size). Its gradient is exactly the sum of
+  n_t / 6 over the faces at a vertex, the area-weighted normals the pressure force uses,
+  which is what makes the pressure force conservative.
 * ``bounding_box``: volume of the axis-aligned bounding box (paper, section 3.1).
 * ``bounding_sphere``: sphere centred on the bounding-box centre, radius the largest vertex
   distance from it.
@@ -52,40 +54,32 @@ class VolumeMethod(IntEnum):
 
 
 @njit(cache=True)
-def eval_body_bounds(q, body_particle_range, body_centroid, body_lo, body_hi):
-    """Vertex centroid and axis-aligned bounds of each body.
-
-    q : (N, 3) positions [m]; body_particle_range : (B, 2) [begin, end) particle indices.
-    Outputs body_centroid, body_lo, body_hi : (B, 3) [m].
-    """
-    for b in range(body_particle_range.shape[0]):
-        begin, end = body_particle_range[b, 0], body_particle_range[b, 1]
+def eval_body_bounds(q, begin, end, lo, hi):
+    """Axis-aligned bounds lo, hi (3,) [m] of particles ``begin:end`` of q (N, 3) [m]."""
+    for k in range(3):
+        lo[k] = np.inf
+        hi[k] = -np.inf
+    for i in range(begin, end):
         for k in range(3):
-            body_centroid[b, k] = 0.0
-            body_lo[b, k] = np.inf
-            body_hi[b, k] = -np.inf
-        for i in range(begin, end):
-            for k in range(3):
-                x = q[i, k]
-                body_centroid[b, k] += x
-                if x < body_lo[b, k]:
-                    body_lo[b, k] = x
-                if x > body_hi[b, k]:
-                    body_hi[b, k] = x
-        inv = 1.0 / max(end - begin, 1)
-        for k in range(3):
-            body_centroid[b, k] *= inv
+            x = q[i, k]
+            if x < lo[k]:
+                lo[k] = x
+            if x > hi[k]:
+                hi[k] = x
 
 
 @njit(cache=True)
-def eval_tri_normals_volume(q, tri_indices, body_tri_range, body_centroid, tri_normal, body_volume):
+def eval_tri_normals_volume(
+    q, tri_indices, body_particle_range, body_tri_range, tri_normal, body_volume
+):
     """Scaled face normals n_t = (b - a) x (c - a) (outward, |n_t| = 2 area) and exact volumes.
 
-    tri_indices : (T, 3); body_tri_range : (B, 2); body_centroid : (B, 3) [m].
+    tri_indices : (T, 3); body_particle_range, body_tri_range : (B, 2).
     Outputs tri_normal : (T, 3) [m^2] and body_volume : (B,) [m^3].
     """
     for b in range(body_tri_range.shape[0]):
-        cx, cy, cz = body_centroid[b, 0], body_centroid[b, 1], body_centroid[b, 2]
+        r = body_particle_range[b, 0]  # reference point: the body's first vertex
+        cx, cy, cz = q[r, 0], q[r, 1], q[r, 2]
         six_v = 0.0
         for t in range(body_tri_range[b, 0], body_tri_range[b, 1]):
             i, j, k = tri_indices[t, 0], tri_indices[t, 1], tri_indices[t, 2]
@@ -181,7 +175,6 @@ def eval_body_volume(
     body_volume_method,
     body_mc_range,
     mc_samples,
-    body_centroid,
     body_lo,
     body_hi,
     tri_normal,
@@ -189,14 +182,18 @@ def eval_body_volume(
 ):
     """Every body's volume by its own method [m^3], plus the per-face scaled normals.
 
-    Fills body_centroid, body_lo, body_hi (B, 3), tri_normal (T, 3) and body_volume (B,).
+    Fills tri_normal (T, 3) and body_volume (B,); body_lo, body_hi (B, 3) get the bounds
+    of the bodies that use a bounding or Monte Carlo volume (the exact method needs none).
     """
-    eval_body_bounds(q, body_particle_range, body_centroid, body_lo, body_hi)
-    eval_tri_normals_volume(q, tri_indices, body_tri_range, body_centroid, tri_normal, body_volume)
+    eval_tri_normals_volume(
+        q, tri_indices, body_particle_range, body_tri_range, tri_normal, body_volume
+    )
     for b in range(body_volume_method.shape[0]):
         method = body_volume_method[b]
         if method == 0:
             continue
+        begin, end = body_particle_range[b, 0], body_particle_range[b, 1]
+        eval_body_bounds(q, begin, end, body_lo[b], body_hi[b])
         if method == 4:
             body_volume[b] = eval_monte_carlo_volume(
                 q,
@@ -209,11 +206,4 @@ def eval_body_volume(
                 mc_samples[body_mc_range[b, 0] : body_mc_range[b, 1]],
             )
         else:
-            body_volume[b] = eval_bounding_volume(
-                q,
-                body_particle_range[b, 0],
-                body_particle_range[b, 1],
-                method,
-                body_lo[b],
-                body_hi[b],
-            )
+            body_volume[b] = eval_bounding_volume(q, begin, end, method, body_lo[b], body_hi[b])

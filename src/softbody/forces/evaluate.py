@@ -17,7 +17,7 @@ def eval_forces(m, c, t, q, qd, w, f):
     """All forces at time ``t`` [s] for positions ``q`` and velocities ``qd`` (N, 3).
 
     m : ModelData, c : ControlData, w : Workspace (its body_volume, body_pressure,
-    tri_normal, body_centroid/lo/hi are refreshed as a side product); f : (N, 3) output [N].
+    tri_normal, body_lo/hi are refreshed as a side product); f : (N, 3) output [N].
     """
     # weight, m g (initialises the accumulator)
     eval_gravity(m.particle_mass, m.gravity, f)
@@ -47,7 +47,6 @@ def eval_forces(m, c, t, q, qd, w, f):
         m.body_volume_method,
         m.body_mc_range,
         m.mc_samples,
-        w.body_centroid,
         w.body_lo,
         w.body_hi,
         w.tri_normal,

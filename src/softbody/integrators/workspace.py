@@ -20,7 +20,6 @@ class Workspace(NamedTuple):
     tri_normal: np.ndarray  # (T, 3) scaled face normals [m^2]
     body_volume: np.ndarray  # (B,) [m^3]
     body_pressure: np.ndarray  # (B,) [Pa]
-    body_centroid: np.ndarray  # (B, 3) [m]
     body_lo: np.ndarray  # (B, 3) [m]
     body_hi: np.ndarray  # (B, 3) [m]
 
@@ -33,7 +32,6 @@ class Workspace(NamedTuple):
             np.zeros((t, 3)),
             np.zeros(b),
             np.zeros(b),
-            np.zeros((b, 3)),
             np.zeros((b, 3)),
             np.zeros((b, 3)),
         )

@@ -35,7 +35,8 @@ def icosphere(subdivisions: int, radius: float = 1.0, center: ArrayLike = (0, 0,
     """Geodesic sphere: an icosahedron split ``subdivisions`` times, vertices on the sphere.
 
     Vertex counts are 10 * 4**s + 2 (12, 42, 162, 642, 2562, 10242, 40962, 163842, ...);
-    ``subdivisions=2`` gives the paper's ball (162 vertices, 320 faces).
+    ``subdivisions=2`` gives the paper's ball (162 vertices, 320 faces). Vertices are
+    numbered along a space-filling curve (:meth:`TriMesh.reordered`) for fast kernels.
 
     Parameters
     ----------
@@ -53,7 +54,7 @@ def icosphere(subdivisions: int, radius: float = 1.0, center: ArrayLike = (0, 0,
     m = trimesh.creation.icosphere(subdivisions=s, radius=1.0)
     v = np.asarray(m.vertices, dtype=np.float64)
     v /= np.linalg.norm(v, axis=1, keepdims=True)  # exactly on the sphere
-    return TriMesh(v * r + _center(center), m.faces)
+    return TriMesh(v, m.faces).reordered().scaled(r).translated(_center(center))
 
 
 def uv_sphere(

@@ -132,6 +132,25 @@ class TriMesh:
             raise ValueError("matrix is a reflection (det < 0); it would turn the mesh inside out")
         return TriMesh(self.vertices @ r.T, self.faces)
 
+    def reordered(self, order: ArrayLike | None = None) -> TriMesh:
+        """The same surface with vertices renumbered for memory locality.
+
+        ``order`` (V,) lists old vertex indices in their new order; by default a Morton
+        (Z-order) curve, so that neighbours in space are neighbours in memory. Faces are
+        renumbered and sorted by their smallest vertex. Per-step kernels run faster on
+        large meshes ordered this way; the physics is unchanged.
+        """
+        from softbody.mesh.ordering import morton_order
+
+        perm = morton_order(self.vertices) if order is None else np.asarray(order, np.int64)
+        if sorted(perm.tolist()) != list(range(self.vertex_count)):
+            raise ValueError("order must be a permutation of the vertex indices")
+        rank = np.empty_like(perm)
+        rank[perm] = np.arange(len(perm))
+        faces = rank[self.faces]
+        faces = faces[np.lexsort((faces.max(axis=1), faces.min(axis=1)))]
+        return TriMesh(self.vertices[perm], faces)
+
     def flipped(self) -> TriMesh:
         """This mesh with every triangle's winding reversed (normals turned around)."""
         return TriMesh(self.vertices, self.faces[:, ::-1])

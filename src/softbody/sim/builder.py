@@ -383,7 +383,6 @@ class ModelBuilder:
             mc_samples,
             np.zeros((bcount, 3)),
             np.zeros((bcount, 3)),
-            np.zeros((bcount, 3)),
             np.zeros((len(tri), 3)),
             rest_volume,
         )

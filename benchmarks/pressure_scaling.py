@@ -1,0 +1,247 @@
+"""Reproduce the paper's Figure 6 and measure full-step throughput.
+
+* Pressure-force time (the paper's steps 2 and 3: body volume, gas pressure, P A n / 3
+  on each face corner) in ms against vertex count, icospheres of 162 to 163,842 vertices,
+  with a least-squares trend line, as the paper plots it.
+* Full-step throughput in vertex-steps per second for each integrator (springs on every
+  edge, exact volume, pressure, integration, blow-up checks), single thread, float64.
+
+Speed is measured, never asserted. Each number is the best of several repeats (the
+machine is shared; the minimum is the least disturbed run), and all sizes run in one
+process so ratios compare like with like. Writes results/pressure_scaling.json and
+results/pressure_scaling.png.
+
+Usage: python benchmarks/pressure_scaling.py [--max-subdivisions 7] [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import softbody as sb
+from softbody.forces.pressure import eval_pressure_forces
+from softbody.gas import eval_body_pressure
+from softbody.integrators.workspace import Workspace
+from softbody.volume import eval_body_volume
+
+RESULTS = Path(__file__).parent / "results"
+INTEGRATORS = ["symplectic_euler", "velocity_verlet", "midpoint", "rk4", "euler"]
+
+
+def ball(subdivisions: int) -> sb.Model:
+    """The paper's ball at a given refinement: radius 1 m, 1 kg, inflated, no gravity."""
+    builder = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+    builder.add_soft_body(
+        sb.icosphere(subdivisions),
+        mass=1.0,
+        stiffness=500.0,
+        damping=0.5,
+        gas=sb.Gas.isothermal(300.0),
+    )
+    return builder.finalize()
+
+
+def best_time(fn, *, min_seconds: float, repeats: int) -> float:
+    """Best per-call time [s] over ``repeats`` batches lasting >= ``min_seconds`` each."""
+    fn()
+    t0 = time.perf_counter()
+    fn()
+    once = max(time.perf_counter() - t0, 1e-7)
+    calls = max(1, int(min_seconds / once))
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(calls):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / calls)
+    return float(best)
+
+
+def pressure_time(model: sb.Model, repeats: int) -> float:
+    """Seconds for volume + pressure + pressure forces once (the paper's steps 2-3)."""
+    m = model.data
+    w = Workspace.for_model(model)
+    q = model.particle_q.copy()
+    f = np.zeros_like(q)
+    override = np.full(model.body_count, np.nan)
+
+    def run():
+        eval_body_volume(
+            q,
+            m.tri_indices,
+            m.body_particle_range,
+            m.body_tri_range,
+            m.body_volume_method,
+            m.body_mc_range,
+            m.mc_samples,
+            w.body_lo,
+            w.body_hi,
+            w.tri_normal,
+            w.body_volume,
+        )
+        eval_body_pressure(
+            0.0,
+            m.body_gas_law,
+            m.body_gas_value,
+            m.body_gas_gamma,
+            m.body_gas_reference_volume,
+            m.body_schedule_range,
+            m.schedule_time,
+            m.schedule_value,
+            override,
+            w.body_volume,
+            w.body_pressure,
+        )
+        eval_pressure_forces(
+            m.tri_indices,
+            m.body_tri_range,
+            w.body_pressure,
+            m.body_ambient_pressure,
+            w.tri_normal,
+            f,
+        )
+
+    return best_time(run, min_seconds=0.05, repeats=repeats)
+
+
+def step_time(model: sb.Model, integrator: str, repeats: int) -> float:
+    """Seconds per full step, timed over batches of steps in one compiled call each."""
+    with warnings.catch_warnings():
+        # throughput does not depend on dt; a tiny dt keeps the ball near rest
+        warnings.simplefilter("ignore", sb.StabilityWarning)
+        sim = sb.Simulator(model, integrator=integrator, dt=1e-7)
+    state = model.state()
+    steps = max(1, int(2e5 / model.particle_count))
+    return best_time(lambda: sim.run(state, steps), min_seconds=0.1, repeats=repeats) / steps
+
+
+def machine() -> dict:
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    import numba
+
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "numba": numba.__version__,
+        "softbody": sb.__version__,
+        "threads": 1,
+        "dtype": "float64",
+    }
+
+
+def plot(result: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = result["sizes"]
+    n = np.array([r["vertex_count"] for r in rows])
+    ms = np.array([r["pressure_ms"] for r in rows])
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), dpi=110)
+    ax = axes[0]
+    ax.plot(n, ms, "o", label="softbody (Numba, 1 thread)")
+    slope, intercept = (
+        result["pressure_trend_ms"]["slope"],
+        result["pressure_trend_ms"]["intercept"],
+    )
+    xs = np.linspace(0, n.max(), 100)
+    ax.plot(
+        xs, intercept + slope * xs, "--", label=f"trend: {slope * 1e6:.3g} ns per vertex"
+    )
+    ax.set_xlabel("vertices")
+    ax.set_ylabel("pressure force time [ms]")
+    ax.set_title("Pressure force (volume + P + P A n / 3), cf. paper Fig. 6")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    ax = axes[1]
+    for k, name in enumerate(INTEGRATORS):
+        ax.plot(
+            n,
+            [r["vertex_steps_per_second"][name] / 1e6 for r in rows],
+            "o-",
+            color=f"C{k}",
+            label=name,
+        )
+    ax.set_xscale("log")
+    ax.set_xlabel("vertices")
+    ax.set_ylabel("million vertex-steps per second")
+    ax.set_title("Full step throughput (float64, 1 thread)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.text(0.01, 0.01, result["machine"]["cpu"] + f", {result['date']}", fontsize=7, color="0.4")
+    fig.tight_layout()
+    tmp = path.with_suffix(".tmp.png")
+    fig.savefig(tmp)
+    os.replace(tmp, path)
+    plt.close(fig)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--min-subdivisions", type=int, default=2)
+    parser.add_argument("--max-subdivisions", type=int, default=7)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--out", type=Path, default=RESULTS)
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for s in range(args.min_subdivisions, args.max_subdivisions + 1):
+        model = ball(s)
+        row = {
+            "subdivisions": s,
+            "vertex_count": model.particle_count,
+            "tri_count": model.tri_count,
+            "spring_count": model.spring_count,
+            "pressure_ms": pressure_time(model, args.repeats) * 1e3,
+            "step_us": {},
+            "vertex_steps_per_second": {},
+        }
+        for name in INTEGRATORS:
+            t = step_time(model, name, args.repeats)
+            row["step_us"][name] = t * 1e6
+            row["vertex_steps_per_second"][name] = model.particle_count / t
+        rows.append(row)
+        print(
+            f"{row['vertex_count']:>7} vertices: pressure {row['pressure_ms']:.4f} ms; "
+            + ", ".join(f"{k} {v / 1e6:.1f} M" for k, v in row["vertex_steps_per_second"].items())
+            + " vertex-steps/s",
+            flush=True,
+        )
+    n = np.array([r["vertex_count"] for r in rows], dtype=float)
+    ms = np.array([r["pressure_ms"] for r in rows])
+    slope, intercept = np.polyfit(n, ms, 1)
+    result = {
+        "benchmark": "pressure_scaling",
+        "date": time.strftime("%Y-%m-%d"),
+        "machine": machine(),
+        "sizes": rows,
+        "pressure_trend_ms": {"slope": float(slope), "intercept": float(intercept)},
+    }
+    json_path = args.out / "pressure_scaling.json"
+    tmp = json_path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=2))
+    os.replace(tmp, json_path)
+    plot(result, args.out / "pressure_scaling.png")
+    print(f"wrote {json_path} and {args.out / 'pressure_scaling.png'}")
+
+
+if __name__ == "__main__":
+    main()
