@@ -84,7 +84,7 @@ def pressure_time(model: sb.Model, repeats: int) -> float:
             m.mc_samples,
             w.body_lo,
             w.body_hi,
-            w.tri_normal,
+            w.volume_gradient,
             w.body_volume,
         )
         eval_body_pressure(
@@ -101,11 +101,10 @@ def pressure_time(model: sb.Model, repeats: int) -> float:
             w.body_pressure,
         )
         eval_pressure_forces(
-            m.tri_indices,
-            m.body_tri_range,
+            m.body_particle_range,
             w.body_pressure,
             m.body_ambient_pressure,
-            w.tri_normal,
+            w.volume_gradient,
             f,
         )
 
@@ -163,9 +162,7 @@ def plot(result: dict, path: Path) -> None:
         result["pressure_trend_ms"]["intercept"],
     )
     xs = np.linspace(0, n.max(), 100)
-    ax.plot(
-        xs, intercept + slope * xs, "--", label=f"trend: {slope * 1e6:.3g} ns per vertex"
-    )
+    ax.plot(xs, intercept + slope * xs, "--", label=f"trend: {slope * 1e6:.3g} ns per vertex")
     ax.set_xlabel("vertices")
     ax.set_ylabel("pressure force time [ms]")
     ax.set_title("Pressure force (volume + P + P A n / 3), cf. paper Fig. 6")

@@ -28,7 +28,7 @@ def _volumes(model: Model, q: np.ndarray) -> Workspace:
         m.mc_samples,
         w.body_lo,
         w.body_hi,
-        w.tri_normal,
+        w.volume_gradient,
         w.body_volume,
     )
     return w
@@ -87,8 +87,8 @@ def body_gas_value(model: Model, state: State, control: Control | None = None) -
 
 def body_area(model: Model, state: State) -> np.ndarray:
     """Surface area of each body [m^2], shape (B,)."""
-    w = _volumes(model, state.particle_q)
-    areas = 0.5 * np.linalg.norm(w.tri_normal, axis=1)
+    x = state.particle_q[model.tri_indices]
+    areas = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
     return np.array([areas[t0:t1].sum() for t0, t1 in model.body_tri_range])
 
 

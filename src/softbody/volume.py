@@ -28,6 +28,9 @@ import numpy as np
 from numba import njit
 
 
+SIXTH = 1.0 / 6.0
+
+
 class VolumeMethod(IntEnum):
     """How a body's volume is measured each step."""
 
@@ -69,16 +72,25 @@ def eval_body_bounds(q, begin, end, lo, hi):
 
 
 @njit(cache=True)
-def eval_tri_normals_volume(
-    q, tri_indices, body_particle_range, body_tri_range, tri_normal, body_volume
+def eval_volume_gradient(
+    q, tri_indices, body_particle_range, body_tri_range, volume_gradient, body_volume
 ):
-    """Scaled face normals n_t = (b - a) x (c - a) (outward, |n_t| = 2 area) and exact volumes.
+    """Exact volumes and their gradients dV/dx_i, in one pass over the faces.
+
+    With n_t = (b - a) x (c - a) (outward normal times twice the area), each face adds
+    n_t . (a - r) / 6 to V and n_t / 6 to dV/dx of each of its corners (the gradient is
+    exact on a closed surface: the extra terms of differentiating a . (b x c) cancel
+    around every vertex fan).
 
     tri_indices : (T, 3); body_particle_range, body_tri_range : (B, 2).
-    Outputs tri_normal : (T, 3) [m^2] and body_volume : (B,) [m^3].
+    Outputs volume_gradient : (N, 3) [m^2] (rows of body particles) and body_volume (B,).
     """
     for b in range(body_tri_range.shape[0]):
         r = body_particle_range[b, 0]  # reference point: the body's first vertex
+        for i in range(body_particle_range[b, 0], body_particle_range[b, 1]):
+            volume_gradient[i, 0] = 0.0
+            volume_gradient[i, 1] = 0.0
+            volume_gradient[i, 2] = 0.0
         cx, cy, cz = q[r, 0], q[r, 1], q[r, 2]
         six_v = 0.0
         for t in range(body_tri_range[b, 0], body_tri_range[b, 1]):
@@ -89,10 +101,17 @@ def eval_tri_normals_volume(
             nx = uy * vz - uz * vy
             ny = uz * vx - ux * vz
             nz = ux * vy - uy * vx
-            tri_normal[t, 0] = nx
-            tri_normal[t, 1] = ny
-            tri_normal[t, 2] = nz
             six_v += (ax - cx) * nx + (ay - cy) * ny + (az - cz) * nz
+            gx, gy, gz = nx * SIXTH, ny * SIXTH, nz * SIXTH
+            volume_gradient[i, 0] += gx
+            volume_gradient[i, 1] += gy
+            volume_gradient[i, 2] += gz
+            volume_gradient[j, 0] += gx
+            volume_gradient[j, 1] += gy
+            volume_gradient[j, 2] += gz
+            volume_gradient[k, 0] += gx
+            volume_gradient[k, 1] += gy
+            volume_gradient[k, 2] += gz
         body_volume[b] = six_v / 6.0
 
 
@@ -124,7 +143,7 @@ def eval_bounding_volume(q, begin, end, method, lo, hi):
 
 
 @njit(cache=True)
-def eval_monte_carlo_volume(q, tri_indices, t_begin, t_end, tri_normal, lo, hi, samples):
+def eval_monte_carlo_volume(q, tri_indices, t_begin, t_end, lo, hi, samples):
     """Monte Carlo volume [m^3] of one body from vertical lines at ``samples`` (S, 2) in [0,1)^2.
 
     Each sample (u, w) is the line x = lo_x + u (hi_x - lo_x), z = lo_z + w (hi_z - lo_z);
@@ -137,20 +156,19 @@ def eval_monte_carlo_volume(q, tri_indices, t_begin, t_end, tri_normal, lo, hi, 
     y0 = 0.5 * (lo[1] + hi[1])
     total = 0.0
     for t in range(t_begin, t_end):
-        ny = tri_normal[t, 1]
-        if ny == 0.0:
-            continue  # a vertical triangle is crossed by no line (measure zero)
         i, j, k = tri_indices[t, 0], tri_indices[t, 1], tri_indices[t, 2]
         ax, az = q[i, 0], q[i, 2]
         bx, bz = q[j, 0], q[j, 2]
         cx, cz = q[k, 0], q[k, 2]
         ay, by, cy = q[i, 1] - y0, q[j, 1] - y0, q[k, 1] - y0
-        # 2D barycentric coordinates in the xz plane; det = (b-a) x (c-a) projected = -n_y
+        # 2D barycentric coordinates in the xz plane; det = -n_y of the outward normal
         det = (bx - ax) * (cz - az) - (cx - ax) * (bz - az)
+        if det == 0.0:
+            continue  # a vertical triangle is crossed by no line (measure zero)
         inv = 1.0 / det
         xmin, xmax = min(ax, bx, cx), max(ax, bx, cx)
         zmin, zmax = min(az, bz, cz), max(az, bz, cz)
-        sign = 1.0 if ny > 0.0 else -1.0
+        sign = 1.0 if det < 0.0 else -1.0  # exit (n_y > 0) adds y, entry subtracts
         for s in range(sample_count):
             px = lo[0] + samples[s, 0] * wx
             if px < xmin or px > xmax:
@@ -177,16 +195,17 @@ def eval_body_volume(
     mc_samples,
     body_lo,
     body_hi,
-    tri_normal,
+    volume_gradient,
     body_volume,
 ):
-    """Every body's volume by its own method [m^3], plus the per-face scaled normals.
+    """Every body's volume by its own method [m^3], and the exact gradients dV/dx.
 
-    Fills tri_normal (T, 3) and body_volume (B,); body_lo, body_hi (B, 3) get the bounds
-    of the bodies that use a bounding or Monte Carlo volume (the exact method needs none).
+    Fills volume_gradient (N, 3) [m^2] (whatever the method: it is what the pressure force
+    uses) and body_volume (B,); body_lo, body_hi (B, 3) get the bounds of the bodies that
+    use a bounding or Monte Carlo volume (the exact method needs none).
     """
-    eval_tri_normals_volume(
-        q, tri_indices, body_particle_range, body_tri_range, tri_normal, body_volume
+    eval_volume_gradient(
+        q, tri_indices, body_particle_range, body_tri_range, volume_gradient, body_volume
     )
     for b in range(body_volume_method.shape[0]):
         method = body_volume_method[b]
@@ -200,7 +219,6 @@ def eval_body_volume(
                 tri_indices,
                 body_tri_range[b, 0],
                 body_tri_range[b, 1],
-                tri_normal,
                 body_lo[b],
                 body_hi[b],
                 mc_samples[body_mc_range[b, 0] : body_mc_range[b, 1]],

@@ -17,7 +17,7 @@ def eval_forces(m, c, t, q, qd, w, f):
     """All forces at time ``t`` [s] for positions ``q`` and velocities ``qd`` (N, 3).
 
     m : ModelData, c : ControlData, w : Workspace (its body_volume, body_pressure,
-    tri_normal, body_lo/hi are refreshed as a side product); f : (N, 3) output [N].
+    volume_gradient, body_lo/hi are refreshed as a side product); f : (N, 3) output [N].
     """
     # weight, m g (initialises the accumulator)
     eval_gravity(m.particle_mass, m.gravity, f)
@@ -38,7 +38,7 @@ def eval_forces(m, c, t, q, qd, w, f):
     )
     # per-step external forces from Control
     eval_external_forces(c.particle_f, f)
-    # body volumes (and the face normals the pressure force reuses)
+    # body volumes and their gradients dV/dx (area-weighted vertex normals)
     eval_body_volume(
         q,
         m.tri_indices,
@@ -49,7 +49,7 @@ def eval_forces(m, c, t, q, qd, w, f):
         m.mc_samples,
         w.body_lo,
         w.body_hi,
-        w.tri_normal,
+        w.volume_gradient,
         w.body_volume,
     )
     # gas law: P(V, nRT(t))
@@ -66,7 +66,7 @@ def eval_forces(m, c, t, q, qd, w, f):
         w.body_volume,
         w.body_pressure,
     )
-    # pressure force (P - P_ambient) A n / 3 on each face corner
+    # pressure force (P - P_ambient) A n / 3 per face corner = (P - P_ambient) dV/dx
     eval_pressure_forces(
-        m.tri_indices, m.body_tri_range, w.body_pressure, m.body_ambient_pressure, w.tri_normal, f
+        m.body_particle_range, w.body_pressure, m.body_ambient_pressure, w.volume_gradient, f
     )

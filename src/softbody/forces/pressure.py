@@ -1,10 +1,12 @@
 """The pressure force (paper, section 2.2): F = (P - P_ambient) A n on every face.
 
-Each face's force is shared equally by its three corners: f = (P - P_a) n_t / 6 with
-n_t = (b - a) x (c - a) the outward normal times twice the area. On a closed mesh the sum
-over the faces around a vertex equals (P - P_a) dV/dx_i exactly, so with the exact volume
-the pressure force is the gradient of the gas energy (conservative), and it has zero net
-force and zero net torque.
+Each face's force is shared equally by its three corners: (P - P_a) n_t / 6 with
+n_t = (b - a) x (c - a) the outward normal times twice the area. Summed over the faces
+around a vertex this is exactly (P - P_a) dV/dx_i, so the volume pass accumulates dV/dx
+once and this kernel only scales it: with the exact volume the pressure force is the
+gradient of the gas energy (conservative), with zero net force and zero net torque. With
+a bounding volume, P comes from that volume but the force still acts through the faces,
+as in the paper.
 """
 
 from __future__ import annotations
@@ -15,22 +17,19 @@ from numba import njit
 
 @njit(cache=True)
 def eval_pressure_forces(
-    tri_indices, body_tri_range, body_pressure, body_ambient_pressure, tri_normal, f
+    body_particle_range, body_pressure, body_ambient_pressure, volume_gradient, f
 ):
-    """Accumulate pressure forces into ``f`` (N, 3) [N].
+    """Accumulate f_i += (P_b - P_ambient,b) dV/dx_i into ``f`` (N, 3) [N].
 
-    tri_indices (T, 3); body_tri_range (B, 2); body_pressure, body_ambient_pressure (B,) [Pa];
-    tri_normal (T, 3) scaled normals [m^2] from the volume pass.
+    body_particle_range (B, 2); body_pressure, body_ambient_pressure (B,) [Pa];
+    volume_gradient (N, 3) [m^2] from the volume pass.
     """
-    for b in range(body_tri_range.shape[0]):
-        p = (body_pressure[b] - body_ambient_pressure[b]) / 6.0
-        for t in range(body_tri_range[b, 0], body_tri_range[b, 1]):
-            fx, fy, fz = p * tri_normal[t, 0], p * tri_normal[t, 1], p * tri_normal[t, 2]
-            for c in range(3):
-                i = tri_indices[t, c]
-                f[i, 0] += fx
-                f[i, 1] += fy
-                f[i, 2] += fz
+    for b in range(body_particle_range.shape[0]):
+        p = body_pressure[b] - body_ambient_pressure[b]
+        for i in range(body_particle_range[b, 0], body_particle_range[b, 1]):
+            f[i, 0] += p * volume_gradient[i, 0]
+            f[i, 1] += p * volume_gradient[i, 1]
+            f[i, 2] += p * volume_gradient[i, 2]
 
 
 def pressure_forces_reference(q: np.ndarray, faces: np.ndarray, pressure: float) -> np.ndarray:

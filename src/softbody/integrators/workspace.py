@@ -8,7 +8,7 @@ import numpy as np
 
 
 class Workspace(NamedTuple):
-    """Scratch for the step kernels; N particles, T triangles, B bodies."""
+    """Scratch for the step kernels; N particles, B bodies."""
 
     f: np.ndarray  # (N, 3) force accumulator [N]
     q0: np.ndarray  # (N, 3) positions at the start of the step [m]
@@ -17,7 +17,7 @@ class Workspace(NamedTuple):
     vs: np.ndarray  # (N, 3) stage velocities
     acc_q: np.ndarray  # (N, 3) RK4 weighted sum of position slopes
     acc_v: np.ndarray  # (N, 3) RK4 weighted sum of velocity slopes
-    tri_normal: np.ndarray  # (T, 3) scaled face normals [m^2]
+    volume_gradient: np.ndarray  # (N, 3) dV/dx of each particle's body [m^2]
     body_volume: np.ndarray  # (B,) [m^3]
     body_pressure: np.ndarray  # (B,) [Pa]
     body_lo: np.ndarray  # (B, 3) [m]
@@ -26,10 +26,9 @@ class Workspace(NamedTuple):
     @classmethod
     def for_model(cls, model) -> Workspace:
         """Allocate scratch sized for ``model``."""
-        n, t, b = model.particle_count, model.tri_count, model.body_count
+        n, b = model.particle_count, model.body_count
         return cls(
-            *(np.zeros((n, 3)) for _ in range(7)),
-            np.zeros((t, 3)),
+            *(np.zeros((n, 3)) for _ in range(8)),
             np.zeros(b),
             np.zeros(b),
             np.zeros((b, 3)),

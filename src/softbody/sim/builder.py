@@ -383,7 +383,7 @@ class ModelBuilder:
             mc_samples,
             np.zeros((bcount, 3)),
             np.zeros((bcount, 3)),
-            np.zeros((len(tri), 3)),
+            np.zeros((len(q), 3)),
             rest_volume,
         )
         for b in range(bcount):
