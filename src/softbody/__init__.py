@@ -4,6 +4,18 @@ Closed triangle meshes with mass-carrying vertices, damped springs on the edges 
 ideal gas inside whose pressure pushes every face outward along its normal.
 """
 
+from softbody import _kernel_cache
+
+_kernel_cache.configure()  # before any compiled kernel is defined
+
+from softbody.collision import (
+    ColliderBox,
+    ColliderPlane,
+    ColliderSphere,
+    MotionOscillation,
+    MotionRotation,
+    MotionTranslation,
+)
 from softbody.diagnostics import (
     Energies,
     body_area,
@@ -39,6 +51,9 @@ __version__ = "0.1.0"
 
 __all__ = [
     "GAS_CONSTANT",
+    "ColliderBox",
+    "ColliderPlane",
+    "ColliderSphere",
     "Control",
     "Energies",
     "Gas",
@@ -49,6 +64,9 @@ __all__ = [
     "MeshWarning",
     "Model",
     "ModelBuilder",
+    "MotionOscillation",
+    "MotionRotation",
+    "MotionTranslation",
     "SimulationError",
     "Simulator",
     "StabilityWarning",

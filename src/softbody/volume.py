@@ -27,7 +27,6 @@ from enum import IntEnum
 import numpy as np
 from numba import njit
 
-
 SIXTH = 1.0 / 6.0
 
 

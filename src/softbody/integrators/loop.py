@@ -5,6 +5,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from softbody.collision.pose import eval_collider_poses
+from softbody.collision.response import eval_collider_contacts
+from softbody.collision.soft import eval_soft_contacts_bounding, eval_soft_contacts_surface
 from softbody.forces.evaluate import eval_forces
 from softbody.integrators.schemes import (
     step_euler,
@@ -21,6 +24,7 @@ RUNAWAY = 2  # a particle moved faster than the speed limit
 BAD_VOLUME = 3  # a body volume became NaN, zero or negative (inverted)
 SHRUNK = 4  # a body volume fell below the lower limit times its rest volume
 EXPLODED = 5  # a body volume grew past the upper limit times its rest volume
+NEED_HASH = 6  # the spatial hash needs more room (value: entries); the step was undone
 
 
 @njit(cache=True)
@@ -55,7 +59,114 @@ def _check_particles(q, qd, max_speed):
 
 
 @njit(cache=True)
-def simulate(integrator, steps, t0, dt, m, c, q, qd, w, max_speed, ratio_min, ratio_max):
+def eval_contacts(
+    m, c, t, fraction, duration, q, qd, w, collider_q, collider_rot, collider_impulse
+):
+    """Collisions at the end of a step (paper step 5): soft-soft, then rigid colliders
+    (last, so no particle ends a step inside a collider). Returns 0, or the spatial-hash
+    capacity surface contacts need."""
+    if m.collider_kind.shape[0] > 0:
+        eval_collider_poses(
+            m.collider_motion,
+            m.collider_center,
+            m.collider_rotation,
+            m.collider_motion_vector,
+            m.collider_motion_pivot,
+            m.collider_motion_frequency,
+            c.collider_target,
+            fraction,
+            duration,
+            t,
+            w.collider_q_start,
+            collider_q,
+            collider_rot,
+            w.collider_v,
+            w.collider_w,
+            w.scratch,
+        )
+    if m.soft_contact_mode == 1:
+        eval_soft_contacts_bounding(
+            m.particle_mass,
+            m.particle_inv_mass,
+            m.body_particle_range,
+            m.body_contact_shape,
+            m.soft_contact_restitution,
+            m.soft_contact_friction,
+            q,
+            qd,
+            w.body_lo,
+            w.body_hi,
+            w.body_velocity,
+            w.body_free_mass,
+            w.body_center,
+            w.body_axes,
+            w.body_dv,
+            w.scratch[0],
+        )
+    elif m.soft_contact_mode == 2:
+        needed = eval_soft_contacts_surface(
+            m.particle_mass,
+            m.particle_inv_mass,
+            m.particle_body,
+            m.body_particle_range,
+            m.tri_indices,
+            m.tri_body,
+            m.soft_contact_restitution,
+            m.soft_contact_friction,
+            m.contact_cell_size,
+            m.contact_margin,
+            q,
+            qd,
+            w.body_lo,
+            w.body_hi,
+            w.body_velocity,
+            w.body_free_mass,
+            w.hash_start,
+            w.hash_count,
+            w.hash_entries,
+        )
+        if needed > 0:
+            return needed
+    if m.collider_kind.shape[0] > 0:
+        eval_collider_contacts(
+            m.particle_mass,
+            m.particle_inv_mass,
+            m.collider_kind,
+            m.collider_size,
+            m.collider_restitution,
+            m.collider_friction,
+            collider_q,
+            collider_rot,
+            w.collider_v,
+            w.collider_w,
+            w.q0,
+            q,
+            qd,
+            collider_impulse,
+            w.scratch[1],
+            w.scratch[2],
+        )
+    return 0
+
+
+@njit(cache=True)
+def simulate(
+    integrator,
+    steps,
+    t0,
+    dt,
+    m,
+    c,
+    q,
+    qd,
+    w,
+    max_speed,
+    ratio_min,
+    ratio_max,
+    collider_q,
+    collider_rot,
+    collider_impulse,
+):
     """Advance ``q``, ``qd`` (N, 3) in place by ``steps`` steps of ``dt`` [s] from ``t0``.
 
     integrator : int (``Integrator`` value). Returns (status, steps_done, index, value):
@@ -63,7 +174,12 @@ def simulate(integrator, steps, t0, dt, m, c, q, qd, w, max_speed, ratio_min, ra
     the body or particle at fault and ``value`` the offending quantity. On a particle
     failure the state is restored to the start of the failing step; on a volume failure
     the state is the one whose volume failed (found before stepping from it).
+    collider_q (C, 3), collider_rot (C, 3, 3) are the colliders' poses (updated each
+    step); collider_impulse (C, 3) accumulates the impulse they receive.
     """
+    for k in range(collider_q.shape[0]):
+        for d in range(3):
+            w.collider_q_start[k, d] = collider_q[k, d]
     if c.pin_active:
         inv = 1.0 / (steps * dt)
         for p in range(m.pin_particle.shape[0]):
@@ -90,6 +206,23 @@ def simulate(integrator, steps, t0, dt, m, c, q, qd, w, max_speed, ratio_min, ra
             step_symplectic_euler(m, c, t, dt, q, qd, w)
         else:
             step_velocity_verlet(m, c, t, dt, q, qd, w)
+        needed = eval_contacts(
+            m,
+            c,
+            t + dt,
+            (s + 1.0) / steps,
+            steps * dt,
+            q,
+            qd,
+            w,
+            collider_q,
+            collider_rot,
+            collider_impulse,
+        )
+        if needed > 0:
+            q[:] = w.q0
+            qd[:] = w.v0
+            return NEED_HASH, s, -1, float(needed)
         status, index, value = _check_particles(q, qd, max_speed)
         if status != OK:
             q[:] = w.q0

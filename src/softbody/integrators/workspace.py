@@ -22,15 +22,44 @@ class Workspace(NamedTuple):
     body_pressure: np.ndarray  # (B,) [Pa]
     body_lo: np.ndarray  # (B, 3) [m]
     body_hi: np.ndarray  # (B, 3) [m]
+    body_velocity: np.ndarray  # (B, 3) mass-weighted mean velocity [m/s]
+    body_free_mass: np.ndarray  # (B,) mass of the movable particles [kg]
+    body_center: np.ndarray  # (B, 3) bounding-object centres [m]
+    body_axes: np.ndarray  # (B, 3) bounding-object semi-axes [m]
+    body_dv: np.ndarray  # (B, 3) velocity change from soft contacts [m/s]
+    collider_q_start: np.ndarray  # (C, 3) collider centres at the start of the call [m]
+    collider_v: np.ndarray  # (C, 3) collider centre velocities [m/s]
+    collider_w: np.ndarray  # (C, 3) collider angular velocities [rad/s]
+    scratch: np.ndarray  # (3, 3) small temporaries
+    hash_start: np.ndarray  # (H + 1,) spatial hash of triangles (surface contacts)
+    hash_count: np.ndarray  # (H,)
+    hash_entries: np.ndarray  # (E,)
 
     @classmethod
-    def for_model(cls, model) -> Workspace:
+    def for_model(cls, model, hash_capacity: int | None = None) -> Workspace:
         """Allocate scratch sized for ``model``."""
-        n, b = model.particle_count, model.body_count
+        n, b, c = model.particle_count, model.body_count, model.collider_count
+        if model.soft_contact_mode == 2:
+            table = 1 << max(4, int(np.ceil(np.log2(2 * max(model.tri_count, 1)))))
+            capacity = 8 * model.tri_count if hash_capacity is None else hash_capacity
+        else:
+            table, capacity = 1, 0
         return cls(
             *(np.zeros((n, 3)) for _ in range(8)),
             np.zeros(b),
             np.zeros(b),
             np.zeros((b, 3)),
             np.zeros((b, 3)),
+            np.zeros((b, 3)),
+            np.zeros(b),
+            np.zeros((b, 3)),
+            np.zeros((b, 3)),
+            np.zeros((b, 3)),
+            np.zeros((c, 3)),
+            np.zeros((c, 3)),
+            np.zeros((c, 3)),
+            np.zeros((3, 3)),
+            np.zeros(table + 1, dtype=np.int64),
+            np.zeros(table, dtype=np.int64),
+            np.zeros(capacity, dtype=np.int64),
         )

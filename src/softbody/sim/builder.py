@@ -10,6 +10,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from softbody.collision.colliders import Collider, collider_arrays
 from softbody.errors import MeshError
 from softbody.gas import Gas
 from softbody.mesh.topology import bending_pairs, unique_edges, vertex_areas
@@ -47,6 +48,7 @@ class _Body:
     gas: Gas
     volume_method: VolumeMethod
     mc_samples: np.ndarray  # (S, 2)
+    contact_shape: VolumeMethod
 
 
 class ModelBuilder:
@@ -77,6 +79,8 @@ class ModelBuilder:
         self._springs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._attachments: list[tuple[int, np.ndarray, float, float, float]] = []
         self._bodies: list[_Body] = []
+        self._colliders: list[Collider] = []
+        self._soft_contact = ("none", 0.5, 0.1, None)
 
     # -- sizes ---------------------------------------------------------------------------
     @property
@@ -205,6 +209,7 @@ class ModelBuilder:
         velocity: ArrayLike = (0.0, 0.0, 0.0),
         monte_carlo_samples: int = 4096,
         seed: int = 0,
+        contact_shape: str = "bounding_ellipsoid",
     ) -> int:
         """Add a closed mesh filled with gas as a soft body; returns the body index.
 
@@ -234,6 +239,10 @@ class ModelBuilder:
             Lines per Monte Carlo volume estimate (``volume_method="monte_carlo"``).
         seed : int
             Seed of the Monte Carlo sample lines, so runs repeat.
+        contact_shape : str
+            The body's bounding object for the paper's soft-soft contacts
+            (``set_soft_contact("bounding")``): ``"bounding_ellipsoid"`` (default),
+            ``"bounding_sphere"`` or ``"bounding_box"``.
         """
         if isinstance(mesh, TriMesh):
             source = mesh
@@ -257,6 +266,16 @@ class ModelBuilder:
         if not isinstance(gas, Gas):
             gas = Gas.isothermal(_number("gas nRT", gas))
         method = VolumeMethod.parse(volume_method)
+        shape = VolumeMethod.parse(contact_shape)
+        if shape not in (
+            VolumeMethod.BOUNDING_BOX,
+            VolumeMethod.BOUNDING_SPHERE,
+            VolumeMethod.BOUNDING_ELLIPSOID,
+        ):
+            raise ValueError(
+                "contact_shape must be 'bounding_ellipsoid', 'bounding_sphere' "
+                f"or 'bounding_box', got {contact_shape!r}"
+            )
         v = mesh.vertex_count
         if mass_distribution == "uniform":
             m = np.full(v, total_mass / v)
@@ -309,9 +328,45 @@ class ModelBuilder:
                 )
             )
         self._bodies.append(
-            _Body(begin, begin + v, mesh.faces + begin, total_mass, gas, method, samples)
+            _Body(begin, begin + v, mesh.faces + begin, total_mass, gas, method, samples, shape)
         )
         return body
+
+    # -- contacts ------------------------------------------------------------------------
+    def add_collider(self, collider: Collider) -> int:
+        """Add a rigid collider (``ColliderPlane``, ``ColliderBox``, ``ColliderSphere``);
+        returns its index. Parameters are checked at ``finalize``."""
+        collider_arrays([collider])  # validate now, so the error points at this call
+        self._colliders.append(collider)
+        return len(self._colliders) - 1
+
+    def set_soft_contact(
+        self,
+        mode: Literal["none", "bounding", "surface"] = "surface",
+        *,
+        restitution: float = 0.5,
+        friction: float = 0.1,
+        margin: float | None = None,
+    ) -> None:
+        """How soft bodies collide with each other.
+
+        ``"bounding"``: the paper's method, vertices against the other body's bounding
+        object (each body's ``contact_shape``); ``"surface"``: vertices against the other
+        body's triangles; ``"none"``: bodies pass through each other. restitution and
+        friction lie in [0, 1]; margin [m] is how far surface contacts look for the
+        nearest triangle (default half the median edge length).
+        """
+        if mode not in ("none", "bounding", "surface"):
+            raise ValueError(
+                f"soft contact mode must be 'none', 'bounding' or 'surface', got {mode!r}"
+            )
+        for name, value in (("restitution", restitution), ("friction", friction)):
+            v = _number(f"soft contact {name}", value)
+            if v > 1:
+                raise ValueError(f"soft contact {name} must lie in [0, 1], got {value!r}")
+        if margin is not None:
+            _number("soft contact margin", margin, strict=True)
+        self._soft_contact = (mode, float(restitution), float(friction), margin)
 
     # -- finalize ------------------------------------------------------------------------
     def finalize(self) -> Model:
@@ -397,6 +452,16 @@ class ModelBuilder:
             dtype=np.float64,
         )
 
+        mode, contact_e, contact_mu, margin = self._soft_contact
+        body_edges = idx[spring_body >= 0] if len(idx) else np.zeros((0, 2), dtype=np.int64)
+        edge_length = (
+            np.linalg.norm(q[body_edges[:, 1]] - q[body_edges[:, 0]], axis=1)
+            if len(body_edges)
+            else np.ones(1)
+        )
+        if margin is None:
+            margin = 0.5 * float(np.median(edge_length))
+        colliders = collider_arrays(self._colliders)
         return Model(
             gravity=self.gravity.copy(),
             particle_q=q,
@@ -433,4 +498,21 @@ class ModelBuilder:
             schedule_value=np.ascontiguousarray(sched[:, 1]),
             body_rest_volume=rest_volume,
             pin_particle=np.flatnonzero(pinned).astype(np.int64),
+            tri_body=np.repeat(np.arange(bcount), tri_counts).astype(np.int64),
+            body_contact_shape=np.array([int(b.contact_shape) for b in bodies], dtype=np.int64),
+            soft_contact_mode={"none": 0, "bounding": 1, "surface": 2}[mode],
+            soft_contact_restitution=contact_e,
+            soft_contact_friction=contact_mu,
+            contact_margin=float(margin),
+            contact_cell_size=float(edge_length.max() + 2.0 * margin),
+            collider_kind=colliders.kind,
+            collider_center=colliders.center,
+            collider_rotation=colliders.rotation,
+            collider_size=colliders.size,
+            collider_restitution=colliders.restitution,
+            collider_friction=colliders.friction,
+            collider_motion=colliders.motion,
+            collider_motion_vector=colliders.motion_vector,
+            collider_motion_pivot=colliders.motion_pivot,
+            collider_motion_frequency=colliders.motion_frequency,
         )

@@ -21,6 +21,7 @@ class ControlData(NamedTuple):
     attachment_anchor: np.ndarray  # (A, 3) anchor points [m]
     pin_target: np.ndarray  # (P, 3) pinned-particle targets at the end of the call [m]
     pin_active: bool  # whether pin_target is used
+    collider_target: np.ndarray  # (C, 3) collider centre targets [m], NaN = prescribed motion
 
 
 @dataclass(eq=False)
@@ -43,6 +44,10 @@ class Control:
     """Where each pinned particle (``model.pin_particle`` order) should be at the end of
     the call [m], shape (P, 3); it moves there at constant velocity. None leaves pins
     moving with their current velocity (at rest unless set)."""
+    collider_target: np.ndarray | None = None
+    """Where each collider's centre should be at the end of the call [m], shape (C, 3);
+    it moves there in a straight line at constant velocity (a ball driven by the user).
+    NaN rows (and None) follow the collider's prescribed motion."""
 
     @classmethod
     def neutral(cls, model: Model) -> Control:
@@ -93,6 +98,13 @@ class Control:
             if not np.all(np.isfinite(a)):
                 raise ValueError("Control.pin_target holds NaN or infinite values")
             np.copyto(out.pin_target, a)
+        if self.collider_target is None:
+            out.collider_target[:] = np.nan
+        else:
+            a = arr("collider_target", self.collider_target, out.collider_target.shape)
+            if np.any(np.isinf(a)):
+                raise ValueError("Control.collider_target holds infinite values")
+            np.copyto(out.collider_target, a)
         return out._replace(pin_active=active)
 
 
@@ -104,4 +116,5 @@ def control_data(model: Model) -> ControlData:
         attachment_anchor=model.attachment_anchor.copy(),
         pin_target=model.particle_q[model.pin_particle].copy(),
         pin_active=False,
+        collider_target=np.full((model.collider_count, 3), np.nan),
     )

@@ -41,6 +41,24 @@ class ModelData(NamedTuple):
     schedule_value: np.ndarray
     body_rest_volume: np.ndarray
     pin_particle: np.ndarray
+    particle_body: np.ndarray
+    tri_body: np.ndarray
+    body_contact_shape: np.ndarray
+    soft_contact_mode: int
+    soft_contact_restitution: float
+    soft_contact_friction: float
+    contact_margin: float
+    contact_cell_size: float
+    collider_kind: np.ndarray
+    collider_center: np.ndarray
+    collider_rotation: np.ndarray
+    collider_size: np.ndarray
+    collider_restitution: np.ndarray
+    collider_friction: np.ndarray
+    collider_motion: np.ndarray
+    collider_motion_vector: np.ndarray
+    collider_motion_pivot: np.ndarray
+    collider_motion_frequency: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,6 +135,41 @@ class Model:
     """Volume of each body at its initial positions by its own method [m^3], shape (B,)."""
     pin_particle: np.ndarray
     """Pinned (kinematic) particles, shape (P,); ``Control.pin_target`` moves them."""
+    tri_body: np.ndarray
+    """Body of each triangle, shape (T,)."""
+    body_contact_shape: np.ndarray
+    """Bounding object of each body for ``bounding`` soft contacts: 1 box, 2 sphere,
+    3 ellipsoid (``VolumeMethod`` numbering), shape (B,)."""
+    soft_contact_mode: int
+    """Soft-soft contacts: 0 none, 1 bounding objects (the paper), 2 surfaces."""
+    soft_contact_restitution: float
+    """Restitution of soft-soft contacts, in [0, 1]."""
+    soft_contact_friction: float
+    """Fraction of tangential relative speed removed by a soft-soft contact, in [0, 1]."""
+    contact_margin: float
+    """Distance [m] within which surface contacts look for the nearest triangle."""
+    contact_cell_size: float
+    """Grid cell [m] of the spatial hash for surface contacts."""
+    collider_kind: np.ndarray
+    """``ColliderKind`` of each rigid collider, shape (C,)."""
+    collider_center: np.ndarray
+    """Collider centres at t = 0 [m] (a plane: a point on it), shape (C, 3)."""
+    collider_rotation: np.ndarray
+    """Collider orientations at t = 0, shape (C, 3, 3) (a plane's normal is column 1)."""
+    collider_size: np.ndarray
+    """Box half-extents or sphere radius (repeated) [m], shape (C, 3)."""
+    collider_restitution: np.ndarray
+    """Restitution of each collider, shape (C,)."""
+    collider_friction: np.ndarray
+    """Fraction of tangential speed each collider removes at contact, shape (C,)."""
+    collider_motion: np.ndarray
+    """``MotionKind`` of each collider, shape (C,)."""
+    collider_motion_vector: np.ndarray
+    """Angular velocity [rad/s], velocity [m/s] or amplitude [m] of the motion, (C, 3)."""
+    collider_motion_pivot: np.ndarray
+    """Pivot of rotating colliders [m], shape (C, 3)."""
+    collider_motion_frequency: np.ndarray
+    """Frequency of oscillating colliders [Hz], shape (C,)."""
     data: ModelData = field(init=False, repr=False)
     """The same arrays bundled for the compiled kernels."""
 
@@ -155,6 +208,11 @@ class Model:
         return int(self.body_particle_range.shape[0])
 
     @property
+    def collider_count(self) -> int:
+        """Number of rigid colliders C."""
+        return int(self.collider_kind.shape[0])
+
+    @property
     def pin_count(self) -> int:
         """Number of pinned particles P."""
         return int(self.pin_particle.shape[0])
@@ -172,7 +230,12 @@ class Model:
         """A new :class:`State` at the initial positions and velocities, time 0."""
         from softbody.sim.state import State
 
-        return State(self.particle_q.copy(), self.particle_qd.copy())
+        return State(
+            self.particle_q.copy(),
+            self.particle_qd.copy(),
+            collider_q=self.collider_center.copy(),
+            collider_rotation=self.collider_rotation.copy(),
+        )
 
     def control(self):
         """A :class:`Control` that changes nothing: model gas, no forces, anchors in place."""
@@ -184,5 +247,6 @@ class Model:
         return (
             f"Model(particle_count={self.particle_count}, spring_count={self.spring_count}, "
             f"tri_count={self.tri_count}, body_count={self.body_count}, "
-            f"attachment_count={self.attachment_count}, pin_count={self.pin_count})"
+            f"attachment_count={self.attachment_count}, pin_count={self.pin_count}, "
+            f"collider_count={self.collider_count})"
         )

@@ -112,25 +112,41 @@ class Simulator:
             return state
         data = self._neutral if control is None else control.write(model, self._control)
         lo, hi = self.volume_limits
-        status, done, index, value = _loop.simulate(
-            int(self.integrator),
-            steps,
-            float(state.time),
-            self.dt,
-            model.data,
-            data,
-            state.particle_q,
-            state.particle_qd,
-            self._work,
-            self.max_speed,
-            lo,
-            hi,
-        )
-        start_step = state.step_count
-        state.step_count = start_step + done
-        state.time = float(state.time) + done * self.dt
-        if status != _loop.OK:
-            raise self._blow_up(status, start_step + done, state.time, index, value)
+        if state.collider_q.shape != (model.collider_count, 3):
+            raise ValueError(
+                f"state has {len(state.collider_q)} colliders, the model {model.collider_count}"
+            )
+        state.collider_impulse[:] = 0.0
+        remaining = steps
+        while remaining:
+            status, done, index, value = _loop.simulate(
+                int(self.integrator),
+                remaining,
+                float(state.time),
+                self.dt,
+                model.data,
+                data,
+                state.particle_q,
+                state.particle_qd,
+                self._work,
+                self.max_speed,
+                lo,
+                hi,
+                state.collider_q,
+                state.collider_rotation,
+                state.collider_impulse,
+            )
+            start_step = state.step_count
+            state.step_count = start_step + done
+            state.time = float(state.time) + done * self.dt
+            remaining -= done
+            if status == _loop.NEED_HASH:
+                # contacts touched more grid cells than the hash holds: grow it and go on
+                # (pin and collider targets are re-aimed over the remaining steps)
+                self._work = Workspace.for_model(model, hash_capacity=int(2 * value))
+                continue
+            if status != _loop.OK:
+                raise self._blow_up(status, start_step + done, state.time, index, value)
         return state
 
     def _blow_up(self, status, step, time, index, value) -> SimulationError:
