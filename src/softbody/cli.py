@@ -1,42 +1,84 @@
 """The ``softbody`` command line.
 
-User mistakes (bad arguments, invalid meshes, unstable settings) print one line to stderr
-and exit with status 2; nothing is written unless the run succeeds.
+    softbody scenes [--show NAME | --copy NAME DEST]
+    softbody run SCENE_OR_FILE [--duration S] [--dt S] [--integrator NAME] [--out DIR]
+                               [--set KEY=VALUE ...] [--meshes obj|ply] [--usd] ...
+    softbody info MESH
+
+User mistakes (unknown scene or key, invalid mesh, unstable settings, a run that blows
+up) print one line to stderr and exit with status 2; nothing is written unless the run
+succeeds.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-import warnings
 from pathlib import Path
 
+INTEGRATORS = ["euler", "midpoint", "rk4", "symplectic_euler", "velocity_verlet"]
 
-def _demo(args) -> int:
-    from softbody.demo import hanging_balls, write_outputs
-    from softbody.errors import StabilityWarning
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", StabilityWarning)
-        result = hanging_balls(
-            duration=args.duration,
-            dt=args.dt,
-            integrator=args.integrator,
-            log=(lambda s: print(s, flush=True)),
-        )
-    paths = write_outputs(result, Path(args.out))
-    rate = result.steps / max(result.wall_seconds, 1e-9)
-    print(
-        f"simulated {result.time[-1]:.3g} s in {result.wall_seconds:.2f} s "
-        f"({rate:,.0f} steps/s, {result.model.particle_count} particles)"
+def _scenes(args) -> int:
+    from softbody.scenes import list_scenes, scene_text
+
+    if args.show:
+        print(scene_text(args.show)[1], end="")
+        return 0
+    if args.copy:
+        name, dest = args.copy
+        _, text, _ = scene_text(name)
+        target = Path(dest)
+        if target.is_dir():
+            target = target / f"{name}.toml"
+        if target.exists():
+            raise ValueError(f"{target} exists; not overwriting it")
+        target.write_text(text)
+        print(f"wrote {target} (edit it, then: softbody run {target})")
+        return 0
+    scenes = list_scenes()
+    width = max(len(n) for n in scenes)
+    for name, description in scenes.items():
+        print(f"{name:<{width}}  {description}")
+    return 0
+
+
+def _run(args) -> int:
+    from softbody.run import Outputs, run_scene
+    from softbody.scenes import load_scene
+
+    overrides = list(args.set or [])
+    if args.velocity_vectors:
+        overrides.append("render.velocity_vectors=true")
+    if args.style:
+        overrides.append(f'render.style="{args.style}"')
+    scene = load_scene(args.scene, overrides)
+    outputs = Outputs(
+        video=not args.no_video, gif=not args.no_gif, meshes=args.meshes, usd=args.usd
     )
-    for b, v in enumerate(result.volume[-1]):
-        print(
-            f"  ball {b}: volume {v:.4f} m^3 (rest {result.model.body_rest_volume[b]:.4f}), "
-            f"pressure {result.pressure[-1, b]:.1f} Pa"
-        )
-    for p in paths:
-        print(f"wrote {p}")
+    print(
+        f"{scene.name}: {scene.model.particle_count} particles, "
+        f"{scene.model.tri_count} triangles, {scene.model.body_count} bodies",
+        flush=True,
+    )
+    summary = run_scene(
+        scene,
+        Path(args.out),
+        integrator=args.integrator,
+        dt=args.dt,
+        duration=args.duration,
+        outputs=outputs,
+        strict_stability=True,
+        progress_stream=sys.stdout,
+    )
+    t = summary["timings_s"]
+    print(
+        f"simulated {summary['duration_s']:.3g} s in {t['simulation']:.2f} s of compute "
+        f"({t['simulated_per_wall_second']:.1f}x real time), rendered in "
+        f"{t['rendering']:.2f} s"
+    )
+    for path in summary["files"]:
+        print(f"wrote {path}")
     return 0
 
 
@@ -72,32 +114,44 @@ def _positive_float(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from softbody.demo import DEMO_DEFAULTS
-
     parser = argparse.ArgumentParser(
         prog="softbody", description="Pressure soft bodies (Matyka & Ollila)."
     )
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="hanging balls at several gas amounts (paper Fig. 1)")
-    demo.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
-    demo.add_argument(
-        "--duration",
-        type=_positive_float,
-        default=DEMO_DEFAULTS["duration"],
-        help=f"simulated seconds (default {DEMO_DEFAULTS['duration']:g})",
+
+    scenes = sub.add_parser("scenes", help="list the built-in scenes, show or copy one")
+    group = scenes.add_mutually_exclusive_group()
+    group.add_argument("--show", metavar="NAME", help="print a scene's TOML")
+    group.add_argument(
+        "--copy",
+        nargs=2,
+        metavar=("NAME", "DEST"),
+        help="copy a built-in scene to a file for editing",
     )
-    demo.add_argument(
-        "--dt",
-        type=_positive_float,
-        default=DEMO_DEFAULTS["dt"],
-        help=f"time step in seconds (default {DEMO_DEFAULTS['dt']:g})",
+    scenes.set_defaults(func=_scenes)
+
+    run = sub.add_parser("run", help="simulate a scene and write video, plots and summary")
+    run.add_argument("scene", help="built-in scene name (see `softbody scenes`) or .toml file")
+    run.add_argument("--out", default="out", help="output folder (default: out)")
+    run.add_argument("--duration", type=_positive_float, help="simulated seconds")
+    run.add_argument("--dt", type=_positive_float, help="time step in seconds")
+    run.add_argument("--integrator", choices=INTEGRATORS)
+    run.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a scene value, e.g. --set bodies.0.gas.nrt=50 (repeatable)",
     )
-    demo.add_argument(
-        "--integrator",
-        default="midpoint",
-        choices=["euler", "midpoint", "rk4", "symplectic_euler", "velocity_verlet"],
+    run.add_argument("--style", choices=["solid", "wireframe", "both"])
+    run.add_argument(
+        "--velocity-vectors", action="store_true", help="draw vertex velocities (paper, Figure 7)"
     )
-    demo.set_defaults(func=_demo)
+    run.add_argument("--meshes", choices=["obj", "ply"], help="also write a mesh per frame")
+    run.add_argument("--usd", action="store_true", help="also write a USD point cache")
+    run.add_argument("--no-video", action="store_true", help="skip the MP4")
+    run.add_argument("--no-gif", action="store_true", help="skip the GIF")
+    run.set_defaults(func=_run)
+
     info = sub.add_parser("info", help="check whether a mesh file can hold gas")
     info.add_argument("mesh", help="OBJ, PLY, STL, OFF or GLB file")
     info.set_defaults(func=_info)
@@ -106,12 +160,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``softbody`` console script."""
+    import warnings
+
     from softbody.errors import MeshError, SimulationError, StabilityWarning
 
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
-    except (MeshError, SimulationError, StabilityWarning, ValueError, OSError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # repairs are reported by info
+            return args.func(args)
+    except (MeshError, SimulationError, StabilityWarning, ValueError, RuntimeError, OSError) as exc:
         print(f"softbody: error: {exc}", file=sys.stderr)
         return 2
 

@@ -53,9 +53,41 @@ def _gas_values(model: Model, time: float, control: Control | None) -> np.ndarra
     )
 
 
+def body_volume_by(model: Model, state: State, method: str) -> np.ndarray:
+    """Volume of every body by one given method (``"exact"``, ``"bounding_box"``, ...)
+    whatever method it simulates with [m^3], shape (B,): to compare the paper's bounding
+    objects with the exact volume (Figure 5)."""
+    from softbody.volume import VolumeMethod
+
+    chosen = np.full(model.body_count, int(VolumeMethod.parse(method)), dtype=np.int64)
+    samples = model.mc_samples
+    mc_range = model.body_mc_range
+    if chosen[0] == VolumeMethod.MONTE_CARLO and len(samples) == 0:
+        samples = np.random.default_rng(0).random((4096, 2))
+        mc_range = np.tile([0, 4096], (model.body_count, 1))
+    w = Workspace.for_model(model)
+    eval_body_volume(
+        state.particle_q,
+        model.tri_indices,
+        model.body_particle_range,
+        model.body_tri_range,
+        chosen,
+        mc_range,
+        samples,
+        w.body_lo,
+        w.body_hi,
+        w.volume_gradient,
+        w.body_volume,
+    )
+    return w.body_volume.copy()
+
+
 def body_volume(model: Model, state: State) -> np.ndarray:
-    """Volume of each body by its own volume method [m^3], shape (B,)."""
-    return _volumes(model, state.particle_q).body_volume.copy()
+    """Volume of each body by its own volume method [m^3], shape (B,); NaN for open
+    surfaces (cloth)."""
+    v = _volumes(model, state.particle_q).body_volume.copy()
+    v[model.body_closed == 0] = np.nan
+    return v
 
 
 def body_pressure(model: Model, state: State, control: Control | None = None) -> np.ndarray:
@@ -127,9 +159,10 @@ class Energies:
     ``body_*`` arrays (B,) split them by body.
 
     ``gas`` is the gas law's potential (``softbody.gas``), evaluated at each body's volume
-    by its own method. With the exact volume the pressure force is minus its gradient, so
-    kinetic + gravitational + spring + gas is conserved without damping and with constant
-    nRT; with a bounding volume that sum is not conserved (the paper's approximation).
+    by its own method (0 for open surfaces, whose wind pressure does uncounted work).
+    With the exact volume the pressure force is minus its gradient, so kinetic +
+    gravitational + spring + gas is conserved without damping and with constant nRT;
+    with a bounding volume that sum is not conserved (the paper's approximation).
     """
 
     kinetic: float
@@ -190,6 +223,8 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
         model.body_ambient_pressure,
         volume,
     )
+    # an open surface (cloth) holds no gas: the work of its wind pressure is not counted
+    gas = np.where(model.body_closed == 1, gas, 0.0)
     return Energies(
         kinetic=float(kin.sum()),
         gravitational=float(grav.sum()),

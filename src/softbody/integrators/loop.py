@@ -28,8 +28,10 @@ NEED_HASH = 6  # the spatial hash needs more room (value: entries); the step was
 
 
 @njit(cache=True)
-def _check_volumes(body_volume, body_rest_volume, ratio_min, ratio_max):
+def _check_volumes(body_volume, body_rest_volume, body_closed, ratio_min, ratio_max):
     for b in range(body_volume.shape[0]):
+        if body_closed[b] == 0:
+            continue  # an open surface encloses no volume
         v = body_volume[b]
         if not (np.isfinite(v) and v > 0.0):
             return BAD_VOLUME, b, v
@@ -192,7 +194,7 @@ def simulate(
         w.v0[:] = qd
         eval_forces(m, c, t, q, qd, w, w.f)
         status, index, value = _check_volumes(
-            w.body_volume, m.body_rest_volume, ratio_min, ratio_max
+            w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max
         )
         if status != OK:
             return status, s, index, value

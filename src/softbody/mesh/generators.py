@@ -173,3 +173,23 @@ def cylinder(
     n_s = _count("segments", segments, 3)
     m = trimesh.creation.cylinder(radius=r, height=h, sections=n_s)
     return TriMesh(np.asarray(m.vertices) @ _Z_TO_Y.T + _center(center), m.faces)
+
+
+def rectangle(
+    size: ArrayLike = (1.0, 1.0), resolution: ArrayLike = (16, 16), center: ArrayLike = (0, 0, 0)
+) -> TriMesh:
+    """Open rectangle in the xy plane facing +z (a cloth): ``size`` (width, height) [m],
+    ``resolution`` (nx, ny) squares, each split into two triangles."""
+    sx, sy = (float(v) for v in size)
+    _positive("width", sx)
+    _positive("height", sy)
+    nx, ny = (_count("resolution", int(v), 1) for v in resolution)
+    x, y = np.meshgrid(
+        np.linspace(-sx / 2, sx / 2, nx + 1), np.linspace(-sy / 2, sy / 2, ny + 1), indexing="ij"
+    )
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    a = (i * (ny + 1) + j).ravel()
+    b, c, d = a + (ny + 1), a + (ny + 1) + 1, a + 1
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    return TriMesh(v + _center(center), faces)

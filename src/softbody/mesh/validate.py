@@ -246,16 +246,30 @@ def inspect_mesh(mesh: TriMesh, *, weld_tolerance: float = WELD_TOLERANCE) -> Me
 
 
 def validate_mesh(
-    mesh: TriMesh, *, name: str = "mesh", weld_tolerance: float = WELD_TOLERANCE
+    mesh: TriMesh,
+    *,
+    name: str = "mesh",
+    weld_tolerance: float = WELD_TOLERANCE,
+    closed: bool = True,
 ) -> TriMesh:
     """Return a closed, outward-wound copy of ``mesh`` or raise :class:`MeshError`.
 
     Safe repairs (welding duplicate vertices, dropping collapsed triangles and unused
     vertices, flipping an inward-wound mesh) are made with a :class:`MeshWarning`;
     open, non-manifold, inconsistently wound, degenerate or multi-shell meshes are refused
-    with every problem and its count in the message.
+    with every problem and its count in the message. With ``closed=False`` (cloth) a
+    boundary is allowed and the winding is kept as given.
     """
     report = inspect_mesh(mesh, weld_tolerance=weld_tolerance)
+    if not closed:
+        problems = [
+            p for p in report.problems if not p.startswith(("open:", "encloses zero volume"))
+        ]
+        if problems:
+            raise MeshError(f"{name} is not a usable surface: " + "; ".join(problems))
+        if report.welded_vertex_count or report.collapsed_face_count:
+            warnings.warn(f"{name}: " + "; ".join(report.repairs[:2]), MeshWarning, stacklevel=2)
+        return report.mesh
     if report.problems:
         raise MeshError(f"{name} cannot hold gas: " + "; ".join(report.problems))
     if report.repairs:

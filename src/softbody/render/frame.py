@@ -14,11 +14,22 @@ from softbody.sim.model import Model
 from softbody.sim.state import State
 
 #: Body colours, cycled (Tableau 10).
-PALETTE = ("#4e79a7", "#f28e2b", "#e15759", "#76b7b2", "#59a14f", "#edc948", "#b07aa1",
-           "#ff9da7", "#9c755f", "#bab0ac")
+PALETTE = (
+    "#4e79a7",
+    "#f28e2b",
+    "#e15759",
+    "#76b7b2",
+    "#59a14f",
+    "#edc948",
+    "#b07aa1",
+    "#ff9da7",
+    "#9c755f",
+    "#bab0ac",
+)
 LIGHT = np.array([0.35, 0.85, 0.45]) / np.linalg.norm([0.35, 0.85, 0.45])
-BOX_EDGES = np.array([[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7],
-                      [0, 4], [1, 5], [2, 6], [3, 7]])
+BOX_EDGES = np.array(
+    [[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7], [0, 4], [1, 5], [2, 6], [3, 7]]
+)
 BOX_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
 
 
@@ -27,7 +38,7 @@ def hex_rgb(color: str) -> np.ndarray:
     c = color.lstrip("#")
     if len(c) != 6:
         raise ValueError(f"colour must be '#rrggbb', got {color!r}")
-    return np.array([int(c[k:k + 2], 16) for k in (0, 2, 4)], float) / 255.0
+    return np.array([int(c[k : k + 2], 16) for k in (0, 2, 4)], float) / 255.0
 
 
 @dataclass(frozen=True)
@@ -53,8 +64,9 @@ class RenderSettings:
 
     def __post_init__(self):
         if self.style not in ("solid", "wireframe", "both"):
-            raise ValueError(f"render style must be 'solid', 'wireframe' or 'both', "
-                             f"got {self.style!r}")
+            raise ValueError(
+                f"render style must be 'solid', 'wireframe' or 'both', got {self.style!r}"
+            )
         for name in ("width", "height"):
             v = getattr(self, name)
             if int(v) != v or not 16 <= v <= 4096:
@@ -67,8 +79,9 @@ class RenderSettings:
 
 def _shade(vertices: np.ndarray, faces: np.ndarray, color: np.ndarray, two_sided: bool):
     """Per-vertex colours (V, 3): ambient + Lambert from area-weighted vertex normals."""
-    n = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
-                 vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    n = np.cross(
+        vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]
+    )
     vn = np.zeros_like(vertices)
     for k in range(3):
         for c in range(3):
@@ -95,20 +108,30 @@ def _ellipse_segments(center, axes, count=48):
 class FrameRenderer:
     """Draws frames of one model. Buffers are allocated once and reused."""
 
-    def __init__(self, model: Model, settings: RenderSettings, *,
-                 open_bodies: np.ndarray | None = None):
+    def __init__(
+        self, model: Model, settings: RenderSettings, *, open_bodies: np.ndarray | None = None
+    ):
         self.model = model
         self.settings = settings
         s = settings.supersample
         self._hi = np.zeros((settings.height * s, settings.width * s, 3))
         self._z = np.zeros((settings.height * s, settings.width * s))
         self._out = np.zeros((settings.height, settings.width, 3), dtype=np.uint8)
-        self._colors = [hex_rgb(settings.body_colors[b % len(settings.body_colors)])
-                        for b in range(model.body_count)]
-        self._open = (np.zeros(model.body_count, bool) if open_bodies is None
-                      else np.asarray(open_bodies, bool))
-        self._edges = [unique_edges(model.tri_indices[t0:t1]) - p0 for (t0, t1), (p0, _) in
-                       zip(model.body_tri_range, model.body_particle_range, strict=True)]
+        self._colors = [
+            hex_rgb(settings.body_colors[b % len(settings.body_colors)])
+            for b in range(model.body_count)
+        ]
+        self._open = (
+            np.zeros(model.body_count, bool)
+            if open_bodies is None
+            else np.asarray(open_bodies, bool)
+        )
+        self._edges = [
+            unique_edges(model.tri_indices[t0:t1]) - p0
+            for (t0, t1), (p0, _) in zip(
+                model.body_tri_range, model.body_particle_range, strict=True
+            )
+        ]
         self._sphere = icosphere(3)
 
     # -- primitives per frame ------------------------------------------------------------
@@ -122,9 +145,10 @@ class FrameRenderer:
         for a in range(n):
             for b in range(n):
                 u0, w0 = -size / 2 + a * tile, -size / 2 + b * tile
-                quad = [center + ex * u + ez * w
-                        for u, w in ((u0, w0), (u0 + tile, w0), (u0 + tile, w0 + tile),
-                                     (u0, w0 + tile))]
+                quad = [
+                    center + ex * u + ez * w
+                    for u, w in ((u0, w0), (u0 + tile, w0), (u0 + tile, w0 + tile), (u0, w0 + tile))
+                ]
                 base = len(verts)
                 verts += quad
                 faces += [[base, base + 2, base + 1], [base, base + 3, base + 2]]
@@ -159,25 +183,47 @@ class FrameRenderer:
             center, rot = state.collider_q[c], state.collider_rotation[c]
             size = model.collider_size[c]
             if kind == ColliderKind.PLANE:
-                add_mesh(*self._ground(center, rot))
+                # the drawn patch is centred under the camera's target
+                normal = rot[:, 1]
+                offset = np.asarray(cam.target, float) - center
+                add_mesh(*self._ground(center + offset - (offset @ normal) * normal, rot))
             elif kind == ColliderKind.SPHERE:
                 v = center + size[0] * self._sphere.vertices
-                add_mesh(v, self._sphere.faces,
-                         _shade(v, self._sphere.faces, np.array([0.55, 0.55, 0.58]), False))
+                add_mesh(
+                    v,
+                    self._sphere.faces,
+                    _shade(v, self._sphere.faces, np.array([0.55, 0.55, 0.58]), False),
+                )
             else:
                 corners = center + (BOX_CORNERS * size) @ rot.T
                 add_lines(corners[BOX_EDGES], np.array([0.25, 0.27, 0.3]))
                 if kind == ColliderKind.BOX:
-                    faces = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5],
-                                      [0, 5, 1], [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4],
-                                      [1, 5, 7], [1, 7, 3]])
+                    faces = np.array(
+                        [
+                            [0, 1, 3],
+                            [0, 3, 2],
+                            [4, 6, 7],
+                            [4, 7, 5],
+                            [0, 4, 5],
+                            [0, 5, 1],
+                            [2, 3, 7],
+                            [2, 7, 6],
+                            [0, 2, 6],
+                            [0, 6, 4],
+                            [1, 5, 7],
+                            [1, 7, 3],
+                        ]
+                    )
                     col = np.array([0.6, 0.6, 0.62])
                     for f in faces:  # flat shading: one colour per face
                         n = np.cross(corners[f[1]] - corners[f[0]], corners[f[2]] - corners[f[0]])
                         n /= np.linalg.norm(n)
                         lam = max(abs(float(n @ LIGHT)), 0.0)
-                        add_mesh(corners[f], np.array([[0, 1, 2]]),
-                                 np.tile(col * (0.32 + 0.68 * lam), (3, 1)))
+                        add_mesh(
+                            corners[f],
+                            np.array([[0, 1, 2]]),
+                            np.tile(col * (0.32 + 0.68 * lam), (3, 1)),
+                        )
 
         q = state.particle_q
         for b, (p0, p1) in enumerate(model.body_particle_range):
@@ -192,8 +238,9 @@ class FrameRenderer:
                 add_lines(v[self._edges[b]], edge_color)
             if st.velocity_vectors:
                 vel = state.particle_qd[p0:p1]
-                add_lines(np.stack([v, v + st.velocity_scale * vel], axis=1),
-                          np.array([0.85, 0.1, 0.1]))
+                add_lines(
+                    np.stack([v, v + st.velocity_scale * vel], axis=1), np.array([0.85, 0.1, 0.1])
+                )
             if st.bounding_objects:
                 lo, hi = v.min(axis=0), v.max(axis=0)
                 c = 0.5 * (lo + hi)
@@ -207,7 +254,15 @@ class FrameRenderer:
         if lines_a:
             a = cam.project(np.concatenate(lines_a), w, h)
             b = cam.project(np.concatenate(lines_b), w, h)
-            draw_lines(a, b, np.ascontiguousarray(np.concatenate(line_colors)), s, near, 2e-3,
-                       self._hi, self._z)
+            draw_lines(
+                a,
+                b,
+                np.ascontiguousarray(np.concatenate(line_colors)),
+                s,
+                near,
+                2e-3,
+                self._hi,
+                self._z,
+            )
         downsample(self._hi, s, self._out)
         return self._out.copy()

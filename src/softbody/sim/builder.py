@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike
 
 from softbody.collision.colliders import Collider, collider_arrays
 from softbody.errors import MeshError
-from softbody.gas import Gas
+from softbody.gas import Gas, GasLaw
 from softbody.mesh.topology import bending_pairs, unique_edges, vertex_areas
 from softbody.mesh.tri_mesh import TriMesh
 from softbody.mesh.validate import validate_mesh
@@ -49,6 +49,7 @@ class _Body:
     volume_method: VolumeMethod
     mc_samples: np.ndarray  # (S, 2)
     contact_shape: VolumeMethod
+    closed: bool
 
 
 class ModelBuilder:
@@ -244,6 +245,91 @@ class ModelBuilder:
             (``set_soft_contact("bounding")``): ``"bounding_ellipsoid"`` (default),
             ``"bounding_sphere"`` or ``"bounding_box"``.
         """
+        if not isinstance(gas, Gas):
+            gas = Gas.isothermal(_number("gas nRT", gas))
+        return self._add_surface(
+            mesh,
+            closed=True,
+            mass=mass,
+            stiffness=stiffness,
+            damping=damping,
+            gas=gas,
+            volume_method=volume_method,
+            pinned=pinned,
+            bend_stiffness=bend_stiffness,
+            bend_damping=bend_damping,
+            mass_distribution=mass_distribution,
+            velocity=velocity,
+            monte_carlo_samples=monte_carlo_samples,
+            seed=seed,
+            contact_shape=contact_shape,
+        )
+
+    def add_cloth(
+        self,
+        mesh: TriMesh,
+        *,
+        mass: float,
+        stiffness: float,
+        damping: float,
+        pressure: Gas | float = 0.0,
+        pinned: Sequence[int] | np.ndarray | None = None,
+        bend_stiffness: float = 0.0,
+        bend_damping: float = 0.0,
+        mass_distribution: Literal["uniform", "area"] = "uniform",
+        velocity: ArrayLike = (0.0, 0.0, 0.0),
+    ) -> int:
+        """Add an open surface (a cloth) with a pressure difference across it; returns the
+        body index (the paper's starting point, Figures 2-3: wind on a cloth).
+
+        ``pressure`` [Pa] pushes every face along its normal (the side the right-hand
+        winding points to), as wind does; give ``Gas.fixed_pressure(p, schedule=...)`` for
+        a gust that changes over time. The mesh may have a boundary but must otherwise be
+        manifold and consistently wound. Other parameters as in :meth:`add_soft_body`.
+        """
+        if not isinstance(pressure, Gas):
+            pressure = Gas.fixed_pressure(_number("cloth pressure", pressure, minimum=None))
+        if pressure.law != GasLaw.FIXED_PRESSURE:
+            raise ValueError(
+                "a cloth encloses no gas: its pressure must be a number or Gas.fixed_pressure(...)"
+            )
+        return self._add_surface(
+            mesh,
+            closed=False,
+            mass=mass,
+            stiffness=stiffness,
+            damping=damping,
+            gas=pressure,
+            volume_method="exact",
+            pinned=pinned,
+            bend_stiffness=bend_stiffness,
+            bend_damping=bend_damping,
+            mass_distribution=mass_distribution,
+            velocity=velocity,
+            monte_carlo_samples=0,
+            seed=0,
+            contact_shape="bounding_box",
+        )
+
+    def _add_surface(
+        self,
+        mesh,
+        *,
+        closed,
+        mass,
+        stiffness,
+        damping,
+        gas,
+        volume_method,
+        pinned,
+        bend_stiffness,
+        bend_damping,
+        mass_distribution,
+        velocity,
+        monte_carlo_samples,
+        seed,
+        contact_shape,
+    ) -> int:
         if isinstance(mesh, TriMesh):
             source = mesh
         elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
@@ -251,7 +337,7 @@ class ModelBuilder:
         else:
             raise TypeError(f"mesh must be a TriMesh, got {type(mesh).__name__}")
         body = len(self._bodies)
-        mesh = validate_mesh(source, name=f"body {body} mesh")
+        mesh = validate_mesh(source, name=f"body {body} mesh", closed=closed)
         if mesh.vertex_count != source.vertex_count and pinned is not None:
             warnings.warn(
                 f"body {body}: welding renumbered the mesh vertices; pinned indices refer "
@@ -263,8 +349,6 @@ class ModelBuilder:
         c = _number("damping", damping)
         kb = _number("bend_stiffness", bend_stiffness)
         cb = _number("bend_damping", bend_damping)
-        if not isinstance(gas, Gas):
-            gas = Gas.isothermal(_number("gas nRT", gas))
         method = VolumeMethod.parse(volume_method)
         shape = VolumeMethod.parse(contact_shape)
         if shape not in (
@@ -328,7 +412,17 @@ class ModelBuilder:
                 )
             )
         self._bodies.append(
-            _Body(begin, begin + v, mesh.faces + begin, total_mass, gas, method, samples, shape)
+            _Body(
+                begin,
+                begin + v,
+                mesh.faces + begin,
+                total_mass,
+                gas,
+                method,
+                samples,
+                shape,
+                closed,
+            )
         )
         return body
 
@@ -442,7 +536,7 @@ class ModelBuilder:
             rest_volume,
         )
         for b in range(bcount):
-            if not rest_volume[b] > 0:
+            if bodies[b].closed and not rest_volume[b] > 0:
                 raise MeshError(f"body {b} encloses no volume ({rest_volume[b]:.3g} m^3)")
         ref_volume = np.array(
             [
@@ -499,6 +593,7 @@ class ModelBuilder:
             body_rest_volume=rest_volume,
             pin_particle=np.flatnonzero(pinned).astype(np.int64),
             tri_body=np.repeat(np.arange(bcount), tri_counts).astype(np.int64),
+            body_closed=np.array([int(b.closed) for b in bodies], dtype=np.int64),
             body_contact_shape=np.array([int(b.contact_shape) for b in bodies], dtype=np.int64),
             soft_contact_mode={"none": 0, "bounding": 1, "surface": 2}[mode],
             soft_contact_restitution=contact_e,

@@ -43,6 +43,7 @@ class ModelData(NamedTuple):
     pin_particle: np.ndarray
     particle_body: np.ndarray
     tri_body: np.ndarray
+    body_closed: np.ndarray
     body_contact_shape: np.ndarray
     soft_contact_mode: int
     soft_contact_restitution: float
@@ -137,6 +138,8 @@ class Model:
     """Pinned (kinematic) particles, shape (P,); ``Control.pin_target`` moves them."""
     tri_body: np.ndarray
     """Body of each triangle, shape (T,)."""
+    body_closed: np.ndarray
+    """1 for a closed body holding gas, 0 for an open surface (cloth), shape (B,)."""
     body_contact_shape: np.ndarray
     """Bounding object of each body for ``bounding`` soft contacts: 1 box, 2 sphere,
     3 ellipsoid (``VolumeMethod`` numbering), shape (B,)."""
