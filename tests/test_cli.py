@@ -1,4 +1,4 @@
-"""The command line: the demo's outputs and one-line errors."""
+"""The command line: runs, exports read back, one-line errors, no partial output."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import softbody as sb
 from softbody.cli import main
@@ -16,29 +17,162 @@ from softbody.cli import main
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_demo_writes_outputs_and_balls_sag_by_gas(tmp_path, capsys):
-    """The hanging balls settle where less gas means less volume and lower pressure, and
-    each pressure is nRT / V (isothermal law) at the final volume."""
-    assert main(["demo", "--out", str(tmp_path), "--duration", "1.5"]) == 0
-    names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == ["hanging-balls-plots.png", "hanging-balls.png", "summary.json"]
-    summary = json.loads((tmp_path / "summary.json").read_text())
-    bodies = summary["bodies"]
-    volumes = [b["volume_m3"] for b in bodies]
-    assert volumes == sorted(volumes)
-    for b in bodies:
-        assert np.isclose(b["pressure_Pa"], b["gas_nrt_J"] / b["volume_m3"], rtol=1e-12)
-    for png in ("hanging-balls.png", "hanging-balls-plots.png"):
-        assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    """One short run of bounding-volumes with every output switched on."""
+    out = tmp_path_factory.mktemp("run")
+    assert (
+        main(
+            [
+                "run",
+                "bounding-volumes",
+                "--out",
+                str(out),
+                "--duration",
+                "0.5",
+                "--meshes",
+                "obj",
+                "--usd",
+                "--velocity-vectors",
+            ]
+        )
+        == 0
+    )
+    return out
 
 
-def test_demo_refuses_unstable_dt(tmp_path, capsys):
-    """A dt above the stability estimate is one line on stderr, exit 2, and no files."""
-    assert main(["demo", "--out", str(tmp_path / "o"), "--dt", "0.05"]) == 2
+def test_run_writes_every_output(run_dir):
+    """MP4, GIF, plots, bounding-volume plot, last frame, summary, meshes and USD."""
+    names = sorted(p.name for p in run_dir.iterdir())
+    assert names == sorted(
+        [
+            "bounding-volumes.mp4",
+            "bounding-volumes.gif",
+            "bounding-volumes-plots.png",
+            "bounding-volumes-bounding-volumes.png",
+            "bounding-volumes-last-frame.png",
+            "bounding-volumes-summary.json",
+            "bounding-volumes.usdc",
+            "meshes",
+        ]
+    )
+    assert not any(p.name.startswith(".") for p in run_dir.iterdir())  # no temp left
+
+
+def test_video_has_every_frame_and_shows_motion(run_dir):
+    """0.5 s at 30 fps: 16 frames (with t = 0) of 640 x 480; the falling capsule moves, so
+    frames differ, and the first frame shows the body (not a blank background)."""
+    import imageio.v3 as iio
+
+    frames = iio.imread(run_dir / "bounding-volumes.mp4")
+    assert frames.shape == (16, 480, 640, 3)
+    assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 1.0
+    # the body colour (#4e79a7) covers part of the first frame
+    blue = (np.abs(frames[0].astype(int) - [78, 121, 167]).sum(axis=2) < 90).mean()
+    assert blue > 0.005
+
+
+def test_obj_and_usd_hold_the_simulated_points(run_dir):
+    """Frame k of the OBJ sequence and time k of the USD cache both hold the particle
+    positions of frame k: frame 0 equals the model's initial positions (to the 9
+    significant digits OBJ keeps; float32 in USD), and the two agree at every frame."""
+    import trimesh
+    from pxr import Usd, UsdGeom
+
+    summary = json.loads((run_dir / "bounding-volumes-summary.json").read_text())
+    initial = sb.scenes.load_scene("bounding-volumes").model.particle_q
+    stage = Usd.Stage.Open(str(run_dir / "bounding-volumes.usdc"))
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/softbody/capsule")).GetPointsAttr()
+    files = sorted((run_dir / "meshes").glob("frame_*.obj"))
+    assert len(files) == summary["frames"] == 16
+    for k, path in enumerate(files):
+        obj = np.asarray(trimesh.load(path, process=False, force="mesh").vertices)
+        usd = np.asarray(points.Get(k))
+        assert np.allclose(obj, usd, rtol=0, atol=1e-6)
+        if k == 0:
+            assert np.allclose(obj, initial, rtol=1e-8, atol=1e-9)
+    assert stage.GetTimeCodesPerSecond() == pytest.approx(summary["fps"])
+
+
+def test_summary_records_parameters_and_diagnostics(run_dir):
+    """Frames are whole numbers of steps (round(1 / (30 fps * 0.5 ms)) = 67), and the run
+    ends on the first frame at or after the 0.5 s asked for."""
+    summary = json.loads((run_dir / "bounding-volumes-summary.json").read_text())
+    assert summary["parameters"]["bodies"][0]["name"] == "capsule"
+    assert summary["integrator"] == "midpoint"
+    assert summary["steps"] == (summary["frames"] - 1) * 67
+    assert 0.5 <= summary["duration_s"] < 0.5 + 67 * 5e-4
+    body = summary["bodies"][0]
+    assert body["pressure_Pa"] == pytest.approx(150.0 / body["volume_m3"], rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "argv,match",
+    [
+        (["run", "bouncy"], "unknown scene 'bouncy'"),
+        (
+            ["run", "bouncing-balls", "--set", "simulation.dtt=1"],
+            "unknown scene key simulation.dtt",
+        ),
+        (["run", "bouncing-balls", "--dt", "0.05"], "exceeds the stable estimate"),
+        (
+            [
+                "run",
+                "bouncing-balls",
+                "--set",
+                "bodies.0.stiffness=1e9",
+                "--dt",
+                "0.0005",
+                "--integrator",
+                "symplectic_euler",
+            ],
+            "exceeds the stable estimate",
+        ),
+        (["info", "missing.obj"], "missing.obj: no such file"),
+    ],
+)
+def test_errors_are_one_line_and_write_nothing(tmp_path, capsys, argv, match):
+    """User mistakes: exit 2, one line on stderr naming the problem, no output files."""
+    out = tmp_path / "out"
+    code = main([*argv, "--out", str(out)] if argv[0] == "run" else argv)
     err = capsys.readouterr().err.strip()
-    assert err.startswith("softbody: error: dt = 0.05 s exceeds the stable estimate")
-    assert "\n" not in err
-    assert not (tmp_path / "o").exists()
+    assert code == 2
+    assert err.startswith("softbody: error:") and "\n" not in err
+    assert re.search(match, err)
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_blow_up_is_one_line_and_leaves_nothing(tmp_path, capsys):
+    """A run that blows up (explicit Euler without damping, forced past the estimate
+    in a scene file) stops with the body and step, and writes no file."""
+    text = (ROOT / "src/softbody/scenes/hanging-ball.toml").read_text()
+    text = text.replace("damping = 0.3", "damping = 0.0").replace(
+        'integrator = "midpoint"', 'integrator = "rk4"'
+    )
+    text = text.replace("stiffness = 30.0", "stiffness = 3e5")
+    (tmp_path / "s.toml").write_text(text)
+    out = tmp_path / "out"
+    from softbody.run import run_scene
+    from softbody.scenes import load_scene
+
+    with (
+        pytest.warns(sb.StabilityWarning),
+        pytest.raises(sb.SimulationError, match=r"body \d blew up at step"),
+    ):
+        run_scene(load_scene(tmp_path / "s.toml"), out, duration=0.5)
+    assert not any(out.iterdir())
+
+
+def test_scenes_lists_shows_and_copies(tmp_path, capsys):
+    assert main(["scenes"]) == 0
+    listed = capsys.readouterr().out
+    assert all(name in listed for name in sb.scenes.list_scenes())
+    assert main(["scenes", "--show", "cloth-wind"]) == 0
+    assert 'kind = "cloth"' in capsys.readouterr().out
+    assert main(["scenes", "--copy", "hand-punch", str(tmp_path)]) == 0
+    copied = tmp_path / "hand-punch.toml"
+    assert sb.scenes.load_scene(copied).model.particle_count == 390
+    assert main(["scenes", "--copy", "hand-punch", str(tmp_path)]) == 2  # no overwrite
 
 
 def test_info_reports_problems(tmp_path, capsys):
@@ -50,26 +184,32 @@ def test_info_reports_problems(tmp_path, capsys):
     assert "can hold gas" in capsys.readouterr().out
     assert main(["info", str(bad)]) == 1
     assert "problem: open: 3 boundary edges" in capsys.readouterr().out
-    assert main(["info", str(tmp_path / "none.obj")]) == 2
-    assert capsys.readouterr().err.strip().endswith("none.obj: no such file")
 
 
-def test_console_script_runs_without_terminal():
-    """The installed entry point works as a subprocess (no tty, as in CI)."""
+def test_console_script_runs_without_terminal(tmp_path):
+    """The entry point works as a subprocess with no tty (as in CI): plain progress lines."""
     out = subprocess.run(
         [
             sys.executable,
             "-m",
             "softbody.cli",
-            "info",
-            str(ROOT / "tests" / "data" / "spot_triangulated.obj"),
+            "run",
+            "hanging-ball",
+            "--duration",
+            "0.2",
+            "--no-video",
+            "--no-gif",
+            "--out",
+            str(tmp_path),
         ],
         capture_output=True,
         text=True,
-        timeout=120,
+        timeout=300,
     )
     assert out.returncode == 0, out.stderr
-    assert "2930 vertices after welding" in out.stdout
+    assert re.search(r"^100\.0% t = 0\.2\d+ s$", out.stdout, flags=re.M)
+    assert "\r" not in out.stdout
+    assert (tmp_path / "hanging-ball-summary.json").exists()
 
 
 def test_readme_test_command_is_what_ci_runs():

@@ -95,8 +95,10 @@ def main() -> None:
 
     min_angle = min(angle(a, b, c).min(), angle(b, c, a).min(), angle(c, a, b).min())
     euler = mesh.vertex_count - len(mesh.edges) + mesh.face_count
-    print(f"hand: {mesh.vertex_count} vertices, {mesh.face_count} faces, Euler {euler}, "
-          f"volume {mesh.volume * 1e6:.1f} cm^3, smallest angle {min_angle:.1f} deg")
+    print(
+        f"hand: {mesh.vertex_count} vertices, {mesh.face_count} faces, Euler {euler}, "
+        f"volume {mesh.volume * 1e6:.1f} cm^3, smallest angle {min_angle:.1f} deg"
+    )
     if euler != 2 or min_angle < 15:
         raise SystemExit("hand mesh failed its checks")
     sb.save_mesh(mesh.reordered(), OUT)

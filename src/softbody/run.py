@@ -100,7 +100,9 @@ def run_scene(
     settings = scene.render
     steps_per_frame = max(1, round(1.0 / (settings.fps * dt)))
     frame_dt = steps_per_frame * dt
-    frame_count = max(1, round(duration / frame_dt))
+    # a frame is a whole number of steps; the run ends on the first frame at or after
+    # the requested duration
+    frame_count = max(1, int(np.ceil(duration / frame_dt - 1e-9)))
     fps = 1.0 / frame_dt
 
     out = Path(out)
