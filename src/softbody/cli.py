@@ -82,6 +82,43 @@ def _run(args) -> int:
     return 0
 
 
+def _view(args) -> int:
+    import warnings
+
+    from softbody.errors import StabilityWarning
+    from softbody.scenes import load_scene
+    from softbody.sim.simulator import Simulator
+    from softbody.viewer.app import show
+
+    try:
+        import viser  # noqa: F401
+    except ImportError:
+        raise RuntimeError("the viewer needs viser: pip install -e '.[viewer]'") from None
+    scene = load_scene(args.scene, list(args.set or []))
+    print(f"{scene.name}: preparing (the first run compiles the kernels, about 40 s)", flush=True)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", StabilityWarning)
+        sim = Simulator(
+            scene.model, integrator=args.integrator or scene.integrator, dt=args.dt or scene.dt
+        )
+    cam = scene.render.camera
+    viewer = show(
+        scene.model,
+        scene.model.state(),
+        sim,
+        host=args.host,
+        port=args.port,
+        block=False,
+        body_names=scene.body_names,
+        body_colors=scene.render.body_colors,
+        camera=(cam.eye, cam.target),
+    )
+    print(f"{scene.name}: open {viewer.url} in a browser (Ctrl-C to stop)", flush=True)
+    viewer.wait()
+    return 0
+
+
 def _info(args) -> int:
     from softbody.mesh import inspect_mesh, read_mesh
 
@@ -151,6 +188,17 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-video", action="store_true", help="skip the MP4")
     run.add_argument("--no-gif", action="store_true", help="skip the GIF")
     run.set_defaults(func=_run)
+
+    view = sub.add_parser("view", help="simulate a scene live in the browser")
+    view.add_argument("scene", help="built-in scene name or .toml file")
+    view.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    view.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    view.add_argument("--dt", type=_positive_float, help="time step in seconds")
+    view.add_argument("--integrator", choices=INTEGRATORS)
+    view.add_argument(
+        "--set", action="append", metavar="KEY=VALUE", help="override a scene value (repeatable)"
+    )
+    view.set_defaults(func=_view)
 
     info = sub.add_parser("info", help="check whether a mesh file can hold gas")
     info.add_argument("mesh", help="OBJ, PLY, STL, OFF or GLB file")

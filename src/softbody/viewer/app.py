@@ -1,0 +1,708 @@
+"""The browser viewer: simulates in real time and streams meshes to a viser (three.js) page.
+
+The simulation runs in a background thread. Each loop it advances the state by the wall
+time since the last loop times the time scale (as many steps as that takes, capped so
+that the page still gets at least 20 updates a second when the machine cannot keep up),
+then pushes the new vertex positions, overlays and readouts to every connected page.
+Parameters that live in the immutable Model (stiffness, damping, gravity, volume method)
+are changed by building a new Model with ``dataclasses.replace``; gas goes through
+``Control``. A blow-up pauses the simulation with its message; Reset restores the start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+import warnings
+from collections import deque
+
+import numpy as np
+
+from softbody.collision.colliders import ColliderKind
+from softbody.diagnostics import body_pressure, body_volume
+from softbody.errors import SimulationError, StabilityWarning
+from softbody.gas import GasLaw
+from softbody.integrators import Integrator
+from softbody.render.frame import BOX_CORNERS, BOX_EDGES, PALETTE, hex_rgb
+from softbody.sim.model import Model
+from softbody.sim.simulator import Simulator
+from softbody.sim.state import State
+from softbody.volume import VolumeMethod
+
+VOLUME_METHODS = [m.name.lower() for m in VolumeMethod]
+INTEGRATORS = [m.name.lower() for m in Integrator]
+HISTORY_SECONDS = 10.0
+#: Updates sent to the page per second (when the simulation keeps up).
+UPDATE_RATE = 30.0
+#: Readout and plot refreshes per second.
+READOUT_RATE = 4.0
+
+
+def _with_user_ball(model: Model, state: State) -> tuple[Model, State, int]:
+    """The model with a rigid sphere the user drives (its first sphere collider if it has
+    one, else a new one parked above the scene), the matching state, and its index."""
+    spheres = np.flatnonzero(model.collider_kind == ColliderKind.SPHERE)
+    if len(spheres):
+        return model, state, int(spheres[0])
+    q = model.particle_q
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    size = float(np.linalg.norm(hi - lo))
+    radius = 0.12 * size
+    park = np.array([lo[0] - 3.0 * radius, 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])])
+
+    def append(name, row):
+        return np.concatenate([getattr(model, name), np.asarray(row)[None]])
+
+    model = dataclasses.replace(
+        model,
+        collider_kind=append("collider_kind", ColliderKind.SPHERE),
+        collider_center=append("collider_center", park),
+        collider_rotation=append("collider_rotation", np.eye(3)),
+        collider_size=append("collider_size", [radius] * 3),
+        collider_restitution=append("collider_restitution", 0.5),
+        collider_friction=append("collider_friction", 0.1),
+        collider_motion=append("collider_motion", 0),
+        collider_motion_vector=append("collider_motion_vector", np.zeros(3)),
+        collider_motion_pivot=append("collider_motion_pivot", park),
+        collider_motion_frequency=append("collider_motion_frequency", 0.0),
+    )
+    state = State(
+        state.particle_q.copy(),
+        state.particle_qd.copy(),
+        state.time,
+        state.step_count,
+        np.vstack([state.collider_q, park]),
+        np.concatenate([state.collider_rotation, np.eye(3)[None]]),
+    )
+    return model, state, model.collider_count - 1
+
+
+def _quaternion(rot: np.ndarray) -> np.ndarray:
+    """(w, x, y, z) of a rotation matrix (3, 3)."""
+    w = np.sqrt(max(0.0, 1.0 + np.trace(rot))) / 2.0
+    if w > 1e-6:
+        return np.array(
+            [
+                w,
+                (rot[2, 1] - rot[1, 2]) / (4 * w),
+                (rot[0, 2] - rot[2, 0]) / (4 * w),
+                (rot[1, 0] - rot[0, 1]) / (4 * w),
+            ]
+        )
+    k = int(np.argmax(np.diag(rot)))
+    i, j = (k + 1) % 3, (k + 2) % 3
+    s = np.sqrt(max(0.0, 1.0 + rot[k, k] - rot[i, i] - rot[j, j])) * 2
+    q = np.zeros(4)
+    q[0] = (rot[j, i] - rot[i, j]) / s
+    q[1 + k] = s / 4
+    q[1 + i] = (rot[i, k] + rot[k, i]) / s
+    q[1 + j] = (rot[j, k] + rot[k, j]) / s
+    return q
+
+
+class Viewer:
+    """A running viewer. Create with :func:`softbody.viewer.show`."""
+
+    def __init__(
+        self,
+        model: Model,
+        state: State,
+        simulator: Simulator,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        body_names: list[str] | None = None,
+        body_colors: tuple[str, ...] | None = None,
+        camera: tuple | None = None,
+    ):
+        import viser
+
+        model, state, self.ball = _with_user_ball(model, state)
+        self.model = model
+        self.initial_model = model
+        self.initial_state = state.copy()
+        self.state = state.copy()
+        self.integrator = simulator.integrator.name.lower()
+        self.dt = simulator.dt
+        self.control = model.control()
+        self.body_names = body_names or [f"body {b}" for b in range(model.body_count)]
+        colors = body_colors or PALETTE
+        self.colors = [
+            tuple(int(255 * c) for c in hex_rgb(colors[b % len(colors)]))
+            for b in range(model.body_count)
+        ]
+        self.lock = threading.RLock()
+        self.running = True
+        self.time_scale = 1.0
+        self.message = ""
+        self.updates_per_second = 0.0
+        self.realtime_factor = 0.0
+        self.grabbed: int | None = None
+        self._stop = threading.Event()
+        self._history: deque = deque()
+        self._last_readout = 0.0
+        self._volume_method = [VolumeMethod(int(m)).name.lower() for m in model.body_volume_method]
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", StabilityWarning)
+            self.sim = Simulator(model, integrator=self.integrator, dt=self.dt)
+        # compile (or load) the kernels now, so the page never shows a frozen scene
+        self.sim.run(self.state.copy(), 1, self.control)
+
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.host = host
+        self.server.scene.set_up_direction("+y")
+        self._camera = camera
+        self.server.on_client_connect(self._on_connect)
+        self._build_scene()
+        self._build_gui()
+        self._thread = threading.Thread(target=self._loop, name="softbody-viewer", daemon=True)
+        self._thread.start()
+
+    # -- public ----------------------------------------------------------------------------
+    @property
+    def url(self) -> str:
+        """Address of the page."""
+        return f"http://{self.host}:{self.server.get_port()}"
+
+    def stop(self) -> None:
+        """Stop the simulation thread and the server."""
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.server.stop()
+
+    def wait(self) -> None:
+        """Block until interrupted (Ctrl-C), then stop."""
+        try:
+            while not self._stop.is_set():
+                time.sleep(0.2)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self.stop()
+
+    # -- scene -----------------------------------------------------------------------------
+    def _on_connect(self, client) -> None:
+        q = self.state.particle_q
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        center = 0.5 * (lo + hi)
+        size = max(float(np.linalg.norm(hi - lo)), 1e-3)
+        if self._camera is not None:
+            eye, target = self._camera
+        else:
+            eye, target = center + np.array([0.0, 0.35, 1.6]) * size, center
+        client.camera.position = tuple(float(x) for x in eye)
+        client.camera.look_at = tuple(float(x) for x in target)
+
+    def _build_scene(self) -> None:
+        scene = self.server.scene
+        model, state = self.model, self.state
+        scene.add_light_hemisphere(
+            "/light/sky", sky_color=(255, 255, 255), ground_color=(110, 110, 120), intensity=0.6
+        )
+        scene.add_light_directional("/light/sun", intensity=1.0, wxyz=(0.92, -0.28, 0.25, 0.0))
+        self.meshes = []
+        for b, (p0, p1) in enumerate(model.body_particle_range):
+            t0, t1 = model.body_tri_range[b]
+            self.meshes.append(
+                scene.add_mesh_simple(
+                    f"/bodies/{b}",
+                    vertices=state.particle_q[p0:p1].astype(np.float32),
+                    faces=(model.tri_indices[t0:t1] - p0).astype(np.uint32),
+                    color=self.colors[b],
+                    side="double" if model.body_closed[b] == 0 else "front",
+                    cast_shadow=False,
+                    receive_shadow=False,
+                )
+            )
+        self.collider_nodes = []
+        for c in range(model.collider_count):
+            kind = int(model.collider_kind[c])
+            center, rot = state.collider_q[c], state.collider_rotation[c]
+            size = model.collider_size[c]
+            if kind == ColliderKind.PLANE:
+                node = scene.add_grid(
+                    f"/colliders/{c}",
+                    width=20.0,
+                    height=20.0,
+                    plane="xz",
+                    position=tuple(center),
+                    cell_size=0.25,
+                    section_size=1.0,
+                    plane_color=(235, 235, 235),
+                    plane_opacity=0.6,
+                    shadow_opacity=0.0,
+                )
+            elif kind == ColliderKind.SPHERE:
+                node = scene.add_icosphere(
+                    f"/colliders/{c}",
+                    radius=float(size[0]),
+                    color=(150, 150, 160) if c != self.ball else (200, 90, 60),
+                    position=tuple(center),
+                )
+            elif kind == ColliderKind.BOX:
+                node = scene.add_box(
+                    f"/colliders/{c}",
+                    color=(160, 160, 165),
+                    dimensions=tuple(2 * size),
+                    position=tuple(center),
+                    wxyz=tuple(_quaternion(rot)),
+                )
+            else:
+                node = scene.add_line_segments(
+                    f"/colliders/{c}",
+                    self._box_lines(c),
+                    colors=(60, 60, 70),
+                    thickness=2.0,
+                    thickness_units="screen",
+                )
+            self.collider_nodes.append(node)
+        self.ball_gizmo = scene.add_transform_controls(
+            "/ball_gizmo",
+            scale=float(3 * model.collider_size[self.ball, 0] + 0.05),
+            disable_rotations=True,
+            position=tuple(state.collider_q[self.ball]),
+        )
+        self.ball_gizmo.on_update(self._on_ball_moved)
+        self.grab_gizmo = scene.add_transform_controls(
+            "/grab_gizmo", scale=0.15, disable_rotations=True, visible=False
+        )
+        for b, mesh in enumerate(self.meshes):
+            mesh.on_click(lambda event, b=b: self._on_mesh_click(b, event))
+        self.velocity_lines = None
+        self.bounding_lines = None
+
+    def _box_lines(self, c: int) -> np.ndarray:
+        corners = (
+            self.state.collider_q[c]
+            + (BOX_CORNERS * self.model.collider_size[c]) @ self.state.collider_rotation[c].T
+        )
+        return corners[BOX_EDGES].astype(np.float32)
+
+    # -- gui -------------------------------------------------------------------------------
+    def _build_gui(self) -> None:
+        gui = self.server.gui
+        model = self.model
+        with gui.add_folder("Simulation"):
+            self.pause_button = gui.add_button("Pause")
+            self.pause_button.on_click(lambda _: self._toggle_pause())
+            self.step_button = gui.add_button("Step")
+            self.step_button.on_click(lambda _: self._step_once())
+            self.reset_button = gui.add_button("Reset")
+            self.reset_button.on_click(lambda _: self._reset())
+            self.scale_slider = gui.add_slider(
+                "Time scale", min=0.05, max=2.0, step=0.05, initial_value=1.0
+            )
+            self.scale_slider.on_update(
+                lambda _: setattr(self, "time_scale", float(self.scale_slider.value))
+            )
+            self.integrator_menu = gui.add_dropdown(
+                "Integrator", INTEGRATORS, initial_value=self.integrator
+            )
+            self.integrator_menu.on_update(lambda _: self._rebuild())
+            self.volume_menu = gui.add_dropdown(
+                "Volume method", VOLUME_METHODS, initial_value=self._volume_method[0]
+            )
+            self.volume_menu.on_update(lambda _: self._rebuild())
+            g = float(model.gravity[1])
+            self.gravity_slider = gui.add_slider(
+                "Gravity y [m/s^2]", min=-20.0, max=5.0, step=0.1, initial_value=round(g, 2)
+            )
+            self.gravity_slider.on_update(lambda _: self._rebuild())
+        self.gas_sliders, self.stiffness_sliders, self.damping_sliders = [], [], []
+        with gui.add_folder("Bodies"):
+            for b in range(model.body_count):
+                name = self.body_names[b]
+                law = GasLaw(int(model.body_gas_law[b]))
+                value = float(model.body_gas_value[b])
+                label = "pressure [Pa]" if law == GasLaw.FIXED_PRESSURE else "nRT [J]"
+                top = max(4.0 * value, 1.0)
+                slider = gui.add_slider(
+                    f"{name}: {label}", min=0.0, max=top, step=top / 400, initial_value=value
+                )
+                slider.on_update(lambda _, b=b: self._gas_changed(b))
+                self.gas_sliders.append(slider)
+                springs = model.spring_body == b
+                k = float(model.spring_stiffness[springs].max()) if springs.any() else 0.0
+                c = float(model.spring_damping[springs].max()) if springs.any() else 0.0
+                ks = gui.add_slider(
+                    f"{name}: stiffness [N/m]",
+                    min=0.0,
+                    max=max(4 * k, 1.0),
+                    step=max(4 * k, 1.0) / 400,
+                    initial_value=k,
+                )
+                cs = gui.add_slider(
+                    f"{name}: damping [N s/m]",
+                    min=0.0,
+                    max=max(4 * c, 0.1),
+                    step=max(4 * c, 0.1) / 400,
+                    initial_value=c,
+                )
+                ks.on_update(lambda _: self._rebuild())
+                cs.on_update(lambda _: self._rebuild())
+                self.stiffness_sliders.append(ks)
+                self.damping_sliders.append(cs)
+        with gui.add_folder("Display"):
+            self.wireframe_box = gui.add_checkbox("Wireframe", False)
+            self.wireframe_box.on_update(lambda _: self._set_wireframe())
+            self.velocity_box = gui.add_checkbox("Velocity vectors", False)
+            self.bounding_box = gui.add_checkbox("Bounding objects", False)
+        with gui.add_folder("Interaction"):
+            gui.add_markdown(
+                "Drag the orange ball's arrows to hit a body. Click a body to "
+                "grab the nearest vertex, then drag the small arrows."
+            )
+            self.release_button = gui.add_button("Release vertex")
+            self.release_button.on_click(lambda _: self._release())
+        with gui.add_folder("Readouts"):
+            self.readout = gui.add_markdown("starting...")
+            self.plot = gui.add_uplot(
+                data=(np.zeros(1), np.zeros(1), np.zeros(1)),
+                series=(
+                    self._series("t"),
+                    self._series("volume (body 0) [m^3]", "#4e79a7"),
+                    self._series("pressure (body 0) [Pa]", "#e15759", scale="p"),
+                ),
+                scales={"x": self._scale(True), "y": self._scale(), "p": self._scale()},
+                aspect=1.6,
+            )
+
+    @staticmethod
+    def _series(label, stroke=None, scale=None):
+        import viser.uplot as uplot
+
+        kwargs = {"label": label}
+        if stroke:
+            kwargs.update(stroke=stroke, width=2)
+        if scale:
+            kwargs["scale"] = scale
+        return uplot.Series(**kwargs)
+
+    @staticmethod
+    def _scale(time_axis=False):
+        import viser.uplot as uplot
+
+        return uplot.Scale(time=False, auto=True) if time_axis else uplot.Scale(auto=True)
+
+    # -- callbacks -------------------------------------------------------------------------
+    def _toggle_pause(self) -> None:
+        self.running = not self.running
+        self.pause_button.label = "Pause" if self.running else "Play"
+
+    def _step_once(self) -> None:
+        with self.lock:
+            if self.running:
+                self._toggle_pause()
+            self._advance(1)
+        self._push(force_readout=True)
+
+    def _reset(self) -> None:
+        with self.lock:
+            self.state = self.initial_state.copy()
+            self.control = self.model.control()
+            for b in range(len(self.gas_sliders)):
+                self._gas_changed(b)
+            self._history.clear()
+            self.message = ""
+            self.grabbed = None
+            self.grab_gizmo.visible = False
+            self.ball_gizmo.position = tuple(self.state.collider_q[self.ball])
+            if not self.running:
+                self._toggle_pause()
+        self._push(force_readout=True)
+
+    def _gas_changed(self, b: int) -> None:
+        value = float(self.gas_sliders[b].value)
+        with self.lock:
+            if self.model.body_gas_law[b] == GasLaw.FIXED_PRESSURE:
+                self.control.body_gas_pressure[b] = value
+            else:
+                self.control.body_gas_nrt[b] = value
+
+    def _rebuild(self) -> None:
+        """A new Model for changed stiffness, damping, gravity or volume method."""
+        with self.lock:
+            base = self.initial_model
+            k = base.spring_stiffness.copy()
+            c = base.spring_damping.copy()
+            for b in range(base.body_count):
+                mask = base.spring_body == b
+                if mask.any():
+                    k0, c0 = base.spring_stiffness[mask].max(), base.spring_damping[mask].max()
+                    k[mask] *= (self.stiffness_sliders[b].value / k0) if k0 > 0 else 0.0
+                    c[mask] = (
+                        c[mask] * self.damping_sliders[b].value / c0
+                        if c0 > 0
+                        else self.damping_sliders[b].value
+                    )
+            gravity = base.gravity.copy()
+            gravity[1] = float(self.gravity_slider.value)
+            method = VolumeMethod.parse(self.volume_menu.value)
+            methods = np.where(base.body_closed == 1, int(method), 0).astype(np.int64)
+            samples, mc_range = base.mc_samples, base.body_mc_range
+            if method == VolumeMethod.MONTE_CARLO:
+                samples = np.random.default_rng(0).random((2048, 2))
+                mc_range = np.tile([0, 2048], (base.body_count, 1))
+            model = dataclasses.replace(
+                base,
+                spring_stiffness=k,
+                spring_damping=c,
+                gravity=gravity,
+                body_volume_method=methods,
+                mc_samples=samples,
+                body_mc_range=mc_range,
+            )
+            rest = body_volume(
+                model,
+                State(
+                    base.particle_q,
+                    base.particle_qd,
+                    collider_q=base.collider_center,
+                    collider_rotation=base.collider_rotation,
+                ),
+            )
+            model = dataclasses.replace(
+                model, body_rest_volume=np.where(np.isnan(rest), base.body_rest_volume, rest)
+            )
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", StabilityWarning)
+                self.sim = Simulator(model, integrator=self.integrator_menu.value, dt=self.dt)
+            self.message = str(caught[0].message) if caught else ""
+            self.model = model
+            control = model.control()
+            control.body_gas_nrt[:] = self.control.body_gas_nrt
+            control.body_gas_pressure[:] = self.control.body_gas_pressure
+            control.collider_target = self.control.collider_target
+            self.control = control
+
+    def _set_wireframe(self) -> None:
+        for mesh in self.meshes:
+            mesh.wireframe = bool(self.wireframe_box.value)
+
+    def _on_ball_moved(self, _) -> None:
+        with self.lock:
+            target = np.full((self.model.collider_count, 3), np.nan)
+            target[self.ball] = np.asarray(self.ball_gizmo.position, dtype=np.float64)
+            self.control.collider_target = target
+
+    def _on_mesh_click(self, b: int, event) -> None:
+        """Grab the vertex of body b nearest the click ray."""
+        origin = np.asarray(event.ray_origin, dtype=np.float64)
+        direction = np.asarray(event.ray_direction, dtype=np.float64)
+        direction /= np.linalg.norm(direction)
+        p0, p1 = self.model.body_particle_range[b]
+        x = self.state.particle_q[p0:p1] - origin
+        along = x @ direction
+        dist = np.linalg.norm(x - along[:, None] * direction, axis=1)
+        dist[along < 0] = np.inf
+        i = int(p0 + np.argmin(dist))
+        with self.lock:
+            self.grabbed = i
+        self.grab_gizmo.position = tuple(self.state.particle_q[i])
+        self.grab_gizmo.visible = True
+
+    def _release(self) -> None:
+        with self.lock:
+            self.grabbed = None
+            self.control.particle_f[:] = 0.0
+        self.grab_gizmo.visible = False
+
+    # -- loop ------------------------------------------------------------------------------
+    def _advance(self, steps: int) -> None:
+        """Run ``steps`` steps (lock held); a blow-up pauses with its message."""
+        if self.grabbed is not None:
+            i = self.grabbed
+            b = int(self.model.particle_body[i])
+            mass = float(self.model.body_mass[b]) if b >= 0 else 1.0
+            k = 200.0 * mass  # pulls the body's weight with 5 cm of stretch
+            target = np.asarray(self.grab_gizmo.position, dtype=np.float64)
+            self.control.particle_f[:] = 0.0
+            self.control.particle_f[i] = (
+                k * (target - self.state.particle_q[i])
+                - 2.0 * np.sqrt(k * mass) * self.state.particle_qd[i]
+            )
+        try:
+            self.sim.run(self.state, steps, self.control)
+        except SimulationError as exc:
+            self.message = f"paused: {exc}. Press Reset."
+            if self.running:
+                self._toggle_pause()
+        if self.control.collider_target is not None:
+            # the ball stays where it was driven to
+            self.control.collider_target = None
+
+    def _loop(self) -> None:
+        last = time.perf_counter()
+        carry = 0.0
+        step_cost = 1e-5
+        updates = deque(maxlen=60)
+        while not self._stop.is_set():
+            now = time.perf_counter()
+            wall = min(now - last, 0.25)
+            last = now
+            with self.lock:
+                if self.running and not self.message.startswith("paused"):
+                    want = wall * self.time_scale / self.dt + carry
+                    cap = max(1, int(0.05 / step_cost))  # keep >= 20 updates per second
+                    steps = min(int(want), cap)
+                    carry = min(want - steps, 1.0)
+                    if steps:
+                        t0 = time.perf_counter()
+                        t_sim = self.state.time
+                        self._advance(steps)
+                        spent = time.perf_counter() - t0
+                        step_cost = 0.8 * step_cost + 0.2 * spent / steps
+                        self.realtime_factor = (self.state.time - t_sim) / max(wall, 1e-6)
+                else:
+                    self.realtime_factor = 0.0
+            self._push()
+            updates.append(time.perf_counter())
+            if len(updates) > 1:
+                self.updates_per_second = (len(updates) - 1) / max(updates[-1] - updates[0], 1e-6)
+            rest = 1.0 / UPDATE_RATE - (time.perf_counter() - now)
+            if rest > 0:
+                time.sleep(rest)
+
+    def _push(self, force_readout: bool = False) -> None:
+        """Send vertex positions and overlays to the page, and readouts at READOUT_RATE."""
+        with self.lock:
+            state = self.state.copy()
+            model = self.model
+            control_values = self.control.body_gas_nrt.copy()
+            message = self.message
+        volumes = body_volume(model, state)
+        pressures = body_pressure(
+            model, state, None if np.all(np.isnan(control_values)) else self.control
+        )
+        with self.server.atomic():
+            for b, (p0, p1) in enumerate(model.body_particle_range):
+                self.meshes[b].vertices = state.particle_q[p0:p1].astype(np.float32)
+            for c, node in enumerate(self.collider_nodes):
+                kind = int(model.collider_kind[c])
+                if kind == ColliderKind.BOX_CONTAINER:
+                    node.points = self._box_lines(c)
+                elif kind in (ColliderKind.SPHERE, ColliderKind.BOX):
+                    node.position = tuple(state.collider_q[c])
+                    node.wxyz = tuple(_quaternion(state.collider_rotation[c]))
+            self._push_overlays(model, state)
+        now = state.time
+        self._history.append((now, volumes[0], pressures[0]))
+        while self._history and self._history[0][0] < now - HISTORY_SECONDS:
+            self._history.popleft()
+        # the readout table and plot are costly for the page to redraw: a few times a second
+        wall = time.perf_counter()
+        if wall - self._last_readout < 1.0 / READOUT_RATE and not force_readout:
+            return
+        self._last_readout = wall
+        rows = [
+            f"| {self.body_names[b]} | {volumes[b]:.4g} | {pressures[b]:.4g} |"
+            for b in range(model.body_count)
+        ]
+        self.readout.content = "\n".join(
+            [
+                f"**t = {now:.2f} s** · {'running' if self.running else 'paused'} · "
+                f"{self.realtime_factor:.2f}x real time · {self.updates_per_second:.0f} updates/s",
+                "",
+                "| body | volume [m^3] | pressure [Pa] |",
+                "|---|---|---|",
+                *rows,
+                "",
+                f"*{message}*" if message else "",
+            ]
+        )
+        hist = np.array(self._history)
+        if len(hist) > 1:
+            self.plot.data = (hist[:, 0], hist[:, 1], hist[:, 2])
+
+    def _push_overlays(self, model: Model, state: State) -> None:
+        scene = self.server.scene
+        q = state.particle_q
+        if self.velocity_box.value:
+            seg = np.stack([q, q + 0.05 * state.particle_qd], axis=1).astype(np.float32)
+            if self.velocity_lines is None:
+                self.velocity_lines = scene.add_line_segments(
+                    "/overlay/velocity",
+                    seg,
+                    colors=(220, 30, 30),
+                    thickness=1.5,
+                    thickness_units="screen",
+                )
+            else:
+                self.velocity_lines.points = seg
+                self.velocity_lines.visible = True
+        elif self.velocity_lines is not None:
+            self.velocity_lines.visible = False
+        if self.bounding_box.value:
+            segs = []
+            for p0, p1 in model.body_particle_range:
+                v = q[p0:p1]
+                lo, hi = v.min(axis=0), v.max(axis=0)
+                c = 0.5 * (lo + hi)
+                half = np.maximum(0.5 * (hi - lo), 1e-9)
+                segs.append(c + (BOX_CORNERS * half)[BOX_EDGES])
+                scale = np.sqrt((((v - c) / half) ** 2).sum(axis=1).max())
+                t = np.linspace(0, 2 * np.pi, 33)
+                for i, j in ((0, 1), (1, 2), (0, 2)):
+                    ring = np.zeros((33, 3))
+                    ring[:, i] = scale * half[i] * np.cos(t)
+                    ring[:, j] = scale * half[j] * np.sin(t)
+                    ring += c
+                    segs.append(np.stack([ring[:-1], ring[1:]], axis=1))
+            seg = np.concatenate(segs).astype(np.float32)
+            if self.bounding_lines is None or len(self.bounding_lines.points) != len(seg):
+                if self.bounding_lines is not None:
+                    self.bounding_lines.remove()
+                self.bounding_lines = scene.add_line_segments(
+                    "/overlay/bounding",
+                    seg,
+                    colors=(40, 90, 220),
+                    thickness=1.5,
+                    thickness_units="screen",
+                )
+            else:
+                self.bounding_lines.points = seg
+                self.bounding_lines.visible = True
+        elif self.bounding_lines is not None:
+            self.bounding_lines.visible = False
+
+
+def show(
+    model: Model,
+    state: State | None = None,
+    simulator: Simulator | None = None,
+    *,
+    host: str = "127.0.0.1",
+    port: int = 8080,
+    block: bool = True,
+    body_names: list[str] | None = None,
+    body_colors: tuple[str, ...] | None = None,
+    camera: tuple | None = None,
+) -> Viewer:
+    """Open a browser viewer on ``model`` (from ``state``, stepped like ``simulator``).
+
+    Prints nothing; the page is at ``viewer.url``. With ``block=True`` it runs until
+    Ctrl-C; with ``block=False`` it returns the running :class:`Viewer` (call ``stop()``).
+    """
+    state = model.state() if state is None else state
+    if simulator is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", StabilityWarning)
+            simulator = Simulator(model, dt=1e-3)
+    viewer = Viewer(
+        model,
+        state,
+        simulator,
+        host=host,
+        port=port,
+        body_names=body_names,
+        body_colors=body_colors,
+        camera=camera,
+    )
+    if block:
+        viewer.wait()
+    return viewer
+
+
+__all__ = ["Viewer", "show"]
