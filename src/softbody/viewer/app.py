@@ -141,6 +141,7 @@ class Viewer:
         self.grabbed: int | None = None
         self._stop = threading.Event()
         self._history: deque = deque()
+        self._restoring = False
         self._last_readout = 0.0
         self._volume_method = [VolumeMethod(int(m)).name.lower() for m in model.body_volume_method]
 
@@ -356,6 +357,7 @@ class Viewer:
             )
             self.release_button = gui.add_button("Release vertex")
             self.release_button.on_click(lambda _: self._release())
+        self._initial_values = [handle.value for handle in self._controls()]
         with gui.add_folder("Readouts"):
             self.readout = gui.add_markdown("starting...")
             self.plot = gui.add_uplot(
@@ -398,12 +400,32 @@ class Viewer:
             self._advance(1)
         self._push(force_readout=True)
 
+    def _controls(self) -> list:
+        """Every parameter control whose change rebuilds or re-drives the simulation."""
+        return [
+            self.integrator_menu,
+            self.volume_menu,
+            self.gravity_slider,
+            *self.gas_sliders,
+            *self.stiffness_sliders,
+            *self.damping_sliders,
+        ]
+
     def _reset(self) -> None:
+        """Back to the starting state and parameters (also after a blow-up)."""
         with self.lock:
+            self._restoring = True
+            try:
+                for handle, value in zip(self._controls(), self._initial_values, strict=True):
+                    handle.value = value
+            finally:
+                self._restoring = False
+            self.model = self.initial_model
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", StabilityWarning)
+                self.sim = Simulator(self.model, integrator=self.integrator, dt=self.dt)
             self.state = self.initial_state.copy()
             self.control = self.model.control()
-            for b in range(len(self.gas_sliders)):
-                self._gas_changed(b)
             self._history.clear()
             self.message = ""
             self.grabbed = None
@@ -414,6 +436,8 @@ class Viewer:
         self._push(force_readout=True)
 
     def _gas_changed(self, b: int) -> None:
+        if self._restoring:
+            return
         value = float(self.gas_sliders[b].value)
         with self.lock:
             if self.model.body_gas_law[b] == GasLaw.FIXED_PRESSURE:
@@ -423,6 +447,8 @@ class Viewer:
 
     def _rebuild(self) -> None:
         """A new Model for changed stiffness, damping, gravity or volume method."""
+        if self._restoring:
+            return
         with self.lock:
             base = self.initial_model
             k = base.spring_stiffness.copy()
@@ -572,10 +598,6 @@ class Viewer:
             model = self.model
             control_values = self.control.body_gas_nrt.copy()
             message = self.message
-        volumes = body_volume(model, state)
-        pressures = body_pressure(
-            model, state, None if np.all(np.isnan(control_values)) else self.control
-        )
         with self.server.atomic():
             for b, (p0, p1) in enumerate(model.body_particle_range):
                 self.meshes[b].vertices = state.particle_q[p0:p1].astype(np.float32)
@@ -587,15 +609,19 @@ class Viewer:
                     node.position = tuple(state.collider_q[c])
                     node.wxyz = tuple(_quaternion(state.collider_rotation[c]))
             self._push_overlays(model, state)
-        now = state.time
-        self._history.append((now, volumes[0], pressures[0]))
-        while self._history and self._history[0][0] < now - HISTORY_SECONDS:
-            self._history.popleft()
-        # the readout table and plot are costly for the page to redraw: a few times a second
+        # readouts and the plot: a few times a second (costly to measure and to redraw)
         wall = time.perf_counter()
         if wall - self._last_readout < 1.0 / READOUT_RATE and not force_readout:
             return
         self._last_readout = wall
+        now = state.time
+        volumes = body_volume(model, state)
+        pressures = body_pressure(
+            model, state, None if np.all(np.isnan(control_values)) else self.control
+        )
+        self._history.append((now, volumes[0], pressures[0]))
+        while self._history and self._history[0][0] < now - HISTORY_SECONDS:
+            self._history.popleft()
         rows = [
             f"| {self.body_names[b]} | {volumes[b]:.4g} | {pressures[b]:.4g} |"
             for b in range(model.body_count)

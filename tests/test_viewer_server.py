@@ -1,0 +1,60 @@
+"""The viewer's server side, without a browser: real time, blow-up handling, reset."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+import softbody as sb
+
+
+@pytest.fixture
+def viewer():
+    from softbody.scenes import load_scene
+    from softbody.viewer.app import show
+
+    scene = load_scene("hanging-ball")
+    sim = sb.Simulator(scene.model, integrator=scene.integrator, dt=scene.dt)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    v = show(
+        scene.model, scene.model.state(), sim, port=port, block=False, body_names=scene.body_names
+    )
+    yield v
+    v.stop()
+
+
+def test_keeps_up_with_the_wall_clock(viewer):
+    """hanging-ball runs 7x faster than real time offline, so the viewer's clock follows
+    the wall clock: never ahead of it (by more than one loop, 1/30 s), and at least 70% of
+    it over 3 s even if another process takes some of the two cores."""
+    t0, w0 = viewer.state.time, time.perf_counter()
+    time.sleep(3.0)
+    elapsed = time.perf_counter() - w0
+    advanced = viewer.state.time - t0
+    assert 0.7 * elapsed <= advanced <= elapsed + 1.0 / 30
+
+
+def test_unstable_slider_pauses_with_a_message_and_reset_recovers(viewer):
+    """Undamped explicit Euler (unstable at any dt) blows the ball up: the server keeps
+    serving, the run pauses with the blow-up message, and Reset restores the starting
+    parameters so the run goes on."""
+    viewer.damping_sliders[0].value = 0.0
+    viewer.integrator_menu.value = "euler"
+    viewer._rebuild()
+    assert "exceeds the stable estimate" in viewer.message
+    deadline = time.perf_counter() + 30
+    while not viewer.message.startswith("paused") and time.perf_counter() < deadline:
+        time.sleep(0.2)
+    assert viewer.message.startswith("paused: body 0 blew up at step")
+    assert not viewer.running
+    viewer._reset()
+    assert viewer.running and viewer.message == ""
+    assert viewer.integrator_menu.value == "midpoint"
+    assert viewer.damping_sliders[0].value == pytest.approx(0.3)
+    t0 = viewer.state.time
+    time.sleep(2.5)
+    assert viewer.state.time > t0 + 2.0 and viewer.message == ""
