@@ -146,3 +146,27 @@ def test_compiled_pressure_kernel_matches_numpy_reference(seed):
     f = forces(model, state)
     ref = pressure_forces_reference(state.particle_q, model.tri_indices, 350.0)
     assert np.allclose(f, ref, rtol=0, atol=1e-13 * np.abs(ref).max())
+
+
+def test_grab_spring_force_and_equilibrium():
+    """Control's grab spring on one particle: f = k (target - x) - c v exactly, and a
+    particle hanging from it under gravity settles at x = target + m g / k."""
+    builder = sb.ModelBuilder()
+    builder.add_particle((0.0, 0.0, 0.0), mass=0.5, velocity=(0.2, 0.0, 0.0))
+    model = builder.finalize()
+    control = model.control()
+    control.grab_particle = 0
+    control.grab_target = np.array([0.0, 1.0, 0.0])
+    control.grab_stiffness, control.grab_damping = 40.0, 3.0
+    f = forces(model, model.state(), control)
+    assert np.allclose(
+        f[0],
+        40.0 * np.array([0.0, 1.0, 0.0]) - 3.0 * np.array([0.2, 0, 0]) + 0.5 * model.gravity,
+        atol=1e-14,
+    )
+    state = model.state()
+    sb.Simulator(model, integrator="rk4", dt=1e-3).run(state, 20_000, control)
+    assert np.allclose(state.particle_q[0], [0.0, 1.0 - 0.5 * 9.81 / 40.0, 0.0], atol=1e-9)
+    control.grab_particle = 3
+    with pytest.raises(ValueError, match="grab_particle must be -1 or a particle index"):
+        sb.Simulator(model, dt=1e-3).step(model.state(), control)

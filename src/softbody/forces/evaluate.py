@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from softbody.forces.external import eval_external_forces
+from softbody.forces.external import eval_external_forces, eval_grab_force
 from softbody.forces.gravity import eval_gravity
 from softbody.forces.pressure import eval_pressure_forces
 from softbody.forces.springs import eval_attachment_forces, eval_spring_forces
@@ -38,6 +38,8 @@ def eval_forces(m, c, t, q, qd, w, f):
     )
     # per-step external forces from Control
     eval_external_forces(c.particle_f, f)
+    # a grabbed particle pulled toward a target (interactive use)
+    eval_grab_force(q, qd, c.grab_particle, c.grab_target, c.grab_stiffness, c.grab_damping, f)
     # body volumes and their gradients dV/dx (area-weighted vertex normals)
     eval_body_volume(
         q,

@@ -22,6 +22,10 @@ class ControlData(NamedTuple):
     pin_target: np.ndarray  # (P, 3) pinned-particle targets at the end of the call [m]
     pin_active: bool  # whether pin_target is used
     collider_target: np.ndarray  # (C, 3) collider centre targets [m], NaN = prescribed motion
+    grab_particle: int  # particle pulled by the grab spring, -1 for none
+    grab_target: np.ndarray  # (3,) where the grab spring pulls it [m]
+    grab_stiffness: float  # [N/m]
+    grab_damping: float  # [N s/m]
 
 
 @dataclass(eq=False)
@@ -48,6 +52,15 @@ class Control:
     """Where each collider's centre should be at the end of the call [m], shape (C, 3);
     it moves there in a straight line at constant velocity (a ball driven by the user).
     NaN rows (and None) follow the collider's prescribed motion."""
+    grab_particle: int = -1
+    """A particle pulled toward ``grab_target`` by a damped spring in every force
+    evaluation (a mouse grab); -1 for none."""
+    grab_target: np.ndarray | None = None
+    """Where the grab spring pulls [m], shape (3,)."""
+    grab_stiffness: float = 0.0
+    """Grab spring stiffness [N/m]."""
+    grab_damping: float = 0.0
+    """Grab spring damping [N s/m] (on the particle's absolute velocity)."""
 
     @classmethod
     def neutral(cls, model: Model) -> Control:
@@ -105,7 +118,24 @@ class Control:
             if np.any(np.isinf(a)):
                 raise ValueError("Control.collider_target holds infinite values")
             np.copyto(out.collider_target, a)
-        return out._replace(pin_active=active)
+        grab = int(self.grab_particle)
+        if grab >= model.particle_count or grab < -1:
+            raise ValueError(f"Control.grab_particle must be -1 or a particle index, got {grab}")
+        if grab >= 0:
+            target = arr("grab_target", self.grab_target, (3,))
+            if not np.all(np.isfinite(target)):
+                raise ValueError("Control.grab_target must be finite")
+            np.copyto(out.grab_target, target)
+            for name in ("grab_stiffness", "grab_damping"):
+                v = float(getattr(self, name))
+                if not (np.isfinite(v) and v >= 0):
+                    raise ValueError(f"Control.{name} must be finite and >= 0")
+        return out._replace(
+            pin_active=active,
+            grab_particle=grab,
+            grab_stiffness=float(self.grab_stiffness),
+            grab_damping=float(self.grab_damping),
+        )
 
 
 def control_data(model: Model) -> ControlData:
@@ -117,4 +147,8 @@ def control_data(model: Model) -> ControlData:
         pin_target=model.particle_q[model.pin_particle].copy(),
         pin_active=False,
         collider_target=np.full((model.collider_count, 3), np.nan),
+        grab_particle=-1,
+        grab_target=np.zeros(3),
+        grab_stiffness=0.0,
+        grab_damping=0.0,
     )

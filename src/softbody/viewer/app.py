@@ -523,7 +523,13 @@ class Viewer:
         along = x @ direction
         dist = np.linalg.norm(x - along[:, None] * direction, axis=1)
         dist[along < 0] = np.inf
-        i = int(p0 + np.argmin(dist))
+        # the ray also passes near vertices on the far side: of those near the ray (within
+        # half an edge of the nearest), take the one nearest the camera
+        t0, t1 = self.model.body_tri_range[b]
+        tri = self.model.tri_indices[t0:t1] - p0
+        edge = float(np.median(np.linalg.norm(x[tri[:, 1]] - x[tri[:, 0]], axis=1)))
+        near = dist <= dist.min() + 0.5 * edge
+        i = int(p0 + np.flatnonzero(near)[np.argmin(along[near])])
         with self.lock:
             self.grabbed = i
         self.grab_gizmo.position = tuple(self.state.particle_q[i])
@@ -532,7 +538,7 @@ class Viewer:
     def _release(self) -> None:
         with self.lock:
             self.grabbed = None
-            self.control.particle_f[:] = 0.0
+            self.control.grab_particle = -1
         self.grab_gizmo.visible = False
 
     # -- loop ------------------------------------------------------------------------------
@@ -540,15 +546,12 @@ class Viewer:
         """Run ``steps`` steps (lock held); a blow-up pauses with its message."""
         if self.grabbed is not None:
             i = self.grabbed
-            b = int(self.model.particle_body[i])
-            mass = float(self.model.body_mass[b]) if b >= 0 else 1.0
-            k = 200.0 * mass  # pulls the body's weight with 5 cm of stretch
-            target = np.asarray(self.grab_gizmo.position, dtype=np.float64)
-            self.control.particle_f[:] = 0.0
-            self.control.particle_f[i] = (
-                k * (target - self.state.particle_q[i])
-                - 2.0 * np.sqrt(k * mass) * self.state.particle_qd[i]
-            )
+            m = float(self.model.particle_mass[i])
+            omega = 0.3 / self.dt  # stiff, yet well inside every integrator's stable range
+            self.control.grab_particle = i
+            self.control.grab_target = np.asarray(self.grab_gizmo.position, dtype=np.float64)
+            self.control.grab_stiffness = m * omega**2
+            self.control.grab_damping = 2.0 * m * omega  # critically damped
         try:
             self.sim.run(self.state, steps, self.control)
         except SimulationError as exc:
