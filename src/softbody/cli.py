@@ -16,7 +16,14 @@ import argparse
 import sys
 from pathlib import Path
 
-INTEGRATORS = ["euler", "midpoint", "rk4", "symplectic_euler", "velocity_verlet"]
+INTEGRATORS = [
+    "euler",
+    "midpoint",
+    "rk4",
+    "symplectic_euler",
+    "velocity_verlet",
+    "implicit_euler",
+]
 
 
 def _scenes(args) -> int:

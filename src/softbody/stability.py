@@ -131,6 +131,8 @@ def amplification_matrix(integrator: Integrator, h: float, omega: float, zeta: f
     """One step of ``integrator`` on x'' = -omega^2 x - 2 zeta omega x' as a (2, 2) matrix."""
     a = np.array([[0.0, 1.0], [-(omega**2), -2.0 * zeta * omega]])
     integrator = Integrator(integrator)
+    if integrator == Integrator.IMPLICIT_EULER:
+        return np.linalg.inv(np.eye(2) - h * a)
     if integrator in (Integrator.EULER, Integrator.MIDPOINT, Integrator.RK4):
         g = np.zeros((2, 2))
         term = np.eye(2)
@@ -160,9 +162,10 @@ def largest_stable_step(
     integrator: Integrator, omega: float, zeta: float, *, tolerance: float = 1e-12
 ) -> float:
     """Largest h [s] with spectral radius <= 1 + tolerance for every step up to h."""
-    if omega <= 0:
-        return float("inf")
     integrator = Integrator(integrator)
+    if omega <= 0 or integrator.implicit:
+        # backward Euler: |1 / (1 - h lambda)| <= 1 whenever Re(lambda) <= 0
+        return float("inf")
 
     def stable(h):
         return _spectral_radius(amplification_matrix(integrator, h, omega, zeta)) <= 1 + tolerance

@@ -1,4 +1,5 @@
-"""Time integrators: explicit Euler, Midpoint (RK2), RK4, symplectic Euler, velocity Verlet."""
+"""Time integrators: explicit Euler, Midpoint (RK2), RK4, symplectic Euler, velocity Verlet,
+and implicit (backward) Euler."""
 
 from __future__ import annotations
 
@@ -15,16 +16,22 @@ class Integrator(IntEnum):
     RK4 = 2
     SYMPLECTIC_EULER = 3
     VELOCITY_VERLET = 4
+    IMPLICIT_EULER = 5
 
     @property
     def order(self) -> int:
         """Global order of accuracy for smooth problems."""
-        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2}[int(self)]
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1}[int(self)]
 
     @property
     def force_evaluations(self) -> int:
-        """Force evaluations per step."""
-        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2}[int(self)]
+        """Force evaluations per step (implicit Euler adds its CG iterations)."""
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1}[int(self)]
+
+    @property
+    def implicit(self) -> bool:
+        """True for schemes that solve a linear system each step (unconditionally stable)."""
+        return self == Integrator.IMPLICIT_EULER
 
     @property
     def symplectic(self) -> bool:
@@ -43,6 +50,8 @@ class Integrator(IntEnum):
                 "verlet": "velocity_verlet",
                 "semi_implicit_euler": "symplectic_euler",
                 "explicit_euler": "euler",
+                "implicit": "implicit_euler",
+                "backward_euler": "implicit_euler",
             }
             key = aliases.get(key, key)
             for member in cls:

@@ -9,6 +9,7 @@ from softbody.collision.pose import eval_collider_poses
 from softbody.collision.response import eval_collider_contacts
 from softbody.collision.soft import eval_soft_contacts_bounding, eval_soft_contacts_surface
 from softbody.forces.evaluate import eval_forces
+from softbody.integrators.implicit import step_implicit_euler
 from softbody.integrators.schemes import (
     step_euler,
     step_midpoint,
@@ -168,6 +169,8 @@ def simulate(
     collider_q,
     collider_rot,
     collider_impulse,
+    cg_tolerance,
+    cg_max_iterations,
 ):
     """Advance ``q``, ``qd`` (N, 3) in place by ``steps`` steps of ``dt`` [s] from ``t0``.
 
@@ -206,8 +209,10 @@ def simulate(
             step_rk4(m, c, t, dt, q, qd, w)
         elif integrator == 3:
             step_symplectic_euler(m, c, t, dt, q, qd, w)
-        else:
+        elif integrator == 4:
             step_velocity_verlet(m, c, t, dt, q, qd, w)
+        else:
+            step_implicit_euler(m, c, t, dt, q, qd, w, cg_tolerance, cg_max_iterations)
         needed = eval_contacts(
             m,
             c,

@@ -34,6 +34,17 @@ class Workspace(NamedTuple):
     hash_start: np.ndarray  # (H + 1,) spatial hash of triangles (surface contacts)
     hash_count: np.ndarray  # (H,)
     hash_entries: np.ndarray  # (E,)
+    spring_u: np.ndarray  # (S, 3) implicit Euler: spring directions
+    spring_a: np.ndarray  # (S,) axial stiffness [N/m]
+    spring_b: np.ndarray  # (S,) transverse (geometric) stiffness [N/m]
+    body_dpdv: np.ndarray  # (B,) dP/dV [Pa/m^3]
+    body_pnet: np.ndarray  # (B,) P - P_ambient [Pa]
+    cg_diag: np.ndarray  # (N,) Jacobi preconditioner [kg]
+    cg_r: np.ndarray  # (N, 3) conjugate-gradient residual
+    cg_z: np.ndarray  # (N, 3) preconditioned residual
+    cg_p: np.ndarray  # (N, 3) search direction
+    cg_ap: np.ndarray  # (N, 3) system matrix times search direction
+    cg_x: np.ndarray  # (N, 3) velocity change being solved for [m/s]
 
     @classmethod
     def for_model(cls, model, hash_capacity: int | None = None) -> Workspace:
@@ -62,4 +73,11 @@ class Workspace(NamedTuple):
             np.zeros(table + 1, dtype=np.int64),
             np.zeros(table, dtype=np.int64),
             np.zeros(capacity, dtype=np.int64),
+            np.zeros((model.spring_count, 3)),
+            np.zeros(model.spring_count),
+            np.zeros(model.spring_count),
+            np.zeros(b),
+            np.zeros(b),
+            np.zeros(n),
+            *(np.zeros((n, 3)) for _ in range(5)),
         )

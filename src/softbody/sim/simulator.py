@@ -45,6 +45,8 @@ class Simulator:
         dt: float,
         max_speed: float = 1.0e4,
         volume_limits: tuple[float, float] = (1.0e-3, 1.0e3),
+        implicit_tolerance: float = 1.0e-6,
+        implicit_max_iterations: int = 200,
     ):
         if not isinstance(model, Model):
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
@@ -64,6 +66,14 @@ class Simulator:
         if not (0 < lo < 1 < hi):
             raise ValueError(f"volume_limits must satisfy 0 < low < 1 < high, got {volume_limits}")
         self.volume_limits = (lo, hi)
+        if not (np.isfinite(implicit_tolerance) and 0 < implicit_tolerance < 1):
+            raise ValueError(f"implicit_tolerance must lie in (0, 1), got {implicit_tolerance!r}")
+        if int(implicit_max_iterations) != implicit_max_iterations or implicit_max_iterations < 1:
+            raise ValueError(
+                f"implicit_max_iterations must be an integer >= 1, got {implicit_max_iterations!r}"
+            )
+        self.implicit_tolerance = float(implicit_tolerance)
+        self.implicit_max_iterations = int(implicit_max_iterations)
         self.stiffest_mode = stiffest_mode(model)
         self.stable_dt = largest_stable_step(
             self.integrator, self.stiffest_mode.omega, self.stiffest_mode.zeta
@@ -135,6 +145,8 @@ class Simulator:
                 state.collider_q,
                 state.collider_rotation,
                 state.collider_impulse,
+                self.implicit_tolerance,
+                self.implicit_max_iterations,
             )
             start_step = state.step_count
             state.step_count = start_step + done
