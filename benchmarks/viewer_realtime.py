@@ -33,9 +33,16 @@ def main() -> None:
     args = parser.parse_args()
     rows = []
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True,
-                                    args=["--no-sandbox", "--enable-unsafe-swiftshader",
-                                          "--disable-background-networking", "--no-first-run"])
+        browser = p.chromium.launch(
+            executable_path="/usr/bin/chromium",
+            headless=True,
+            args=[
+                "--no-sandbox",
+                "--enable-unsafe-swiftshader",
+                "--disable-background-networking",
+                "--no-first-run",
+            ],
+        )
         for name in list_scenes():
             scene = load_scene(name)
             sim = sb.Simulator(scene.model, integrator=scene.integrator, dt=scene.dt)
@@ -43,8 +50,15 @@ def main() -> None:
                 s.bind(("127.0.0.1", 0))
                 port = s.getsockname()[1]
             cam = scene.render.camera
-            viewer = show(scene.model, scene.model.state(), sim, port=port, block=False,
-                          body_names=scene.body_names, camera=(cam.eye, cam.target))
+            viewer = show(
+                scene.model,
+                scene.model.state(),
+                sim,
+                port=port,
+                block=False,
+                body_names=scene.body_names,
+                camera=(cam.eye, cam.target),
+            )
             page = browser.new_page(viewport={"width": 1200, "height": 800})
             page.goto(viewer.url)
             page.get_by_text("t = ").first.wait_for(timeout=30_000)
@@ -52,20 +66,31 @@ def main() -> None:
             time.sleep(args.seconds)
             realtime = (viewer.state.time - t_sim) / (time.perf_counter() - t_wall)
             fps = page.evaluate(PAGE_FPS)
-            row = {"scene": name, "particles": scene.model.particle_count, "dt_s": scene.dt,
-                   "simulated_per_wall_second": realtime,
-                   "server_updates_per_second": viewer.updates_per_second,
-                   "page_frames_per_second": fps}
+            row = {
+                "scene": name,
+                "particles": scene.model.particle_count,
+                "dt_s": scene.dt,
+                "simulated_per_wall_second": realtime,
+                "server_updates_per_second": viewer.updates_per_second,
+                "page_frames_per_second": fps,
+            }
             rows.append(row)
-            print(f"{name:18s} {realtime:5.2f}x real time, {viewer.updates_per_second:5.1f} "
-                  f"updates/s, page {fps:5.1f} fps", flush=True)
+            print(
+                f"{name:18s} {realtime:5.2f}x real time, {viewer.updates_per_second:5.1f} "
+                f"updates/s, page {fps:5.1f} fps",
+                flush=True,
+            )
             page.close()
             viewer.stop()
         browser.close()
     RESULTS.mkdir(exist_ok=True)
-    out = {"benchmark": "viewer_realtime", "date": time.strftime("%Y-%m-%d"),
-           "cores": os.cpu_count(), "renderer": "headless chromium, software WebGL",
-           "scenes": rows}
+    out = {
+        "benchmark": "viewer_realtime",
+        "date": time.strftime("%Y-%m-%d"),
+        "cores": os.cpu_count(),
+        "renderer": "headless chromium, software WebGL",
+        "scenes": rows,
+    }
     (RESULTS / "viewer_realtime.json").write_text(json.dumps(out, indent=2))
     print(f"wrote {RESULTS / 'viewer_realtime.json'}")
 
