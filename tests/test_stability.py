@@ -118,3 +118,33 @@ def test_collapse_is_detected():
     sim = sb.Simulator(model, integrator="rk4", dt=1e-4, max_speed=1e9)
     with pytest.raises(sb.SimulationError, match="body 0 blew up .*volume"):
         sim.run(model.state(), 100_000)
+
+
+@pytest.mark.parametrize("integrator", ["midpoint", "symplectic_euler", "rk4", "implicit_euler"])
+def test_auto_step_is_stable_and_lands_on_time(integrator):
+    """dt="auto": the substep is 0.8 of the stability estimate at the current state (1/60 s
+    at most, and for implicit Euler), so a user asking for a duration gets a stable run:
+    30 frames of 1/30 s of the paper's bouncing balls end at t = 1 s exactly, round."""
+    from softbody.scenes import load_scene
+    from softbody.sim.simulator import AUTO_SAFETY, MAX_AUTO_DT
+
+    model = load_scene("bouncing-balls").model
+    sim = sb.Simulator(model, integrator=integrator, dt="auto")
+    assert sim.dt == pytest.approx(min(MAX_AUTO_DT, AUTO_SAFETY * sim.stable_dt))
+    state = model.state()
+    for _ in range(30):
+        sim.advance(state, 1 / 30)
+        assert sim.dt <= AUTO_SAFETY * sim.stable_dt * 1.5 or integrator == "implicit_euler"
+    assert state.time == pytest.approx(1.0, abs=1e-12)
+    ratio = sb.body_volume(model, state) / model.body_rest_volume
+    assert np.all((ratio > 0.8) & (ratio < 2.0))
+
+
+def test_advance_with_fixed_dt_uses_no_longer_steps():
+    """With a fixed dt, advance(duration) takes ceil(duration / dt) equal substeps."""
+    model = two_masses()
+    sim = sb.Simulator(model, integrator="rk4", dt=1e-3)
+    state = model.state()
+    sim.advance(state, 0.0105)
+    assert state.step_count == 11 and state.time == pytest.approx(0.0105, abs=1e-15)
+    assert sim.dt == 1e-3

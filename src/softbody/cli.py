@@ -147,6 +147,10 @@ def _info(args) -> int:
     return 0
 
 
+def _dt(text: str) -> float | str:
+    return "auto" if text == "auto" else _positive_float(text)
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -178,7 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("scene", help="built-in scene name (see `softbody scenes`) or .toml file")
     run.add_argument("--out", default="out", help="output folder (default: out)")
     run.add_argument("--duration", type=_positive_float, help="simulated seconds")
-    run.add_argument("--dt", type=_positive_float, help="time step in seconds")
+    run.add_argument("--dt", type=_dt, help='time step in seconds, or "auto"')
     run.add_argument("--integrator", choices=INTEGRATORS)
     run.add_argument(
         "--set",
@@ -200,7 +204,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("scene", help="built-in scene name or .toml file")
     view.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     view.add_argument("--port", type=int, default=8080, help="port (default 8080)")
-    view.add_argument("--dt", type=_positive_float, help="time step in seconds")
+    view.add_argument("--dt", type=_dt, help='time step in seconds, or "auto"')
     view.add_argument("--integrator", choices=INTEGRATORS)
     view.add_argument(
         "--set", action="append", metavar="KEY=VALUE", help="override a scene value (repeatable)"

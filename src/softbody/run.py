@@ -89,7 +89,8 @@ def run_scene(
 
     model = scene.model
     integrator = integrator or scene.integrator
-    dt = float(dt if dt is not None else scene.dt)
+    dt = dt if dt is not None else scene.dt
+    auto = dt == "auto"
     duration = float(duration if duration is not None else scene.duration)
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be > 0 seconds, got {duration!r}")
@@ -98,8 +99,12 @@ def run_scene(
             warnings.simplefilter("error", StabilityWarning)
         sim = Simulator(model, integrator=integrator, dt=dt)
     settings = scene.render
-    steps_per_frame = max(1, round(1.0 / (settings.fps * dt)))
-    frame_dt = steps_per_frame * dt
+    if auto:
+        # each frame is 1 / fps, advanced in substeps re-chosen from the stability estimate
+        steps_per_frame, frame_dt = 0, 1.0 / settings.fps
+    else:
+        steps_per_frame = max(1, round(1.0 / (settings.fps * dt)))
+        frame_dt = steps_per_frame * dt
     # a frame is a whole number of steps; the run ends on the first frame at or after
     # the requested duration
     frame_count = max(1, int(np.ceil(duration / frame_dt - 1e-9)))
@@ -128,7 +133,10 @@ def run_scene(
         for frame in range(frame_count + 1):
             if frame:
                 t0 = time.perf_counter()
-                sim.run(state, steps_per_frame)
+                if auto:
+                    sim.advance(state, frame_dt)
+                else:
+                    sim.run(state, steps_per_frame)
                 sim_seconds += time.perf_counter() - t0
             times.append(state.time)
             vol.append(body_volume(model, state))
@@ -179,7 +187,8 @@ def run_scene(
             times,
             series,
             scene.body_names,
-            f"{scene.name}: {model.particle_count} particles, {integrator}, dt = {dt:g} s",
+            f"{scene.name}: {model.particle_count} particles, {integrator}, "
+            f"dt = {'auto' if auto else f'{dt:g} s'}",
         )
         if bounding is not None:
             plot_bounding_volumes(
@@ -204,7 +213,8 @@ def run_scene(
             "softbody_version": __version__,
             "parameters": scene.data,
             "integrator": sim.integrator.name.lower(),
-            "dt_s": dt,
+            "dt_s": sim.dt if auto else dt,
+            "dt_auto": auto,
             "stable_dt_estimate_s": sim.stable_dt,
             "duration_s": float(times[-1]),
             "steps": state.step_count,

@@ -359,6 +359,19 @@ def _rotation(spec, where) -> np.ndarray | None:
     return rotation_about(v[:3], np.radians(v[3]))
 
 
+def _dt(value) -> float | str:
+    """simulation.dt: seconds, or "auto" (chosen from the stability estimate)."""
+    if value == "auto":
+        return "auto"
+    try:
+        dt = float(value)
+    except (TypeError, ValueError):
+        raise SceneError(f'simulation.dt must be seconds or "auto", got {value!r}') from None
+    if not (np.isfinite(dt) and dt > 0):
+        raise SceneError(f"simulation.dt must be > 0 seconds, got {value!r}")
+    return dt
+
+
 @dataclass
 class Scene:
     """A loaded scene: the model and how to run and draw it."""
@@ -369,7 +382,8 @@ class Scene:
     """The scene table after overrides (what the JSON summary records)."""
     model: Model
     integrator: str
-    dt: float
+    dt: float | str
+    """Time step [s], or "auto"."""
     duration: float
     render: RenderSettings
     body_names: list[str]
@@ -528,7 +542,7 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
         data=data,
         model=model,
         integrator=str(sim.get("integrator", "midpoint")),
-        dt=float(sim.get("dt", 1e-3)),
+        dt=_dt(sim.get("dt", 1e-3)),
         duration=duration,
         render=render,
         body_names=names,

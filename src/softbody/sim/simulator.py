@@ -15,6 +15,10 @@ from softbody.sim.model import Model
 from softbody.sim.state import State
 from softbody.stability import largest_stable_step, stiffest_mode
 
+#: With dt="auto": the fraction of the stability estimate used, and the largest step [s].
+AUTO_SAFETY = 0.8
+MAX_AUTO_DT = 1.0 / 60.0
+
 
 class Simulator:
     """Steps a :class:`Model`'s states forward in time.
@@ -25,9 +29,10 @@ class Simulator:
     integrator : str
         ``"midpoint"`` (default, the paper's choice), ``"euler"``, ``"rk4"``,
         ``"symplectic_euler"`` or ``"velocity_verlet"``.
-    dt : float
+    dt : float or "auto"
         Time step [s], > 0. A :class:`StabilityWarning` is issued when it exceeds
-        :attr:`stable_dt`.
+        :attr:`stable_dt`. ``"auto"`` picks it from the stability estimate (and
+        :meth:`advance` re-picks it from the current state).
     max_speed : float
         A particle faster than this [m/s] means the run blew up (runaway energy).
     volume_limits : (float, float)
@@ -52,10 +57,13 @@ class Simulator:
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
         self.model = model
         self.integrator = Integrator.parse(integrator)
+        self.auto_dt = isinstance(dt, str) and dt == "auto"
+        if self.auto_dt:
+            dt = MAX_AUTO_DT
         try:
             dt = float(dt)
         except (TypeError, ValueError):
-            raise ValueError(f"dt must be a number of seconds, got {dt!r}") from None
+            raise ValueError(f"dt must be a number of seconds or 'auto', got {dt!r}") from None
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be finite and > 0 seconds, got {dt!r}")
         self.dt = dt
@@ -81,7 +89,9 @@ class Simulator:
         self._work = Workspace.for_model(model)
         self._neutral = control_data(model)
         self._control = control_data(model)
-        if dt > self.stable_dt:
+        if self.auto_dt:
+            self.dt = min(MAX_AUTO_DT, AUTO_SAFETY * self.stable_dt)
+        elif dt > self.stable_dt:
             warnings.warn(self.stability_note(), StabilityWarning, stacklevel=2)
 
     def stability_note(self) -> str:
@@ -100,6 +110,36 @@ class Simulator:
         else:
             text += "; reduce dt, stiffness or pressure, or add mass"
         return text
+
+    def advance(self, state: State, duration: float, control: Control | None = None) -> State:
+        """Advance ``state`` by ``duration`` [s] in equal substeps.
+
+        With ``dt="auto"`` the substep is chosen from the stability estimate at the
+        current positions (``AUTO_SAFETY`` times the largest stable step, at most
+        ``MAX_AUTO_DT``; 1/60 s for implicit Euler), so the run stays stable as the gas
+        and shape change; otherwise the substeps are no longer than ``dt``. The state
+        ends exactly ``duration`` later.
+        """
+        duration = float(duration)
+        if not (np.isfinite(duration) and duration >= 0):
+            raise ValueError(f"duration must be finite and >= 0 seconds, got {duration!r}")
+        if duration == 0:
+            return state
+        limit = self.dt
+        if self.auto_dt:
+            mode = stiffest_mode(self.model, state.particle_q)
+            limit = min(
+                MAX_AUTO_DT,
+                AUTO_SAFETY * largest_stable_step(self.integrator, mode.omega, mode.zeta),
+            )
+        substeps = max(1, int(np.ceil(duration / limit - 1e-9)))
+        saved, self.dt = self.dt, duration / substeps
+        try:
+            self.run(state, substeps, control)
+        finally:
+            if not self.auto_dt:
+                self.dt = saved
+        return state
 
     def step(self, state: State, control: Control | None = None) -> State:
         """Advance ``state`` by one step of ``dt`` in place; returns it."""
