@@ -18,6 +18,8 @@ from softbody.stability import largest_stable_step, stiffest_mode
 #: With dt="auto": the fraction of the stability estimate used, and the largest step [s].
 AUTO_SAFETY = 0.8
 MAX_AUTO_DT = 1.0 / 60.0
+#: With dt="auto": simulated seconds between re-estimates of the stable step.
+AUTO_RECHECK = 0.25
 
 
 class Simulator:
@@ -58,6 +60,8 @@ class Simulator:
         self.model = model
         self.integrator = Integrator.parse(integrator)
         self.auto_dt = isinstance(dt, str) and dt == "auto"
+        self._auto_limit: float | None = None
+        self._auto_time = 0.0
         if self.auto_dt:
             dt = MAX_AUTO_DT
         try:
@@ -116,8 +120,9 @@ class Simulator:
 
         With ``dt="auto"`` the substep is chosen from the stability estimate at the
         current positions (``AUTO_SAFETY`` times the largest stable step, at most
-        ``MAX_AUTO_DT``; 1/60 s for implicit Euler), so the run stays stable as the gas
-        and shape change; otherwise the substeps are no longer than ``dt``. The state
+        ``MAX_AUTO_DT``; 1/60 s for implicit Euler), re-estimated every ``AUTO_RECHECK``
+        simulated seconds, so the run stays stable as the gas and shape change;
+        otherwise the substeps are no longer than ``dt``. The state
         ends exactly ``duration`` later.
         """
         duration = float(duration)
@@ -127,11 +132,16 @@ class Simulator:
             return state
         limit = self.dt
         if self.auto_dt:
-            mode = stiffest_mode(self.model, state.particle_q)
-            limit = min(
-                MAX_AUTO_DT,
-                AUTO_SAFETY * largest_stable_step(self.integrator, mode.omega, mode.zeta),
-            )
+            # re-estimate from the current shape and gas now and then (it costs a pass
+            # over the mesh); between estimates keep the last substep limit
+            if self._auto_limit is None or abs(state.time - self._auto_time) >= AUTO_RECHECK:
+                mode = stiffest_mode(self.model, state.particle_q)
+                self._auto_limit = min(
+                    MAX_AUTO_DT,
+                    AUTO_SAFETY * largest_stable_step(self.integrator, mode.omega, mode.zeta),
+                )
+                self._auto_time = state.time
+            limit = self._auto_limit
         substeps = max(1, int(np.ceil(duration / limit - 1e-9)))
         saved, self.dt = self.dt, duration / substeps
         try:
