@@ -30,7 +30,7 @@ import softbody as sb
 from softbody.forces.pressure import eval_pressure_forces
 from softbody.gas import eval_body_pressure
 from softbody.integrators.workspace import Workspace
-from softbody.volume import eval_body_volume
+from softbody.volume import eval_model_volume
 
 RESULTS = Path(__file__).parent / "results"
 INTEGRATORS = ["symplectic_euler", "velocity_verlet", "midpoint", "rk4", "euler"]
@@ -74,19 +74,7 @@ def pressure_time(model: sb.Model, repeats: int) -> float:
     override = np.full(model.body_count, np.nan)
 
     def run():
-        eval_body_volume(
-            q,
-            m.tri_indices,
-            m.body_particle_range,
-            m.body_tri_range,
-            m.body_volume_method,
-            m.body_mc_range,
-            m.mc_samples,
-            w.body_lo,
-            w.body_hi,
-            w.volume_gradient,
-            w.body_volume,
-        )
+        eval_model_volume(m, q, w)
         eval_body_pressure(
             0.0,
             m.body_gas_law,

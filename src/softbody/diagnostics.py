@@ -12,25 +12,13 @@ from softbody.integrators.workspace import Workspace
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
 from softbody.sim.state import State
-from softbody.volume import eval_body_volume
+from softbody.volume import eval_body_volume, eval_model_volume
 
 
 def _volumes(model: Model, q: np.ndarray) -> Workspace:
     w = Workspace.for_model(model)
     m = model.data
-    eval_body_volume(
-        q,
-        m.tri_indices,
-        m.body_particle_range,
-        m.body_tri_range,
-        m.body_volume_method,
-        m.body_mc_range,
-        m.mc_samples,
-        w.body_lo,
-        w.body_hi,
-        w.volume_gradient,
-        w.body_volume,
-    )
+    eval_model_volume(m, q, w)
     return w
 
 

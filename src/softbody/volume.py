@@ -224,3 +224,22 @@ def eval_body_volume(
             )
         else:
             body_volume[b] = eval_bounding_volume(q, begin, end, method, body_lo[b], body_hi[b])
+
+
+@njit(cache=True)
+def eval_model_volume(m, q, w):
+    """``eval_body_volume`` on a model's arrays: m is a ``ModelData``, w a ``Workspace``
+    (its body_volume, volume_gradient, body_lo and body_hi are filled)."""
+    eval_body_volume(
+        q,
+        m.tri_indices,
+        m.body_particle_range,
+        m.body_tri_range,
+        m.body_volume_method,
+        m.body_mc_range,
+        m.mc_samples,
+        w.body_lo,
+        w.body_hi,
+        w.volume_gradient,
+        w.body_volume,
+    )

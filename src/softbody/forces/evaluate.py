@@ -9,7 +9,7 @@ from softbody.forces.gravity import eval_gravity
 from softbody.forces.pressure import eval_pressure_forces
 from softbody.forces.springs import eval_attachment_forces, eval_spring_forces
 from softbody.gas import eval_body_pressure
-from softbody.volume import eval_body_volume
+from softbody.volume import eval_model_volume
 
 
 @njit(cache=True)
@@ -41,19 +41,7 @@ def eval_forces(m, c, t, q, qd, w, f):
     # a grabbed particle pulled toward a target (interactive use)
     eval_grab_force(q, qd, c.grab_particle, c.grab_target, c.grab_stiffness, c.grab_damping, f)
     # body volumes and their gradients dV/dx (area-weighted vertex normals)
-    eval_body_volume(
-        q,
-        m.tri_indices,
-        m.body_particle_range,
-        m.body_tri_range,
-        m.body_volume_method,
-        m.body_mc_range,
-        m.mc_samples,
-        w.body_lo,
-        w.body_hi,
-        w.volume_gradient,
-        w.body_volume,
-    )
+    eval_model_volume(m, q, w)
     # gas law: P(V, nRT(t))
     eval_body_pressure(
         t,
