@@ -29,7 +29,7 @@ from numba import njit
 
 import softbody as sb
 from softbody.forces.pressure import eval_pressure_forces
-from softbody.gas import eval_body_pressure
+from softbody.gas import eval_model_pressure
 from softbody.integrators.workspace import Workspace
 from softbody.volume import eval_model_volume
 
@@ -72,19 +72,7 @@ def pressure_passes(m, q, w, override, f, reps):
     pressure, and the pressure force on every face corner."""
     for _ in range(reps):
         eval_model_volume(m, q, w)
-        eval_body_pressure(
-            0.0,
-            m.body_gas_law,
-            m.body_gas_value,
-            m.body_gas_gamma,
-            m.body_gas_reference_volume,
-            m.body_schedule_range,
-            m.schedule_time,
-            m.schedule_value,
-            override,
-            w.body_volume,
-            w.body_pressure,
-        )
+        eval_model_pressure(m, 0.0, override, w)
         eval_pressure_forces(
             m.body_particle_range, w.body_pressure, m.body_ambient_pressure, w.volume_gradient, f
         )

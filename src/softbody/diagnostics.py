@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from softbody.forces.springs import attachment_energy, spring_energy
-from softbody.gas import eval_body_pressure, gas_energy, gas_value_at
+from softbody.gas import eval_model_pressure, gas_energy, gas_value_at
 from softbody.integrators.workspace import Workspace
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
@@ -83,19 +83,7 @@ def body_pressure(model: Model, state: State, control: Control | None = None) ->
     w = _volumes(model, state.particle_q)
     data = control_data(model) if control is None else control.write(model, control_data(model))
     m = model.data
-    eval_body_pressure(
-        float(state.time),
-        m.body_gas_law,
-        m.body_gas_value,
-        m.body_gas_gamma,
-        m.body_gas_reference_volume,
-        m.body_schedule_range,
-        m.schedule_time,
-        m.schedule_value,
-        data.gas_override,
-        w.body_volume,
-        w.body_pressure,
-    )
+    eval_model_pressure(m, float(state.time), data.gas_override, w)
     return w.body_pressure.copy()
 
 

@@ -216,6 +216,25 @@ def eval_body_pressure(
         )
 
 
+@njit(cache=True)
+def eval_model_pressure(m, t, gas_override, w):
+    """``eval_body_pressure`` on a model's arrays (m: ``ModelData``) at time ``t`` [s], from
+    and into the workspace w (body_volume -> body_pressure)."""
+    eval_body_pressure(
+        t,
+        m.body_gas_law,
+        m.body_gas_value,
+        m.body_gas_gamma,
+        m.body_gas_reference_volume,
+        m.body_schedule_range,
+        m.schedule_time,
+        m.schedule_value,
+        gas_override,
+        w.body_volume,
+        w.body_pressure,
+    )
+
+
 def gas_energy(
     law: np.ndarray,
     value: np.ndarray,

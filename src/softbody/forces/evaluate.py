@@ -8,7 +8,7 @@ from softbody.forces.external import eval_external_forces, eval_grab_force
 from softbody.forces.gravity import eval_gravity
 from softbody.forces.pressure import eval_pressure_forces
 from softbody.forces.springs import eval_attachment_forces, eval_spring_forces
-from softbody.gas import eval_body_pressure
+from softbody.gas import eval_model_pressure
 from softbody.volume import eval_model_volume
 
 
@@ -43,19 +43,7 @@ def eval_forces(m, c, t, q, qd, w, f):
     # body volumes and their gradients dV/dx (area-weighted vertex normals)
     eval_model_volume(m, q, w)
     # gas law: P(V, nRT(t))
-    eval_body_pressure(
-        t,
-        m.body_gas_law,
-        m.body_gas_value,
-        m.body_gas_gamma,
-        m.body_gas_reference_volume,
-        m.body_schedule_range,
-        m.schedule_time,
-        m.schedule_value,
-        c.gas_override,
-        w.body_volume,
-        w.body_pressure,
-    )
+    eval_model_pressure(m, t, c.gas_override, w)
     # pressure force (P - P_ambient) A n / 3 per face corner = (P - P_ambient) dV/dx
     eval_pressure_forces(
         m.body_particle_range, w.body_pressure, m.body_ambient_pressure, w.volume_gradient, f

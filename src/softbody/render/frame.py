@@ -105,6 +105,22 @@ def _ellipse_segments(center, axes, count=48):
     return np.concatenate(segs)
 
 
+def bounding_segments(v: np.ndarray):
+    """Wireframes of the paper's bounding objects of points v (N, 3), as segment arrays
+    (K, 2, 3): the axis-aligned box, the sphere and the ellipsoid (as in softbody.volume:
+    centred on the box, the ellipsoid with the box's aspect ratio)."""
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    c = 0.5 * (lo + hi)
+    half = np.maximum(0.5 * (hi - lo), 1e-12)
+    r = np.linalg.norm(v - c, axis=1).max()
+    scale = np.sqrt((((v - c) / half) ** 2).sum(axis=1).max())
+    return (
+        c + (BOX_CORNERS * half)[BOX_EDGES],
+        _ellipse_segments(c, np.array([r, r, r])),
+        _ellipse_segments(c, scale * half),
+    )
+
+
 class FrameRenderer:
     """Draws frames of one model. Buffers are allocated once and reused."""
 
@@ -242,14 +258,10 @@ class FrameRenderer:
                     np.stack([v, v + st.velocity_scale * vel], axis=1), np.array([0.85, 0.1, 0.1])
                 )
             if st.bounding_objects:
-                lo, hi = v.min(axis=0), v.max(axis=0)
-                c = 0.5 * (lo + hi)
-                half = np.maximum(0.5 * (hi - lo), 1e-12)
-                add_lines(c + (BOX_CORNERS * half)[BOX_EDGES], np.array([0.2, 0.35, 0.85]))
-                r = np.linalg.norm(v - c, axis=1).max()
-                add_lines(_ellipse_segments(c, np.array([r, r, r])), np.array([0.2, 0.65, 0.3]))
-                scale = np.sqrt((((v - c) / half) ** 2).sum(axis=1).max())
-                add_lines(_ellipse_segments(c, scale * half), np.array([0.85, 0.25, 0.2]))
+                box, sphere, ellipsoid = bounding_segments(v)
+                add_lines(box, np.array([0.2, 0.35, 0.85]))
+                add_lines(sphere, np.array([0.2, 0.65, 0.3]))
+                add_lines(ellipsoid, np.array([0.85, 0.25, 0.2]))
 
         if lines_a:
             a = cam.project(np.concatenate(lines_a), w, h)

@@ -24,7 +24,7 @@ from softbody.diagnostics import body_pressure, body_volume
 from softbody.errors import SimulationError, StabilityWarning
 from softbody.gas import GasLaw
 from softbody.integrators import Integrator
-from softbody.render.frame import BOX_CORNERS, BOX_EDGES, PALETTE, hex_rgb
+from softbody.render.frame import BOX_CORNERS, BOX_EDGES, PALETTE, bounding_segments, hex_rgb
 from softbody.sim.model import Model
 from softbody.sim.simulator import Simulator
 from softbody.sim.state import State
@@ -271,8 +271,7 @@ class Viewer:
         )
         for b, mesh in enumerate(self.meshes):
             mesh.on_click(lambda event, b=b: self._on_mesh_click(b, event))
-        self.velocity_lines = None
-        self.bounding_lines = None
+        self._overlays: dict = {}
 
     def _box_lines(self, c: int) -> np.ndarray:
         corners = (
@@ -645,56 +644,39 @@ class Viewer:
         if len(hist) > 1:
             self.plot.data = (hist[:, 0], hist[:, 1], hist[:, 2])
 
+    def _overlay(self, name: str, segments: np.ndarray | None, color) -> None:
+        """Show ``segments`` (K, 2, 3) as the overlay ``name``, or hide it if None."""
+        node = self._overlays.get(name)
+        if segments is None:
+            if node is not None:
+                node.visible = False
+            return
+        seg = segments.astype(np.float32)
+        if node is None or len(node.points) != len(seg):
+            if node is not None:
+                node.remove()
+            self._overlays[name] = self.server.scene.add_line_segments(
+                f"/overlay/{name}", seg, colors=color, thickness=1.5, thickness_units="screen"
+            )
+        else:
+            node.points = seg
+            node.visible = True
+
     def _push_overlays(self, model: Model, state: State) -> None:
-        scene = self.server.scene
         q = state.particle_q
+        velocity = None
         if self.velocity_box.value:
-            seg = np.stack([q, q + 0.05 * state.particle_qd], axis=1).astype(np.float32)
-            if self.velocity_lines is None:
-                self.velocity_lines = scene.add_line_segments(
-                    "/overlay/velocity",
-                    seg,
-                    colors=(220, 30, 30),
-                    thickness=1.5,
-                    thickness_units="screen",
-                )
-            else:
-                self.velocity_lines.points = seg
-                self.velocity_lines.visible = True
-        elif self.velocity_lines is not None:
-            self.velocity_lines.visible = False
+            velocity = np.stack([q, q + 0.05 * state.particle_qd], axis=1)
+        self._overlay("velocity", velocity, (220, 30, 30))
+        bounding = None
         if self.bounding_box.value:
-            segs = []
-            for p0, p1 in model.body_particle_range:
-                v = q[p0:p1]
-                lo, hi = v.min(axis=0), v.max(axis=0)
-                c = 0.5 * (lo + hi)
-                half = np.maximum(0.5 * (hi - lo), 1e-9)
-                segs.append(c + (BOX_CORNERS * half)[BOX_EDGES])
-                scale = np.sqrt((((v - c) / half) ** 2).sum(axis=1).max())
-                t = np.linspace(0, 2 * np.pi, 33)
-                for i, j in ((0, 1), (1, 2), (0, 2)):
-                    ring = np.zeros((33, 3))
-                    ring[:, i] = scale * half[i] * np.cos(t)
-                    ring[:, j] = scale * half[j] * np.sin(t)
-                    ring += c
-                    segs.append(np.stack([ring[:-1], ring[1:]], axis=1))
-            seg = np.concatenate(segs).astype(np.float32)
-            if self.bounding_lines is None or len(self.bounding_lines.points) != len(seg):
-                if self.bounding_lines is not None:
-                    self.bounding_lines.remove()
-                self.bounding_lines = scene.add_line_segments(
-                    "/overlay/bounding",
-                    seg,
-                    colors=(40, 90, 220),
-                    thickness=1.5,
-                    thickness_units="screen",
-                )
-            else:
-                self.bounding_lines.points = seg
-                self.bounding_lines.visible = True
-        elif self.bounding_lines is not None:
-            self.bounding_lines.visible = False
+            bounding = np.concatenate(
+                [
+                    np.concatenate(bounding_segments(q[p0:p1]))
+                    for p0, p1 in model.body_particle_range
+                ]
+            )
+        self._overlay("bounding", bounding, (40, 90, 220))
 
 
 def show(
