@@ -15,22 +15,22 @@ from numba import njit
 
 
 @njit(cache=True)
-def _local(rot, center, x):
-    """Coordinates of world point x (3,) in a collider frame: rot^T (x - center)."""
-    dx, dy, dz = x[0] - center[0], x[1] - center[1], x[2] - center[2]
+def _local(rot, center, c, x, i):
+    """Coordinates of world point x[i] in collider c's frame: rot^T (x - center)."""
+    dx, dy, dz = x[i, 0] - center[c, 0], x[i, 1] - center[c, 1], x[i, 2] - center[c, 2]
     return (
-        rot[0, 0] * dx + rot[1, 0] * dy + rot[2, 0] * dz,
-        rot[0, 1] * dx + rot[1, 1] * dy + rot[2, 1] * dz,
-        rot[0, 2] * dx + rot[1, 2] * dy + rot[2, 2] * dz,
+        rot[c, 0, 0] * dx + rot[c, 1, 0] * dy + rot[c, 2, 0] * dz,
+        rot[c, 0, 1] * dx + rot[c, 1, 1] * dy + rot[c, 2, 1] * dz,
+        rot[c, 0, 2] * dx + rot[c, 1, 2] * dy + rot[c, 2, 2] * dz,
     )
 
 
 @njit(cache=True)
-def _world(rot, center, lx, ly, lz):
+def _world(rot, center, c, lx, ly, lz):
     return (
-        center[0] + rot[0, 0] * lx + rot[0, 1] * ly + rot[0, 2] * lz,
-        center[1] + rot[1, 0] * lx + rot[1, 1] * ly + rot[1, 2] * lz,
-        center[2] + rot[2, 0] * lx + rot[2, 1] * ly + rot[2, 2] * lz,
+        center[c, 0] + rot[c, 0, 0] * lx + rot[c, 0, 1] * ly + rot[c, 0, 2] * lz,
+        center[c, 1] + rot[c, 1, 0] * lx + rot[c, 1, 1] * ly + rot[c, 1, 2] * lz,
+        center[c, 2] + rot[c, 2, 0] * lx + rot[c, 2, 1] * ly + rot[c, 2, 2] * lz,
     )
 
 
@@ -65,50 +65,56 @@ def _clamp(value, h):
     return value, 0.0
 
 
-@njit(cache=True)
-def collider_contact(kind, center, rot, size, x, x0, out_x, out_n):
-    """Whether point x (3,) violates a collider; if so its corrected position and the
-    surface normal pointing to the allowed side are written to out_x, out_n (3,).
+@njit(cache=True, inline="always")
+def collider_contact(kind, center, rot, size, c, x, x0, i, out_x, out_n):
+    """Whether particle i at x[i] violates collider c; if so its corrected position and
+    the surface normal pointing to the allowed side are written to out_x, out_n (3,).
 
-    x0 (3,) is where the particle was at the start of the step (continuous detection for
-    solid spheres and boxes). Allocates nothing.
+    center (C, 3), rot (C, 3, 3), size (C, 3): the colliders; x, x0 (N, 3): positions now
+    and at the start of the step (continuous detection for solid spheres and boxes).
+    Whole arrays and indices, not row views: a view per particle and collider costs
+    reference counting that took longer than the test itself. Allocates nothing.
     """
     if kind == 0:  # plane: local +y is the normal
-        nx, ny, nz = rot[0, 1], rot[1, 1], rot[2, 1]
-        d = (x[0] - center[0]) * nx + (x[1] - center[1]) * ny + (x[2] - center[2]) * nz
+        nx, ny, nz = rot[c, 0, 1], rot[c, 1, 1], rot[c, 2, 1]
+        d = (
+            (x[i, 0] - center[c, 0]) * nx
+            + (x[i, 1] - center[c, 1]) * ny
+            + (x[i, 2] - center[c, 2]) * nz
+        )
         if d >= 0.0:
             return False
-        out_x[0], out_x[1], out_x[2] = x[0] - d * nx, x[1] - d * ny, x[2] - d * nz
+        out_x[0], out_x[1], out_x[2] = x[i, 0] - d * nx, x[i, 1] - d * ny, x[i, 2] - d * nz
         out_n[0], out_n[1], out_n[2] = nx, ny, nz
         return True
     if kind == 1:  # container: clamp into the box
-        lx, ly, lz = _local(rot, center, x)
-        lx, mx = _clamp(lx, size[0])
-        ly, my = _clamp(ly, size[1])
-        lz, mz = _clamp(lz, size[2])
+        lx, ly, lz = _local(rot, center, c, x, i)
+        lx, mx = _clamp(lx, size[c, 0])
+        ly, my = _clamp(ly, size[c, 1])
+        lz, mz = _clamp(lz, size[c, 2])
         if mx == 0.0 and my == 0.0 and mz == 0.0:
             return False
-        out_x[0], out_x[1], out_x[2] = _world(rot, center, lx, ly, lz)
+        out_x[0], out_x[1], out_x[2] = _world(rot, center, c, lx, ly, lz)
         norm = np.sqrt(mx * mx + my * my + mz * mz)
-        for i in range(3):
-            out_n[i] = (rot[i, 0] * mx + rot[i, 1] * my + rot[i, 2] * mz) / norm
+        for k in range(3):
+            out_n[k] = (rot[c, k, 0] * mx + rot[c, k, 1] * my + rot[c, k, 2] * mz) / norm
         return True
     if kind == 2:  # solid sphere
-        r = size[0]
-        dx, dy, dz = x[0] - center[0], x[1] - center[1], x[2] - center[2]
+        r = size[c, 0]
+        dx, dy, dz = x[i, 0] - center[c, 0], x[i, 1] - center[c, 1], x[i, 2] - center[c, 2]
         d2 = dx * dx + dy * dy + dz * dz
         # did the step's path enter the sphere? solve |x0 + s (x - x0) - c| = r, s in [0, 1]
-        ex, ey, ez = x0[0] - center[0], x0[1] - center[1], x0[2] - center[2]
-        ux, uy, uz = x[0] - x0[0], x[1] - x0[1], x[2] - x0[2]
+        ex, ey, ez = x0[i, 0] - center[c, 0], x0[i, 1] - center[c, 1], x0[i, 2] - center[c, 2]
+        ux, uy, uz = x[i, 0] - x0[i, 0], x[i, 1] - x0[i, 1], x[i, 2] - x0[i, 2]
         a = ux * ux + uy * uy + uz * uz
         b = ex * ux + ey * uy + ez * uz
         cc = ex * ex + ey * ey + ez * ez - r * r
         if a > 0.0 and cc >= 0.0 and b < 0.0 and b * b - a * cc >= 0.0:
             s = (-b - np.sqrt(b * b - a * cc)) / a
             if s <= 1.0:  # entry point: cut the displacement there
-                for i in range(3):
-                    out_x[i] = x0[i] + s * (x[i] - x0[i])
-                    out_n[i] = (out_x[i] - center[i]) / r
+                for k in range(3):
+                    out_x[k] = x0[i, k] + s * (x[i, k] - x0[i, k])
+                    out_n[k] = (out_x[k] - center[c, k]) / r
                 return True
         if d2 >= r * r:
             return False
@@ -117,14 +123,14 @@ def collider_contact(kind, center, rot, size, x, x0, out_x, out_n):
         if d == 0.0:
             dx, dy, dz, d = 0.0, 1.0, 0.0, 1.0
         out_n[0], out_n[1], out_n[2] = dx / d, dy / d, dz / d
-        for i in range(3):
-            out_x[i] = center[i] + r * out_n[i]
+        for k in range(3):
+            out_x[k] = center[c, k] + r * out_n[k]
         return True
     # solid box: path entry first (a fast particle may end beyond the middle, or beyond
     # the box), else the nearest face for a particle that started inside
-    lx, ly, lz = _local(rot, center, x)
-    hx, hy, hz = size[0], size[1], size[2]
-    ax, ay, az = _local(rot, center, x0)
+    lx, ly, lz = _local(rot, center, c, x, i)
+    hx, hy, hz = size[c, 0], size[c, 1], size[c, 2]
+    ax, ay, az = _local(rot, center, c, x0, i)
     s_in, s_out, axis, side = -np.inf, np.inf, -1, 0.0
     s_in, s_out, axis, side = _slab(ax, lx, hx, s_in, s_out, axis, side, 0)
     s_in, s_out, axis, side = _slab(ay, ly, hy, s_in, s_out, axis, side, 1)
@@ -150,9 +156,9 @@ def collider_contact(kind, center, rot, size, x, x0, out_x, out_n):
             lz = side * hz
     else:
         return False
-    out_x[0], out_x[1], out_x[2] = _world(rot, center, lx, ly, lz)
-    for i in range(3):
-        out_n[i] = rot[i, axis] * side
+    out_x[0], out_x[1], out_x[2] = _world(rot, center, c, lx, ly, lz)
+    for k in range(3):
+        out_n[k] = rot[c, k, axis] * side
     return True
 
 
@@ -187,11 +193,13 @@ def eval_collider_contacts(
         for c in range(collider_kind.shape[0]):
             if not collider_contact(
                 collider_kind[c],
-                collider_q[c],
-                collider_rot[c],
-                collider_size[c],
-                q[i],
-                q_start[i],
+                collider_q,
+                collider_rot,
+                collider_size,
+                c,
+                q,
+                q_start,
+                i,
                 xp,
                 n,
             ):

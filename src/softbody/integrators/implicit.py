@@ -15,9 +15,14 @@ K p and C p are computed term by term:
   term (one dot product per body) plus, for each face (a, b, c) and its rotations,
   (d2V/dx2 p)_a += ((p_b x x_c) + (x_b x p_c)) / 6, never a dense matrix.
 
-The system matrix is symmetric; CG with a Jacobi preconditioner solves it to a relative
-residual ``tolerance``. The pressure Hessian is indefinite, so at very large steps the
-matrix may lose definiteness: CG then stops at its last good iterate. Pinned particles
+The system matrix is symmetric; preconditioned CG solves it to a relative residual
+``tolerance``, starting from the previous step's dv. The preconditioner is one V-cycle
+whose finest level smooths with block Gauss-Seidel on the true spring blocks and whose
+coarse levels are an algebraic multigrid hierarchy of the spring Laplacian
+(``integrators.multigrid``), or Jacobi. The pressure Hessian is indefinite, so at large
+steps (a ball whose springs are still slack, say) the matrix may be too: CG's
+recurrences hold for any symmetric matrix, so it carries on through negative curvature
+and stops only on an exact breakdown (p^T A p = 0), keeping its last iterate. Pinned particles
 keep their velocity (their rows are filtered out). Backward Euler is unconditionally
 stable for linear problems and first-order accurate, and it damps: energy is lost at a
 rate that grows with dt (benchmarks/implicit_energy.py plots it).
@@ -27,6 +32,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from softbody.integrators.multigrid import _coarse_solve, cycle_from, prolong, restrict
 
 
 @njit(cache=True)
@@ -180,8 +187,168 @@ def _dot_free(a, b, inv_mass):
 
 
 @njit(cache=True)
-def step_implicit_euler(m, c, t, dt, q, qd, w, tolerance, max_iterations):
-    """One backward Euler step (module docstring). w.f holds f(x0, v0) on entry; returns
+def _prepare_blocks(m, c, dt, q, w, mg):
+    """The true spring part of the system matrix for the finest-level smoother: per spring
+    the block alpha u u^T + beta I (alpha = dt c + dt^2 (a - b), beta = dt^2 b), per
+    particle the diagonal block m I + sum of its springs' blocks (+ attachments, grab),
+    and its inverse."""
+    n = q.shape[0]
+    for i in range(n):
+        for r in range(3):
+            for s in range(3):
+                mg.block[i, r, s] = 0.0
+            mg.block[i, r, r] = m.particle_mass[i]
+    for s in range(m.spring_indices.shape[0]):
+        alpha = dt * m.spring_damping[s] + dt * dt * (w.spring_a[s] - w.spring_b[s])
+        beta = dt * dt * w.spring_b[s]
+        mg.spring_alpha[s] = alpha
+        mg.spring_beta[s] = beta
+        for end in range(2):
+            i = m.spring_indices[s, end]
+            for r in range(3):
+                for k in range(3):
+                    mg.block[i, r, k] += alpha * w.spring_u[s, r] * w.spring_u[s, k]
+                mg.block[i, r, r] += beta
+    for a in range(m.attachment_particle.shape[0]):
+        i = m.attachment_particle[a]
+        d = w.scratch[0]
+        for k in range(3):
+            d[k] = c.attachment_anchor[a, k] - q[i, k]
+        length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        k_a = m.attachment_stiffness[a]
+        iso = k_a if length == 0.0 else k_a * max(0.0, 1.0 - m.attachment_rest_length[a] / length)
+        alpha = dt * m.attachment_damping[a] + dt * dt * (k_a - iso)
+        for r in range(3):
+            for k in range(3):
+                if length > 0.0:
+                    mg.block[i, r, k] += alpha * d[r] * d[k] / (length * length)
+            mg.block[i, r, r] += dt * dt * iso
+    g = c.grab_particle
+    if g >= 0:
+        for r in range(3):
+            mg.block[g, r, r] += dt * dt * c.grab_stiffness + dt * c.grab_damping
+    for i in range(n):
+        _invert_3x3(mg.block[i], mg.block_inv[i])
+
+
+@njit(cache=True)
+def _invert_3x3(a, out):
+    """out = a^-1 for a (3, 3) by the adjugate (no allocation)."""
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    inv_det = 1.0 / (a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02)
+    out[0, 0] = c00 * inv_det
+    out[1, 0] = c01 * inv_det
+    out[2, 0] = c02 * inv_det
+    out[0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) * inv_det
+    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) * inv_det
+    out[2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) * inv_det
+    out[0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) * inv_det
+    out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) * inv_det
+    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * inv_det
+
+
+@njit(cache=True)
+def _block_gauss_seidel(m, mg, w, inv_mass, forward):
+    """One block Gauss-Seidel sweep with the true spring blocks on the finest level,
+    x = mg.x[:N] for b = mg.b[:N]; pinned rows stay 0."""
+    n = inv_mass.shape[0]
+    x, b = mg.x, mg.b
+    for step in range(n):
+        i = step if forward else n - 1 - step
+        if inv_mass[i] == 0.0:
+            continue
+        s0, s1, s2 = b[i, 0], b[i, 1], b[i, 2]
+        for e in range(mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]):
+            sp = mg.vertex_spring[e]
+            j = m.spring_indices[sp, 0]
+            if j == i:
+                j = m.spring_indices[sp, 1]
+            ux, uy, uz = w.spring_u[sp, 0], w.spring_u[sp, 1], w.spring_u[sp, 2]
+            xj0, xj1, xj2 = x[j, 0], x[j, 1], x[j, 2]
+            ax = mg.spring_alpha[sp] * (ux * xj0 + uy * xj1 + uz * xj2)
+            beta = mg.spring_beta[sp]
+            s0 += ax * ux + beta * xj0
+            s1 += ax * uy + beta * xj1
+            s2 += ax * uz + beta * xj2
+        d = mg.block_inv[i]
+        x[i, 0] = d[0, 0] * s0 + d[0, 1] * s1 + d[0, 2] * s2
+        x[i, 1] = d[1, 0] * s0 + d[1, 1] * s1 + d[1, 2] * s2
+        x[i, 2] = d[2, 0] * s0 + d[2, 1] * s1 + d[2, 2] * s2
+
+
+@njit(cache=True)
+def _precondition(m, mg, w, diag, inv_mass, r, z):
+    """z = P^-1 r for r, z (N, 3); pinned rows are 0.
+
+    With ``mg`` built for this model: one V-cycle whose finest level smooths with block
+    Gauss-Seidel on the true (anisotropic) spring matrix, forward down and backward up,
+    and whose coarse correction is the isotropic Laplacian hierarchy; both halves are
+    symmetric, so the cycle is a symmetric operator. Otherwise Jacobi with ``diag`` (N,).
+    """
+    n = r.shape[0]
+    if mg.level_size[0] != n:
+        for i in range(n):
+            for k in range(3):
+                z[i, k] = r[i, k] / diag[i]
+        return
+    for i in range(n):
+        for k in range(3):
+            mg.b[i, k] = r[i, k]
+            mg.x[i, k] = 0.0
+    _block_gauss_seidel(m, mg, w, inv_mass, True)
+    # residual of the true spring matrix after the sweep
+    for i in range(n):
+        d = mg.block[i]
+        for k in range(3):
+            mg.r[i, k] = mg.b[i, k] - (
+                d[k, 0] * mg.x[i, 0] + d[k, 1] * mg.x[i, 1] + d[k, 2] * mg.x[i, 2]
+            )
+    for s in range(m.spring_indices.shape[0]):
+        i, j = m.spring_indices[s, 0], m.spring_indices[s, 1]
+        ux, uy, uz = w.spring_u[s, 0], w.spring_u[s, 1], w.spring_u[s, 2]
+        alpha, beta = mg.spring_alpha[s], mg.spring_beta[s]
+        axj = alpha * (ux * mg.x[j, 0] + uy * mg.x[j, 1] + uz * mg.x[j, 2])
+        axi = alpha * (ux * mg.x[i, 0] + uy * mg.x[i, 1] + uz * mg.x[i, 2])
+        mg.r[i, 0] += axj * ux + beta * mg.x[j, 0]
+        mg.r[i, 1] += axj * uy + beta * mg.x[j, 1]
+        mg.r[i, 2] += axj * uz + beta * mg.x[j, 2]
+        mg.r[j, 0] += axi * ux + beta * mg.x[i, 0]
+        mg.r[j, 1] += axi * uy + beta * mg.x[i, 1]
+        mg.r[j, 2] += axi * uz + beta * mg.x[i, 2]
+    for i in range(n):
+        if inv_mass[i] == 0.0:
+            mg.r[i, 0] = mg.r[i, 1] = mg.r[i, 2] = 0.0
+    # coarse correction with the Laplacian hierarchy (the dense solve when it is 1 level)
+    if mg.level_count > 0:
+        restrict(mg, 0, mg.r[:n])
+        cycle_from(mg, 1)
+        prolong(mg, 0)
+    else:
+        for i in range(n):
+            for k in range(3):
+                mg.r[i, k], mg.x[i, k] = mg.x[i, k], mg.r[i, k]
+                mg.b[i, k], mg.x[i, k] = mg.x[i, k], mg.b[i, k]
+        # now b holds the residual, r the smoothed x, x the right-hand side
+        _coarse_solve(mg)
+        for i in range(n):
+            for k in range(3):
+                mg.x[i, k] += mg.r[i, k]
+                mg.b[i, k] = r[i, k]
+    for i in range(n):
+        if inv_mass[i] == 0.0:
+            mg.x[i, 0] = mg.x[i, 1] = mg.x[i, 2] = 0.0
+    _block_gauss_seidel(m, mg, w, inv_mass, False)
+    for i in range(n):
+        for k in range(3):
+            z[i, k] = mg.x[i, k]
+
+
+@njit(cache=True)
+def step_implicit_euler(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations):
+    """One backward Euler step (module docstring). w.f holds f(x0, v0) on entry; ``mg``
+    is the multigrid preconditioner (set for this dt) or an empty one (Jacobi); returns
     the number of CG iterations used."""
     n = q.shape[0]
     inv_mass = m.particle_inv_mass
@@ -195,6 +362,8 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, tolerance, max_iterations):
         w.spring_b,
     )
     _body_pressure_slopes(m, w.body_volume, w.body_pressure, w.body_dpdv, w.body_pnet)
+    if mg.level_size[0] == n:
+        _prepare_blocks(m, c, dt, w.q0, w, mg)
     # right-hand side b = dt (f0 + dt K v0), kept in w.acc_v
     apply_jacobians(
         m,
@@ -223,15 +392,48 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, tolerance, max_iterations):
     for i in range(n):
         for k in range(3):
             b = dt * (w.f[i, k] + dt * w.acc_v[i, k]) if inv_mass[i] > 0.0 else 0.0
-            w.cg_r[i, k] = b  # residual of dv = 0
-            w.cg_x[i, k] = 0.0
+            w.cg_r[i, k] = b
             rhs_norm += b * b
+            if inv_mass[i] == 0.0:
+                w.cg_x[i, k] = 0.0
     rhs_norm = np.sqrt(rhs_norm)
+    # warm start from the previous step's dv (still in w.cg_x): in smooth motion it is
+    # close, and CG then starts from residual b - A dv_prev; kept only if that is smaller
+    apply_jacobians(
+        m,
+        c,
+        w.q0,
+        w.cg_x,
+        1.0,
+        -dt,
+        -dt * dt,
+        w.spring_u,
+        w.spring_a,
+        w.spring_b,
+        w.volume_gradient,
+        w.body_dpdv,
+        w.body_pnet,
+        w.cg_ap,
+    )
+    warm = 0.0
+    for i in range(n):
+        if inv_mass[i] > 0.0:
+            for k in range(3):
+                d = w.cg_r[i, k] - w.cg_ap[i, k]
+                warm += d * d
+    if np.isfinite(warm) and warm < rhs_norm * rhs_norm:
+        for i in range(n):
+            if inv_mass[i] > 0.0:
+                for k in range(3):
+                    w.cg_r[i, k] -= w.cg_ap[i, k]
+    else:
+        w.cg_x[:] = 0.0
+        warm = rhs_norm * rhs_norm
     iterations = 0
-    if rhs_norm > 0.0:
+    if np.sqrt(warm) > tolerance * rhs_norm:
+        _precondition(m, mg, w, w.cg_diag, inv_mass, w.cg_r, w.cg_z)
         for i in range(n):
             for k in range(3):
-                w.cg_z[i, k] = w.cg_r[i, k] / w.cg_diag[i]
                 w.cg_p[i, k] = w.cg_z[i, k]
         rz = _dot_free(w.cg_r, w.cg_z, inv_mass)
         while iterations < max_iterations:
@@ -252,8 +454,10 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, tolerance, max_iterations):
                 w.cg_ap,
             )
             pap = _dot_free(w.cg_p, w.cg_ap, inv_mass)
-            if not pap > 0.0:
-                break  # lost definiteness (pressure Hessian at a huge step): keep x
+            if pap == 0.0 or not np.isfinite(pap):
+                break  # breakdown: keep the last iterate
+            # pap < 0 (the pressure Hessian made the matrix indefinite at a large step)
+            # is no breakdown: CG's recurrences still hold for a symmetric matrix
             alpha = rz / pap
             res = 0.0
             for i in range(n):
@@ -266,9 +470,7 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, tolerance, max_iterations):
             iterations += 1
             if np.sqrt(res) <= tolerance * rhs_norm:
                 break
-            for i in range(n):
-                for k in range(3):
-                    w.cg_z[i, k] = w.cg_r[i, k] / w.cg_diag[i]
+            _precondition(m, mg, w, w.cg_diag, inv_mass, w.cg_r, w.cg_z)
             rz_new = _dot_free(w.cg_r, w.cg_z, inv_mass)
             beta = rz_new / rz
             rz = rz_new

@@ -169,6 +169,7 @@ def simulate(
     collider_q,
     collider_rot,
     collider_impulse,
+    mg,
     cg_tolerance,
     cg_max_iterations,
 ):
@@ -180,7 +181,8 @@ def simulate(
     failure the state is restored to the start of the failing step; on a volume failure
     the state is the one whose volume failed (found before stepping from it).
     collider_q (C, 3), collider_rot (C, 3, 3) are the colliders' poses (updated each
-    step); collider_impulse (C, 3) accumulates the impulse they receive.
+    step); collider_impulse (C, 3) accumulates the impulse they receive. ``mg`` is implicit
+    Euler's preconditioner (``integrators.multigrid``; an empty one means Jacobi).
     """
     for k in range(collider_q.shape[0]):
         for d in range(3):
@@ -212,7 +214,10 @@ def simulate(
         elif integrator == 4:
             step_velocity_verlet(m, c, t, dt, q, qd, w)
         else:
-            step_implicit_euler(m, c, t, dt, q, qd, w, cg_tolerance, cg_max_iterations)
+            its = step_implicit_euler(m, c, t, dt, q, qd, w, mg, cg_tolerance, cg_max_iterations)
+            w.cg_stats[0] += 1
+            w.cg_stats[1] += its
+            w.cg_stats[2] = max(w.cg_stats[2], its)
         needed = eval_contacts(
             m,
             c,

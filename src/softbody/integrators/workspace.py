@@ -45,6 +45,7 @@ class Workspace(NamedTuple):
     cg_p: np.ndarray  # (N, 3) search direction
     cg_ap: np.ndarray  # (N, 3) system matrix times search direction
     cg_x: np.ndarray  # (N, 3) velocity change being solved for [m/s]
+    cg_stats: np.ndarray  # (3,) implicit steps, their CG iterations in all, the most in one
 
     @classmethod
     def for_model(cls, model, hash_capacity: int | None = None) -> Workspace:
@@ -80,4 +81,5 @@ class Workspace(NamedTuple):
             np.zeros(b),
             np.zeros(n),
             *(np.zeros((n, 3)) for _ in range(5)),
+            np.zeros(3, dtype=np.int64),
         )

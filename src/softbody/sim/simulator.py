@@ -9,6 +9,7 @@ import numpy as np
 from softbody.errors import SimulationError, StabilityWarning
 from softbody.integrators import Integrator
 from softbody.integrators import loop as _loop
+from softbody.integrators.multigrid import build_multigrid, empty_multigrid, set_multigrid_step
 from softbody.integrators.workspace import Workspace
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
@@ -39,6 +40,16 @@ class Simulator:
         A particle faster than this [m/s] means the run blew up (runaway energy).
     volume_limits : (float, float)
         A body whose volume leaves [low, high] times its rest volume blew up.
+    implicit_tolerance : float
+        ``implicit_euler`` only: relative residual at which its conjugate-gradient solve
+        stops, in (0, 1).
+    implicit_max_iterations : int
+        ``implicit_euler`` only: most CG iterations per step (a step that reaches it keeps
+        the last iterate; :attr:`solver_iterations` tells).
+    implicit_preconditioner : str
+        ``implicit_euler`` only: ``"multigrid"`` (default; one algebraic-multigrid V-cycle
+        of the spring Laplacian, built once, so the iteration count barely grows with mesh
+        size) or ``"jacobi"`` (the diagonal; iterations grow like omega_max dt).
 
     A step that blows up raises :class:`SimulationError` naming the body or particle, the
     step and the time; the state is left at the last good step.
@@ -54,6 +65,7 @@ class Simulator:
         volume_limits: tuple[float, float] = (1.0e-3, 1.0e3),
         implicit_tolerance: float = 1.0e-6,
         implicit_max_iterations: int = 200,
+        implicit_preconditioner: str = "multigrid",
     ):
         if not isinstance(model, Model):
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
@@ -86,6 +98,15 @@ class Simulator:
             )
         self.implicit_tolerance = float(implicit_tolerance)
         self.implicit_max_iterations = int(implicit_max_iterations)
+        if implicit_preconditioner not in ("multigrid", "jacobi"):
+            raise ValueError(
+                "implicit_preconditioner must be 'multigrid' or 'jacobi', "
+                f"got {implicit_preconditioner!r}"
+            )
+        self.implicit_preconditioner = implicit_preconditioner
+        use_mg = self.integrator.implicit and implicit_preconditioner == "multigrid"
+        self._multigrid = build_multigrid(model) if use_mg else empty_multigrid()
+        self._multigrid_dt = None
         self.stiffest_mode = stiffest_mode(model)
         self.stable_dt = largest_stable_step(
             self.integrator, self.stiffest_mode.omega, self.stiffest_mode.zeta
@@ -97,6 +118,13 @@ class Simulator:
             self.dt = min(MAX_AUTO_DT, AUTO_SAFETY * self.stable_dt)
         elif dt > self.stable_dt:
             warnings.warn(self.stability_note(), StabilityWarning, stacklevel=2)
+
+    @property
+    def solver_iterations(self) -> tuple[float, int]:
+        """``implicit_euler``: (mean, most) CG iterations per step over the last
+        :meth:`run` call; (0, 0) for explicit integrators."""
+        steps, total, most = (int(x) for x in self._work.cg_stats)
+        return (total / steps if steps else 0.0, most)
 
     def stability_note(self) -> str:
         """One line comparing ``dt`` with the stability estimate, with advice."""
@@ -177,6 +205,10 @@ class Simulator:
                 f"state has {len(state.collider_q)} colliders, the model {model.collider_count}"
             )
         state.collider_impulse[:] = 0.0
+        self._work.cg_stats[:] = 0
+        if self._multigrid.level_size[0] == model.particle_count and self._multigrid_dt != self.dt:
+            set_multigrid_step(self._multigrid, self.dt)  # its matrix depends on dt
+            self._multigrid_dt = self.dt
         remaining = steps
         while remaining:
             status, done, index, value = _loop.simulate(
@@ -195,6 +227,7 @@ class Simulator:
                 state.collider_q,
                 state.collider_rotation,
                 state.collider_impulse,
+                self._multigrid,
                 self.implicit_tolerance,
                 self.implicit_max_iterations,
             )
