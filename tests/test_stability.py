@@ -50,6 +50,21 @@ def test_euler_needs_damping():
     assert np.max(np.abs(np.linalg.eigvals(g))) > 1
 
 
+@pytest.mark.parametrize("integrator", ["implicit_euler", "bdf2"])
+def test_implicit_schemes_are_a_stable(integrator):
+    """Backward Euler and BDF2 are A-stable: on the undamped oscillator the spectral radius
+    of one step is below 1 for every w dt from 0.01 to 1e4 (BDF2's (4, 4) companion
+    matrix included), tends to 0 as w dt grows (L-stable), and no step limit exists."""
+    scheme = Integrator.parse(integrator)
+    radii = [
+        np.abs(np.linalg.eigvals(amplification_matrix(scheme, h, 1.0, 0.0))).max()
+        for h in np.logspace(-2, 4, 61)
+    ]
+    assert max(radii) < 1.0
+    assert radii[-1] < 0.02
+    assert largest_stable_step(scheme, 1.0, 0.0) == float("inf")
+
+
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "velocity_verlet", "rk4"])
 def test_estimate_separates_stable_from_unstable(integrator):
     """Just below the estimate the linear oscillator stays bounded for 20,000 steps (near

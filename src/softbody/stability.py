@@ -128,11 +128,17 @@ def stiffest_mode(model, q: np.ndarray | None = None) -> StiffestMode:
 
 
 def amplification_matrix(integrator: Integrator, h: float, omega: float, zeta: float) -> np.ndarray:
-    """One step of ``integrator`` on x'' = -omega^2 x - 2 zeta omega x' as a (2, 2) matrix."""
+    """One step of ``integrator`` on x'' = -omega^2 x - 2 zeta omega x' as a (2, 2) matrix
+    ((4, 4) on the last two states for the two-step BDF2)."""
     a = np.array([[0.0, 1.0], [-(omega**2), -2.0 * zeta * omega]])
     integrator = Integrator(integrator)
     if integrator == Integrator.IMPLICIT_EULER:
         return np.linalg.inv(np.eye(2) - h * a)
+    if integrator == Integrator.BDF2:
+        # a two-step scheme: (4, 4) companion matrix on (y_n, y_n-1),
+        # y_n+1 = (I - 2/3 h a)^-1 (4/3 y_n - 1/3 y_n-1)
+        g = np.linalg.inv(np.eye(2) - (2.0 / 3.0) * h * a)
+        return np.block([[4.0 / 3.0 * g, -1.0 / 3.0 * g], [np.eye(2), np.zeros((2, 2))]])
     if integrator in (Integrator.EULER, Integrator.MIDPOINT, Integrator.RK4):
         g = np.zeros((2, 2))
         term = np.eye(2)

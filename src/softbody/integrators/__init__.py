@@ -1,5 +1,5 @@
 """Time integrators: explicit Euler, Midpoint (RK2), RK4, symplectic Euler, velocity Verlet,
-and implicit (backward) Euler."""
+implicit (backward) Euler and BDF2."""
 
 from __future__ import annotations
 
@@ -17,21 +17,22 @@ class Integrator(IntEnum):
     SYMPLECTIC_EULER = 3
     VELOCITY_VERLET = 4
     IMPLICIT_EULER = 5
+    BDF2 = 6
 
     @property
     def order(self) -> int:
         """Global order of accuracy for smooth problems."""
-        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1}[int(self)]
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 2}[int(self)]
 
     @property
     def force_evaluations(self) -> int:
-        """Force evaluations per step (implicit Euler adds its CG iterations)."""
-        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1}[int(self)]
+        """Force evaluations per step (the implicit schemes add their CG iterations)."""
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 1}[int(self)]
 
     @property
     def implicit(self) -> bool:
         """True for schemes that solve a linear system each step (unconditionally stable)."""
-        return self == Integrator.IMPLICIT_EULER
+        return self in (Integrator.IMPLICIT_EULER, Integrator.BDF2)
 
     @property
     def symplectic(self) -> bool:
@@ -52,6 +53,7 @@ class Integrator(IntEnum):
                 "explicit_euler": "euler",
                 "implicit": "implicit_euler",
                 "backward_euler": "implicit_euler",
+                "implicit_bdf2": "bdf2",
             }
             key = aliases.get(key, key)
             for member in cls:

@@ -12,8 +12,9 @@ K p and C p are computed term by term:
   semi-definite, as Choi & Ko do), C_s = c u u^T;
 * attachments: the same blocks to a fixed point;
 * pressure of each body: K_p = P'(V) g g^T + (P - P_a) d2V/dx2 with g = dV/dx: a rank-one
-  term (one dot product per body) plus, for each face (a, b, c) and its rotations,
-  (d2V/dx2 p)_a += ((p_b x x_c) + (x_b x p_c)) / 6, never a dense matrix.
+  term (one dot product per body) plus, for each face (a, b, c), the change of its area
+  vector (e1 x e2) / 6 (e1 = x_b - x_a, e2 = x_c - x_a), (d1 x e2 + e1 x d2) / 6 with
+  d1, d2 the same differences of p, added to all three corners; never a dense matrix.
 
 The system matrix is symmetric; preconditioned CG solves it to a relative residual
 ``tolerance``, starting from the previous step's dv. The preconditioner is one V-cycle
@@ -143,22 +144,29 @@ def apply_jacobians(
         coef = alpha_k * body_pnet[body] / 6.0
         if coef == 0.0:
             continue
-        # d/dx of (x_b - x_a) x (x_c - x_a) / 6, the face's share of g at each corner
+        # each corner's share of g is the face's area vector / 3 = (e1 x e2) / 6 with
+        # e1 = x_b - x_a, e2 = x_c - x_a (the same from any corner), so its change under
+        # p, d1 x e2 + e1 x d2 with d1 = p_b - p_a, d2 = p_c - p_a, goes to all three
         for t in range(m.body_tri_range[body, 0], m.body_tri_range[body, 1]):
-            for rot in range(3):
-                ia = m.tri_indices[t, rot]
-                ib = m.tri_indices[t, (rot + 1) % 3]
-                ic = m.tri_indices[t, (rot + 2) % 3]
-                bx, by, bz = q[ib, 0] - q[ia, 0], q[ib, 1] - q[ia, 1], q[ib, 2] - q[ia, 2]
-                cx, cy, cz = q[ic, 0] - q[ia, 0], q[ic, 1] - q[ia, 1], q[ic, 2] - q[ia, 2]
-                pbx, pby, pbz = p[ib, 0] - p[ia, 0], p[ib, 1] - p[ia, 1], p[ib, 2] - p[ia, 2]
-                pcx, pcy, pcz = p[ic, 0] - p[ia, 0], p[ic, 1] - p[ia, 1], p[ic, 2] - p[ia, 2]
-                hx = (pby * cz - pbz * cy) + (by * pcz - bz * pcy)
-                hy = (pbz * cx - pbx * cz) + (bz * pcx - bx * pcz)
-                hz = (pbx * cy - pby * cx) + (bx * pcy - by * pcx)
-                out[ia, 0] += coef * hx
-                out[ia, 1] += coef * hy
-                out[ia, 2] += coef * hz
+            ia, ib, ic = m.tri_indices[t, 0], m.tri_indices[t, 1], m.tri_indices[t, 2]
+            ax, ay, az = q[ia, 0], q[ia, 1], q[ia, 2]
+            e1x, e1y, e1z = q[ib, 0] - ax, q[ib, 1] - ay, q[ib, 2] - az
+            e2x, e2y, e2z = q[ic, 0] - ax, q[ic, 1] - ay, q[ic, 2] - az
+            pax, pay, paz = p[ia, 0], p[ia, 1], p[ia, 2]
+            d1x, d1y, d1z = p[ib, 0] - pax, p[ib, 1] - pay, p[ib, 2] - paz
+            d2x, d2y, d2z = p[ic, 0] - pax, p[ic, 1] - pay, p[ic, 2] - paz
+            hx = coef * ((d1y * e2z - d1z * e2y) + (e1y * d2z - e1z * d2y))
+            hy = coef * ((d1z * e2x - d1x * e2z) + (e1z * d2x - e1x * d2z))
+            hz = coef * ((d1x * e2y - d1y * e2x) + (e1x * d2y - e1y * d2x))
+            out[ia, 0] += hx
+            out[ia, 1] += hy
+            out[ia, 2] += hz
+            out[ib, 0] += hx
+            out[ib, 1] += hy
+            out[ib, 2] += hz
+            out[ic, 0] += hx
+            out[ic, 1] += hy
+            out[ic, 2] += hz
 
 
 @njit(cache=True)
@@ -193,22 +201,28 @@ def _prepare_blocks(m, c, dt, q, w, mg):
     particle the diagonal block m I + sum of its springs' blocks (+ attachments, grab),
     and its inverse."""
     n = q.shape[0]
+    # per particle, its springs' coefficients packed in entry order (the smoother and the
+    # residual then stream through them instead of gathering per spring)
     for i in range(n):
-        for r in range(3):
-            for s in range(3):
-                mg.block[i, r, s] = 0.0
-            mg.block[i, r, r] = m.particle_mass[i]
-    for s in range(m.spring_indices.shape[0]):
-        alpha = dt * m.spring_damping[s] + dt * dt * (w.spring_a[s] - w.spring_b[s])
-        beta = dt * dt * w.spring_b[s]
-        mg.spring_alpha[s] = alpha
-        mg.spring_beta[s] = beta
-        for end in range(2):
-            i = m.spring_indices[s, end]
-            for r in range(3):
-                for k in range(3):
-                    mg.block[i, r, k] += alpha * w.spring_u[s, r] * w.spring_u[s, k]
-                mg.block[i, r, r] += beta
+        b00 = b11 = b22 = m.particle_mass[i]
+        b01 = b02 = b12 = 0.0
+        for e in range(mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]):
+            s = mg.vertex_spring[e]
+            ux, uy, uz = w.spring_u[s, 0], w.spring_u[s, 1], w.spring_u[s, 2]
+            alpha = dt * m.spring_damping[s] + dt * dt * (w.spring_a[s] - w.spring_b[s])
+            beta = dt * dt * w.spring_b[s]
+            mg.entry_coef[e, 0], mg.entry_coef[e, 1], mg.entry_coef[e, 2] = ux, uy, uz
+            mg.entry_coef[e, 3], mg.entry_coef[e, 4] = alpha, beta
+            b00 += alpha * ux * ux + beta
+            b11 += alpha * uy * uy + beta
+            b22 += alpha * uz * uz + beta
+            b01 += alpha * ux * uy
+            b02 += alpha * ux * uz
+            b12 += alpha * uy * uz
+        mg.block[i, 0, 0], mg.block[i, 1, 1], mg.block[i, 2, 2] = b00, b11, b22
+        mg.block[i, 0, 1] = mg.block[i, 1, 0] = b01
+        mg.block[i, 0, 2] = mg.block[i, 2, 0] = b02
+        mg.block[i, 1, 2] = mg.block[i, 2, 1] = b12
     for a in range(m.attachment_particle.shape[0]):
         i = m.attachment_particle[a]
         d = w.scratch[0]
@@ -249,6 +263,23 @@ def _invert_3x3(a, out):
     out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) * inv_det
 
 
+@njit(cache=True, inline="always")
+def _offdiagonal_sum(mg, i, x):
+    """-sum over particle i's springs of their off-diagonal block times x_j (the blocks
+    are -(alpha u u^T + beta I))."""
+    s0 = s1 = s2 = 0.0
+    for e in range(mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]):
+        j = mg.vertex_neighbor[e]
+        ux, uy, uz = mg.entry_coef[e, 0], mg.entry_coef[e, 1], mg.entry_coef[e, 2]
+        beta = mg.entry_coef[e, 4]
+        xj0, xj1, xj2 = x[j, 0], x[j, 1], x[j, 2]
+        ax = mg.entry_coef[e, 3] * (ux * xj0 + uy * xj1 + uz * xj2)
+        s0 += ax * ux + beta * xj0
+        s1 += ax * uy + beta * xj1
+        s2 += ax * uz + beta * xj2
+    return s0, s1, s2
+
+
 @njit(cache=True)
 def _block_gauss_seidel(m, mg, w, inv_mass, forward):
     """One block Gauss-Seidel sweep with the true spring blocks on the finest level,
@@ -259,19 +290,10 @@ def _block_gauss_seidel(m, mg, w, inv_mass, forward):
         i = step if forward else n - 1 - step
         if inv_mass[i] == 0.0:
             continue
-        s0, s1, s2 = b[i, 0], b[i, 1], b[i, 2]
-        for e in range(mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]):
-            sp = mg.vertex_spring[e]
-            j = m.spring_indices[sp, 0]
-            if j == i:
-                j = m.spring_indices[sp, 1]
-            ux, uy, uz = w.spring_u[sp, 0], w.spring_u[sp, 1], w.spring_u[sp, 2]
-            xj0, xj1, xj2 = x[j, 0], x[j, 1], x[j, 2]
-            ax = mg.spring_alpha[sp] * (ux * xj0 + uy * xj1 + uz * xj2)
-            beta = mg.spring_beta[sp]
-            s0 += ax * ux + beta * xj0
-            s1 += ax * uy + beta * xj1
-            s2 += ax * uz + beta * xj2
+        s0, s1, s2 = _offdiagonal_sum(mg, i, x)
+        s0 += b[i, 0]
+        s1 += b[i, 1]
+        s2 += b[i, 2]
         d = mg.block_inv[i]
         x[i, 0] = d[0, 0] * s0 + d[0, 1] * s1 + d[0, 2] * s2
         x[i, 1] = d[1, 0] * s0 + d[1, 1] * s1 + d[1, 2] * s2
@@ -298,28 +320,17 @@ def _precondition(m, mg, w, diag, inv_mass, r, z):
             mg.b[i, k] = r[i, k]
             mg.x[i, k] = 0.0
     _block_gauss_seidel(m, mg, w, inv_mass, True)
-    # residual of the true spring matrix after the sweep
-    for i in range(n):
-        d = mg.block[i]
-        for k in range(3):
-            mg.r[i, k] = mg.b[i, k] - (
-                d[k, 0] * mg.x[i, 0] + d[k, 1] * mg.x[i, 1] + d[k, 2] * mg.x[i, 2]
-            )
-    for s in range(m.spring_indices.shape[0]):
-        i, j = m.spring_indices[s, 0], m.spring_indices[s, 1]
-        ux, uy, uz = w.spring_u[s, 0], w.spring_u[s, 1], w.spring_u[s, 2]
-        alpha, beta = mg.spring_alpha[s], mg.spring_beta[s]
-        axj = alpha * (ux * mg.x[j, 0] + uy * mg.x[j, 1] + uz * mg.x[j, 2])
-        axi = alpha * (ux * mg.x[i, 0] + uy * mg.x[i, 1] + uz * mg.x[i, 2])
-        mg.r[i, 0] += axj * ux + beta * mg.x[j, 0]
-        mg.r[i, 1] += axj * uy + beta * mg.x[j, 1]
-        mg.r[i, 2] += axj * uz + beta * mg.x[j, 2]
-        mg.r[j, 0] += axi * ux + beta * mg.x[i, 0]
-        mg.r[j, 1] += axi * uy + beta * mg.x[i, 1]
-        mg.r[j, 2] += axi * uz + beta * mg.x[i, 2]
+    # residual of the true spring matrix after the sweep (0 on pinned rows)
     for i in range(n):
         if inv_mass[i] == 0.0:
             mg.r[i, 0] = mg.r[i, 1] = mg.r[i, 2] = 0.0
+            continue
+        s0, s1, s2 = _offdiagonal_sum(mg, i, mg.x)
+        d = mg.block[i]
+        x0, x1, x2 = mg.x[i, 0], mg.x[i, 1], mg.x[i, 2]
+        mg.r[i, 0] = mg.b[i, 0] + s0 - (d[0, 0] * x0 + d[0, 1] * x1 + d[0, 2] * x2)
+        mg.r[i, 1] = mg.b[i, 1] + s1 - (d[1, 0] * x0 + d[1, 1] * x1 + d[1, 2] * x2)
+        mg.r[i, 2] = mg.b[i, 2] + s2 - (d[2, 0] * x0 + d[2, 1] * x1 + d[2, 2] * x2)
     # coarse correction with the Laplacian hierarchy (the dense solve when it is 1 level)
     if mg.level_count > 0:
         restrict(mg, 0, mg.r[:n])
@@ -346,12 +357,27 @@ def _precondition(m, mg, w, diag, inv_mass, r, z):
 
 
 @njit(cache=True)
-def step_implicit_euler(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations):
-    """One backward Euler step (module docstring). w.f holds f(x0, v0) on entry; ``mg``
-    is the multigrid preconditioner (set for this dt) or an empty one (Jacobi); returns
-    the number of CG iterations used."""
+def step_implicit(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations, bdf2):
+    """One backward Euler step, or with ``bdf2`` one BDF2 step (module docstring), from
+    w.q0, w.v0 with w.f = f(x0, v0) on entry; ``mg`` is the multigrid preconditioner or an
+    empty one (Jacobi). BDF2 reads the previous step's start in w.q_prev, w.v_prev; both
+    schemes leave this step's start there for the next. Returns the CG iterations used.
+
+    BDF2 (Choi & Ko 2002): x1 = 4/3 x0 - 1/3 x_-1 + h v1, v1 = 4/3 v0 - 1/3 v_-1 + h M^-1
+    f(x1, v1) with h = 2/3 dt; linearised like backward Euler it is the same system with
+    h for dt and the right-hand side M (v0 - v_-1) / 3 + h (f0 + K y),
+    y = (x0 - x_-1) / 3 + h v0 (backward Euler: h = dt, y = dt v0, no momentum term).
+    """
     n = q.shape[0]
     inv_mass = m.particle_inv_mass
+    h = dt * (2.0 / 3.0) if bdf2 else dt
+    # y, the linearisation's position change before dv, in w.qs
+    for i in range(n):
+        for k in range(3):
+            if bdf2:
+                w.qs[i, k] = (w.q0[i, k] - w.q_prev[i, k]) / 3.0 + h * w.v0[i, k]
+            else:
+                w.qs[i, k] = h * w.v0[i, k]
     _prepare_springs(
         w.q0,
         m.spring_indices,
@@ -363,13 +389,13 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations):
     )
     _body_pressure_slopes(m, w.body_volume, w.body_pressure, w.body_dpdv, w.body_pnet)
     if mg.level_size[0] == n:
-        _prepare_blocks(m, c, dt, w.q0, w, mg)
-    # right-hand side b = dt (f0 + dt K v0), kept in w.acc_v
+        _prepare_blocks(m, c, h, w.q0, w, mg)
+    # K y for the right-hand side, kept in w.acc_v
     apply_jacobians(
         m,
         c,
         w.q0,
-        w.v0,
+        w.qs,
         0.0,
         0.0,
         1.0,
@@ -381,17 +407,21 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations):
         w.body_pnet,
         w.acc_v,
     )
-    # Jacobi preconditioner: mass + dt (damping) + dt^2 (stiffness) on the diagonal
+    # Jacobi preconditioner: mass + h (damping) + h^2 (stiffness) on the diagonal
     for i in range(n):
         w.cg_diag[i] = m.particle_mass[i]
     for s in range(m.spring_indices.shape[0]):
-        d = dt * m.spring_damping[s] + dt * dt * w.spring_a[s]
+        d = h * m.spring_damping[s] + h * h * w.spring_a[s]
         w.cg_diag[m.spring_indices[s, 0]] += d
         w.cg_diag[m.spring_indices[s, 1]] += d
     rhs_norm = 0.0
     for i in range(n):
         for k in range(3):
-            b = dt * (w.f[i, k] + dt * w.acc_v[i, k]) if inv_mass[i] > 0.0 else 0.0
+            b = 0.0
+            if inv_mass[i] > 0.0:
+                b = h * (w.f[i, k] + w.acc_v[i, k])
+                if bdf2:
+                    b += m.particle_mass[i] * (w.v0[i, k] - w.v_prev[i, k]) / 3.0
             w.cg_r[i, k] = b
             rhs_norm += b * b
             if inv_mass[i] == 0.0:
@@ -405,8 +435,8 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations):
         w.q0,
         w.cg_x,
         1.0,
-        -dt,
-        -dt * dt,
+        -h,
+        -h * h,
         w.spring_u,
         w.spring_a,
         w.spring_b,
@@ -443,8 +473,8 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations):
                 w.q0,
                 w.cg_p,
                 1.0,
-                -dt,
-                -dt * dt,
+                -h,
+                -h * h,
                 w.spring_u,
                 w.spring_a,
                 w.spring_b,
@@ -481,5 +511,10 @@ def step_implicit_euler(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations):
         for k in range(3):
             v = w.v0[i, k] + w.cg_x[i, k]
             qd[i, k] = v
-            q[i, k] = w.q0[i, k] + dt * v
+            if bdf2 and inv_mass[i] > 0.0:
+                q[i, k] = (4.0 * w.q0[i, k] - w.q_prev[i, k]) / 3.0 + h * v
+            else:
+                q[i, k] = w.q0[i, k] + dt * v  # pinned particles keep their set velocity
+            w.q_prev[i, k] = w.q0[i, k]
+            w.v_prev[i, k] = w.v0[i, k]
     return iterations

@@ -66,12 +66,12 @@ class Multigrid(NamedTuple):
     p_indices: np.ndarray
     p_data: np.ndarray
     coarse_cholesky: np.ndarray  # (n_L, n_L)
-    vertex_spring_ptr: np.ndarray  # (N + 1,) CSR of each particle's springs
-    vertex_spring: np.ndarray  # (2 S,) spring indices
+    vertex_spring_ptr: np.ndarray  # (N + 1,) CSR of each particle's springs ("entries")
+    vertex_spring: np.ndarray  # (2 S,) spring of each entry
+    vertex_neighbor: np.ndarray  # (2 S,) particle at the entry spring's other end
     block: np.ndarray  # (N, 3, 3) scratch: finest-level diagonal blocks of the true matrix
     block_inv: np.ndarray  # (N, 3, 3) scratch: their inverses
-    spring_alpha: np.ndarray  # (S,) scratch: axial coefficient of each spring's block
-    spring_beta: np.ndarray  # (S,) scratch: isotropic coefficient of each spring's block
+    entry_coef: np.ndarray  # (2 S, 5) scratch: u (3,), alpha, beta of each entry's spring
     x: np.ndarray  # (sum n_l, 3) scratch: level solutions
     b: np.ndarray  # (sum n_l, 3) scratch: level right-hand sides
     r: np.ndarray  # (sum n_l, 3) scratch: level residuals
@@ -107,10 +107,10 @@ def empty_multigrid() -> Multigrid:
         np.zeros((0, 0)),
         i0,
         i0[:0],
+        i0[:0],
         np.zeros((0, 3, 3)),
         np.zeros((0, 3, 3)),
-        f0,
-        f0,
+        np.zeros((0, 5)),
         np.zeros((0, 3)),
         np.zeros((0, 3)),
         np.zeros((0, 3)),
@@ -273,10 +273,11 @@ def build_multigrid(model) -> Multigrid:
         np.zeros((int(sizes[-1]), int(sizes[-1])) if coarse_dense else (0, 0)),
         vertex_spring_ptr,
         (order // 2).astype(np.int64),
+        # the other end: entry 2 s + e of the flattened pairs sits opposite 2 s + 1 - e
+        ends[order ^ 1].astype(np.int64),
         np.zeros((n, 3, 3)),
         np.zeros((n, 3, 3)),
-        np.zeros(s_count),
-        np.zeros(s_count),
+        np.zeros((2 * s_count, 5)),
         np.zeros((total, 3)),
         np.zeros((total, 3)),
         np.zeros((total, 3)),

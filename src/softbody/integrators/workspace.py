@@ -46,6 +46,9 @@ class Workspace(NamedTuple):
     cg_ap: np.ndarray  # (N, 3) system matrix times search direction
     cg_x: np.ndarray  # (N, 3) velocity change being solved for [m/s]
     cg_stats: np.ndarray  # (3,) implicit steps, their CG iterations in all, the most in one
+    q_prev: np.ndarray  # (N, 3) BDF2: positions at the start of the previous step [m]
+    v_prev: np.ndarray  # (N, 3) BDF2: velocities at the start of the previous step [m/s]
+    contacts_acted: np.ndarray  # (1,) BDF2: 1 when the last step's contacts acted
 
     @classmethod
     def for_model(cls, model, hash_capacity: int | None = None) -> Workspace:
@@ -82,4 +85,7 @@ class Workspace(NamedTuple):
             np.zeros(n),
             *(np.zeros((n, 3)) for _ in range(5)),
             np.zeros(3, dtype=np.int64),
+            np.zeros((n, 3)),
+            np.zeros((n, 3)),
+            np.zeros(1, dtype=np.int64),
         )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+import weakref
 
 import numpy as np
 
@@ -31,7 +32,10 @@ class Simulator:
     model : Model
     integrator : str
         ``"midpoint"`` (default, the paper's choice), ``"euler"``, ``"rk4"``,
-        ``"symplectic_euler"`` or ``"velocity_verlet"``.
+        ``"symplectic_euler"``, ``"velocity_verlet"``, or the implicit ``"implicit_euler"``
+        (backward Euler) and ``"bdf2"`` (second order, far less numerical damping; it uses
+        the previous step, so its first step on a state, or after dt changes, is a
+        backward Euler step), both stable at any dt.
     dt : float or "auto"
         Time step [s], > 0. A :class:`StabilityWarning` is issued when it exceeds
         :attr:`stable_dt`. ``"auto"`` picks it from the stability estimate (and
@@ -107,6 +111,8 @@ class Simulator:
         use_mg = self.integrator.implicit and implicit_preconditioner == "multigrid"
         self._multigrid = build_multigrid(model) if use_mg else empty_multigrid()
         self._multigrid_dt = None
+        # BDF2: which state, at which step and dt, the workspace's previous step belongs to
+        self._history: tuple | None = None
         self.stiffest_mode = stiffest_mode(model)
         self.stable_dt = largest_stable_step(
             self.integrator, self.stiffest_mode.omega, self.stiffest_mode.zeta
@@ -206,11 +212,17 @@ class Simulator:
             )
         state.collider_impulse[:] = 0.0
         self._work.cg_stats[:] = 0
-        if self._multigrid.level_size[0] == model.particle_count and self._multigrid_dt != self.dt:
-            set_multigrid_step(self._multigrid, self.dt)  # its matrix depends on dt
-            self._multigrid_dt = self.dt
+        # the system matrix's step: dt for backward Euler, 2/3 dt for BDF2
+        h = self.dt * (2.0 / 3.0 if self.integrator == Integrator.BDF2 else 1.0)
+        if self._multigrid.level_size[0] == model.particle_count and self._multigrid_dt != h:
+            set_multigrid_step(self._multigrid, h)
+            self._multigrid_dt = h
         remaining = steps
         while remaining:
+            ref = self._history
+            history = (
+                ref is not None and ref[0]() is state and ref[1:] == (state.step_count, self.dt)
+            )
             status, done, index, value = _loop.simulate(
                 int(self.integrator),
                 remaining,
@@ -230,15 +242,19 @@ class Simulator:
                 self._multigrid,
                 self.implicit_tolerance,
                 self.implicit_max_iterations,
+                history,
             )
             start_step = state.step_count
             state.step_count = start_step + done
             state.time = float(state.time) + done * self.dt
             remaining -= done
+            if done > 0 or history:
+                self._history = (weakref.ref(state), state.step_count, self.dt)
             if status == _loop.NEED_HASH:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
                 self._work = Workspace.for_model(model, hash_capacity=int(2 * value))
+                self._history = None  # the undone step overwrote BDF2's previous step
                 continue
             if status != _loop.OK:
                 raise self._blow_up(status, start_step + done, state.time, index, value)
