@@ -221,3 +221,11 @@ def test_readme_test_command_is_what_ci_runs():
     commands = re.findall(r"```(?:sh|bash)\n(.*?)\n```", readme, flags=re.S)
     test_command = next(c for c in commands if "pytest" in c)
     assert test_command.strip() in (ROOT / ".ci" / "run").read_text()
+
+
+def test_cli_offers_every_integrator():
+    """The command line's --integrator choices are exactly the library's integrators."""
+    from softbody import cli
+    from softbody.integrators import Integrator
+
+    assert cli.INTEGRATORS == [m.name.lower() for m in Integrator]

@@ -131,8 +131,9 @@ def test_bdf2_is_second_order_on_two_mass_oscillator():
 
 def test_bdf2_history_follows_the_state():
     """BDF2 uses the previous step: two calls of one step each equal one call of two
-    (the history carries over), and a simulator reused on a fresh state restarts with a
-    backward Euler step exactly as a new simulator does (bitwise)."""
+    (the history carries over), and a simulator reused on a fresh state, or on a state
+    edited between calls, restarts with a backward Euler step exactly as a new simulator
+    does (bitwise)."""
     model = ball_model(subdivisions=1, stiffness=300.0, damping=0.5, gravity=(0.0, -9.81, 0.0))
     sim = sb.Simulator(model, integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12)
     a, b = model.state(), model.state()
@@ -146,6 +147,11 @@ def test_bdf2_history_follows_the_state():
     reference = model.state()
     sb.Simulator(model, integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12).run(reference, 3)
     assert np.array_equal(fresh.particle_q, reference.particle_q)
+    fresh.particle_q[:, 1] += 0.01  # edited in place: same object, same step count
+    copy = sb.State(fresh.particle_q.copy(), fresh.particle_qd.copy())
+    sim.run(fresh, 1)
+    sb.Simulator(model, integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12).run(copy, 1)
+    assert np.array_equal(fresh.particle_q, copy.particle_q)
 
 
 @pytest.mark.parametrize("integrator", IMPLICIT)

@@ -23,6 +23,7 @@ INTEGRATORS = [
     "symplectic_euler",
     "velocity_verlet",
     "implicit_euler",
+    "bdf2",
 ]
 
 

@@ -62,6 +62,16 @@ def _check_particles(q, qd, max_speed):
 
 
 @njit(cache=True)
+def same_values(a, b):
+    """Whether two (N, 3) arrays hold the same values (no temporary arrays)."""
+    for i in range(a.shape[0]):
+        for k in range(3):
+            if a[i, k] != b[i, k]:
+                return False
+    return True
+
+
+@njit(cache=True)
 def _contacts_acted(q, qd, q_before, qd_before):
     """Whether contacts moved a particle or changed its velocity this step. BDF2 then
     takes its next step as backward Euler. BDF2 reads x_n - x_n-1 and v_n - v_n-1 as

@@ -49,6 +49,8 @@ class Workspace(NamedTuple):
     q_prev: np.ndarray  # (N, 3) BDF2: positions at the start of the previous step [m]
     v_prev: np.ndarray  # (N, 3) BDF2: velocities at the start of the previous step [m/s]
     contacts_acted: np.ndarray  # (1,) BDF2: 1 when the last step's contacts acted
+    q_end: np.ndarray  # (N, 3) BDF2: positions the last run ended with [m]
+    v_end: np.ndarray  # (N, 3) BDF2: velocities the last run ended with [m/s]
 
     @classmethod
     def for_model(cls, model, hash_capacity: int | None = None) -> Workspace:
@@ -88,4 +90,6 @@ class Workspace(NamedTuple):
             np.zeros((n, 3)),
             np.zeros((n, 3)),
             np.zeros(1, dtype=np.int64),
+            np.zeros((n, 3)),
+            np.zeros((n, 3)),
         )

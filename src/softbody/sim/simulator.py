@@ -34,8 +34,9 @@ class Simulator:
         ``"midpoint"`` (default, the paper's choice), ``"euler"``, ``"rk4"``,
         ``"symplectic_euler"``, ``"velocity_verlet"``, or the implicit ``"implicit_euler"``
         (backward Euler) and ``"bdf2"`` (second order, far less numerical damping; it uses
-        the previous step, so its first step on a state, or after dt changes, is a
-        backward Euler step), both stable at any dt.
+        the previous step, so its first step on a state, after dt changes, after the
+        state was changed outside :meth:`run`, or after contacts acted, is a backward
+        Euler step), both stable at any dt.
     dt : float or "auto"
         Time step [s], > 0. A :class:`StabilityWarning` is issued when it exceeds
         :attr:`stable_dt`. ``"auto"`` picks it from the stability estimate (and
@@ -45,13 +46,13 @@ class Simulator:
     volume_limits : (float, float)
         A body whose volume leaves [low, high] times its rest volume blew up.
     implicit_tolerance : float
-        ``implicit_euler`` only: relative residual at which its conjugate-gradient solve
+        ``implicit_euler`` and ``bdf2``: relative residual at which its conjugate-gradient solve
         stops, in (0, 1).
     implicit_max_iterations : int
-        ``implicit_euler`` only: most CG iterations per step (a step that reaches it keeps
+        ``implicit_euler`` and ``bdf2``: most CG iterations per step (a step that reaches it keeps
         the last iterate; :attr:`solver_iterations` tells).
     implicit_preconditioner : str
-        ``implicit_euler`` only: ``"multigrid"`` (default; one algebraic-multigrid V-cycle
+        ``implicit_euler`` and ``bdf2``: ``"multigrid"`` (default; one algebraic-multigrid V-cycle
         of the spring Laplacian, built once, so the iteration count barely grows with mesh
         size) or ``"jacobi"`` (the diagonal; iterations grow like omega_max dt).
 
@@ -127,8 +128,8 @@ class Simulator:
 
     @property
     def solver_iterations(self) -> tuple[float, int]:
-        """``implicit_euler``: (mean, most) CG iterations per step over the last
-        :meth:`run` call; (0, 0) for explicit integrators."""
+        """``implicit_euler``, ``bdf2``: (mean, most) CG iterations per step over the
+        last :meth:`run` call; (0, 0) for explicit integrators."""
         steps, total, most = (int(x) for x in self._work.cg_stats)
         return (total / steps if steps else 0.0, most)
 
@@ -221,7 +222,11 @@ class Simulator:
         while remaining:
             ref = self._history
             history = (
-                ref is not None and ref[0]() is state and ref[1:] == (state.step_count, self.dt)
+                ref is not None
+                and ref[0]() is state
+                and ref[1:] == (state.step_count, self.dt)
+                and _loop.same_values(state.particle_q, self._work.q_end)
+                and _loop.same_values(state.particle_qd, self._work.v_end)
             )
             status, done, index, value = _loop.simulate(
                 int(self.integrator),
@@ -250,6 +255,8 @@ class Simulator:
             remaining -= done
             if done > 0 or history:
                 self._history = (weakref.ref(state), state.step_count, self.dt)
+                self._work.q_end[:] = state.particle_q  # to see edits between calls
+                self._work.v_end[:] = state.particle_qd
             if status == _loop.NEED_HASH:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
