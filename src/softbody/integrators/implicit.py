@@ -357,6 +357,28 @@ def _precondition(m, mg, w, diag, inv_mass, r, z):
 
 
 @njit(cache=True)
+def _apply_at_start(m, c, w, alpha_m, alpha_c, alpha_k, p, out):
+    """``apply_jacobians`` at the step's start w.q0 with the prepared spring and
+    pressure data in ``w``: out = alpha_m M p + alpha_c C p + alpha_k K p."""
+    apply_jacobians(
+        m,
+        c,
+        w.q0,
+        p,
+        alpha_m,
+        alpha_c,
+        alpha_k,
+        w.spring_u,
+        w.spring_a,
+        w.spring_b,
+        w.volume_gradient,
+        w.body_dpdv,
+        w.body_pnet,
+        out,
+    )
+
+
+@njit(cache=True)
 def step_implicit(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations, bdf2):
     """One backward Euler step, or with ``bdf2`` one BDF2 step (module docstring), from
     w.q0, w.v0 with w.f = f(x0, v0) on entry; ``mg`` is the multigrid preconditioner or an
@@ -391,29 +413,15 @@ def step_implicit(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations, bdf2):
     if mg.level_size[0] == n:
         _prepare_blocks(m, c, h, w.q0, w, mg)
     # K y for the right-hand side, kept in w.acc_v
-    apply_jacobians(
-        m,
-        c,
-        w.q0,
-        w.qs,
-        0.0,
-        0.0,
-        1.0,
-        w.spring_u,
-        w.spring_a,
-        w.spring_b,
-        w.volume_gradient,
-        w.body_dpdv,
-        w.body_pnet,
-        w.acc_v,
-    )
-    # Jacobi preconditioner: mass + h (damping) + h^2 (stiffness) on the diagonal
-    for i in range(n):
-        w.cg_diag[i] = m.particle_mass[i]
-    for s in range(m.spring_indices.shape[0]):
-        d = h * m.spring_damping[s] + h * h * w.spring_a[s]
-        w.cg_diag[m.spring_indices[s, 0]] += d
-        w.cg_diag[m.spring_indices[s, 1]] += d
+    _apply_at_start(m, c, w, 0.0, 0.0, 1.0, w.qs, w.acc_v)
+    if mg.level_size[0] != n:
+        # Jacobi preconditioner: mass + h (damping) + h^2 (stiffness) on the diagonal
+        for i in range(n):
+            w.cg_diag[i] = m.particle_mass[i]
+        for s in range(m.spring_indices.shape[0]):
+            d = h * m.spring_damping[s] + h * h * w.spring_a[s]
+            w.cg_diag[m.spring_indices[s, 0]] += d
+            w.cg_diag[m.spring_indices[s, 1]] += d
     rhs_norm = 0.0
     for i in range(n):
         for k in range(3):
@@ -429,22 +437,7 @@ def step_implicit(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations, bdf2):
     rhs_norm = np.sqrt(rhs_norm)
     # warm start from the previous step's dv (still in w.cg_x): in smooth motion it is
     # close, and CG then starts from residual b - A dv_prev; kept only if that is smaller
-    apply_jacobians(
-        m,
-        c,
-        w.q0,
-        w.cg_x,
-        1.0,
-        -h,
-        -h * h,
-        w.spring_u,
-        w.spring_a,
-        w.spring_b,
-        w.volume_gradient,
-        w.body_dpdv,
-        w.body_pnet,
-        w.cg_ap,
-    )
+    _apply_at_start(m, c, w, 1.0, -h, -h * h, w.cg_x, w.cg_ap)
     warm = 0.0
     for i in range(n):
         if inv_mass[i] > 0.0:
@@ -467,22 +460,7 @@ def step_implicit(m, c, t, dt, q, qd, w, mg, tolerance, max_iterations, bdf2):
                 w.cg_p[i, k] = w.cg_z[i, k]
         rz = _dot_free(w.cg_r, w.cg_z, inv_mass)
         while iterations < max_iterations:
-            apply_jacobians(
-                m,
-                c,
-                w.q0,
-                w.cg_p,
-                1.0,
-                -h,
-                -h * h,
-                w.spring_u,
-                w.spring_a,
-                w.spring_b,
-                w.volume_gradient,
-                w.body_dpdv,
-                w.body_pnet,
-                w.cg_ap,
-            )
+            _apply_at_start(m, c, w, 1.0, -h, -h * h, w.cg_p, w.cg_ap)
             pap = _dot_free(w.cg_p, w.cg_ap, inv_mass)
             if pap == 0.0 or not np.isfinite(pap):
                 break  # breakdown: keep the last iterate
