@@ -4,7 +4,9 @@
   on each face corner) in ms against vertex count, icospheres of 162 to 163,842 vertices,
   with a least-squares trend line, as the paper plots it.
 * Full-step throughput in vertex-steps per second for each integrator (springs on every
-  edge, exact volume, pressure, integration, blow-up checks), single thread, float64.
+  edge, exact volume, pressure, integration, blow-up checks), single thread, float64;
+  and symplectic Euler again with ``threads=2`` (opt-in), timed in alternation with the
+  serial run so that both see the same machine load.
 
 Speed is measured, never asserted. Each number is the best of several repeats (the
 machine is shared; the minimum is the least disturbed run), and all sizes run in one
@@ -95,15 +97,40 @@ def pressure_time(model: sb.Model, repeats: int) -> float:
     )
 
 
-def step_time(model: sb.Model, integrator: str, repeats: int) -> float:
-    """Seconds per full step, timed over batches of steps in one compiled call each."""
+def stepper(model: sb.Model, integrator: str, threads: int = 1):
+    """A function running a batch of full steps in one compiled call, and the batch size."""
     with warnings.catch_warnings():
         # throughput does not depend on dt; a tiny dt keeps the ball near rest
         warnings.simplefilter("ignore", sb.StabilityWarning)
-        sim = sb.Simulator(model, integrator=integrator, dt=1e-7)
+        sim = sb.Simulator(model, integrator=integrator, dt=1e-7, threads=threads)
     state = model.state()
     steps = max(1, int(2e5 / model.particle_count))
-    return best_time(lambda: sim.run(state, steps), min_seconds=0.1, repeats=repeats) / steps
+    return (lambda: sim.run(state, steps)), steps
+
+
+def step_time(model: sb.Model, integrator: str, repeats: int) -> float:
+    """Seconds per full step, timed over batches of steps in one compiled call each."""
+    run, steps = stepper(model, integrator)
+    return best_time(run, min_seconds=0.1, repeats=repeats) / steps
+
+
+#: opt-in threads timed against serial (this machine has two cores)
+THREADS = 2
+
+
+def paired_step_times(model: sb.Model, integrator: str, repeats: int) -> tuple[float, float]:
+    """Seconds per full step serially and on THREADS threads, the two timed in
+    alternation (best of 3 x ``repeats`` each) so that both see the same load."""
+    runs = [stepper(model, integrator, threads) for threads in (1, THREADS)]
+    best = [np.inf, np.inf]
+    for run, _ in runs:
+        run()  # compile and warm up
+    for _ in range(3 * repeats):
+        for k, (run, steps) in enumerate(runs):
+            t0 = time.perf_counter()
+            run()
+            best[k] = min(best[k], (time.perf_counter() - t0) / steps)
+    return best[0], best[1]
 
 
 def machine() -> dict:
@@ -124,7 +151,7 @@ def machine() -> dict:
         "numpy": np.__version__,
         "numba": numba.__version__,
         "softbody": sb.__version__,
-        "threads": 1,
+        "threads": f"1 (and {THREADS} for the threaded series)",
         "dtype": "float64",
     }
 
@@ -161,10 +188,17 @@ def plot(result: dict, path: Path) -> None:
             color=f"C{k}",
             label=name,
         )
+    ax.plot(
+        n,
+        [r["threads"]["threaded_vertex_steps_per_second"] / 1e6 for r in rows],
+        "s--",
+        color="C0",
+        label=f"symplectic_euler, {THREADS} threads (opt-in)",
+    )
     ax.set_xscale("log")
     ax.set_xlabel("vertices")
     ax.set_ylabel("million vertex-steps per second")
-    ax.set_title("Full step throughput (float64, 1 thread)")
+    ax.set_title("Full step throughput (float64; 1 thread unless marked)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.text(0.01, 0.01, result["machine"]["cpu"] + f", {result['date']}", fontsize=7, color="0.4")
@@ -199,11 +233,23 @@ def main() -> None:
             t = step_time(model, name, args.repeats)
             row["step_us"][name] = t * 1e6
             row["vertex_steps_per_second"][name] = model.particle_count / t
+        serial, threaded = paired_step_times(model, "symplectic_euler", args.repeats)
+        row["threads"] = {
+            "integrator": "symplectic_euler",
+            "threads": THREADS,
+            "serial_step_us": serial * 1e6,
+            "threaded_step_us": threaded * 1e6,
+            "serial_vertex_steps_per_second": model.particle_count / serial,
+            "threaded_vertex_steps_per_second": model.particle_count / threaded,
+            "speedup": serial / threaded,
+        }
         rows.append(row)
         print(
             f"{row['vertex_count']:>7} vertices: pressure {row['pressure_ms']:.4f} ms; "
             + ", ".join(f"{k} {v / 1e6:.1f} M" for k, v in row["vertex_steps_per_second"].items())
-            + " vertex-steps/s",
+            + f" vertex-steps/s; symplectic Euler on {THREADS} threads "
+            + f"{row['threads']['threaded_vertex_steps_per_second'] / 1e6:.1f} M "
+            + f"({row['threads']['speedup']:.2f}x its paired serial run)",
             flush=True,
         )
     n = np.array([r["vertex_count"] for r in rows], dtype=float)

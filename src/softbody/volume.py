@@ -25,7 +25,7 @@ from __future__ import annotations
 from enum import IntEnum
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 SIXTH = 1.0 / 6.0
 
@@ -70,6 +70,30 @@ def eval_body_bounds(q, begin, end, lo, hi):
                 hi[k] = x
 
 
+@njit(cache=True, inline="always")
+def _face_volume_gradient(q, t, tri_indices, cx, cy, cz, volume_gradient):
+    """Add face ``t``'s n_t / 6 to its corners' rows of ``volume_gradient``; return its
+    term n_t . (a - r) of 6 V, r = (cx, cy, cz)."""
+    i, j, k = tri_indices[t, 0], tri_indices[t, 1], tri_indices[t, 2]
+    ax, ay, az = q[i, 0], q[i, 1], q[i, 2]
+    ux, uy, uz = q[j, 0] - ax, q[j, 1] - ay, q[j, 2] - az
+    vx, vy, vz = q[k, 0] - ax, q[k, 1] - ay, q[k, 2] - az
+    nx = uy * vz - uz * vy
+    ny = uz * vx - ux * vz
+    nz = ux * vy - uy * vx
+    gx, gy, gz = nx * SIXTH, ny * SIXTH, nz * SIXTH
+    volume_gradient[i, 0] += gx
+    volume_gradient[i, 1] += gy
+    volume_gradient[i, 2] += gz
+    volume_gradient[j, 0] += gx
+    volume_gradient[j, 1] += gy
+    volume_gradient[j, 2] += gz
+    volume_gradient[k, 0] += gx
+    volume_gradient[k, 1] += gy
+    volume_gradient[k, 2] += gz
+    return (ax - cx) * nx + (ay - cy) * ny + (az - cz) * nz
+
+
 @njit(cache=True)
 def eval_volume_gradient(
     q, tri_indices, body_particle_range, body_tri_range, volume_gradient, body_volume
@@ -93,25 +117,75 @@ def eval_volume_gradient(
         cx, cy, cz = q[r, 0], q[r, 1], q[r, 2]
         six_v = 0.0
         for t in range(body_tri_range[b, 0], body_tri_range[b, 1]):
-            i, j, k = tri_indices[t, 0], tri_indices[t, 1], tri_indices[t, 2]
-            ax, ay, az = q[i, 0], q[i, 1], q[i, 2]
-            ux, uy, uz = q[j, 0] - ax, q[j, 1] - ay, q[j, 2] - az
-            vx, vy, vz = q[k, 0] - ax, q[k, 1] - ay, q[k, 2] - az
-            nx = uy * vz - uz * vy
-            ny = uz * vx - ux * vz
-            nz = ux * vy - uy * vx
-            six_v += (ax - cx) * nx + (ay - cy) * ny + (az - cz) * nz
-            gx, gy, gz = nx * SIXTH, ny * SIXTH, nz * SIXTH
-            volume_gradient[i, 0] += gx
-            volume_gradient[i, 1] += gy
-            volume_gradient[i, 2] += gz
-            volume_gradient[j, 0] += gx
-            volume_gradient[j, 1] += gy
-            volume_gradient[j, 2] += gz
-            volume_gradient[k, 0] += gx
-            volume_gradient[k, 1] += gy
-            volume_gradient[k, 2] += gz
+            six_v += _face_volume_gradient(q, t, tri_indices, cx, cy, cz, volume_gradient)
         body_volume[b] = six_v / 6.0
+
+
+@njit(cache=True, parallel=True)
+def eval_volume_gradient_threaded(
+    q,
+    body_particle_range,
+    particle_start,
+    tri_start,
+    tri_indices,
+    tri_body,
+    six_volume,
+    volume_gradient,
+    body_volume,
+):
+    """``eval_volume_gradient`` on threads, for faces in chunk order
+    (``softbody.partition``; tri_start (T + 2,), tri_indices (F, 3), tri_body (F,) each
+    face's body): each thread clears its chunk's gradient rows and adds its chunk's
+    faces, then the faces that cross chunks run serially; each chunk's share of 6 V goes
+    to its row of six_volume (T + 1, B), and the rows are summed in a fixed order, so the
+    result is the same in every run."""
+    chunk_count = particle_start.shape[0] - 1
+    for c in prange(chunk_count):
+        for i in range(particle_start[c], particle_start[c + 1]):
+            volume_gradient[i, 0] = 0.0
+            volume_gradient[i, 1] = 0.0
+            volume_gradient[i, 2] = 0.0
+        _chunk_faces(
+            q, tri_indices, tri_body, body_particle_range, tri_start, c, six_volume, volume_gradient
+        )
+    _chunk_faces(
+        q,
+        tri_indices,
+        tri_body,
+        body_particle_range,
+        tri_start,
+        chunk_count,
+        six_volume,
+        volume_gradient,
+    )
+    for b in range(body_volume.shape[0]):
+        six_v = 0.0
+        for c in range(chunk_count + 1):
+            six_v += six_volume[c, b]
+        body_volume[b] = six_v / 6.0
+
+
+@njit(cache=True, inline="always")
+def _chunk_faces(
+    q, tri_indices, tri_body, body_particle_range, tri_start, c, six_volume, volume_gradient
+):
+    """Chunk ``c``'s faces into volume_gradient and row c of six_volume (faces come
+    grouped by body, so the sum runs in a register until the body changes)."""
+    for b in range(six_volume.shape[1]):
+        six_volume[c, b] = 0.0
+    body = -1
+    six_v = cx = cy = cz = 0.0
+    for t in range(tri_start[c], tri_start[c + 1]):
+        b = tri_body[t]
+        if b != body:
+            if body >= 0:
+                six_volume[c, body] += six_v
+            body, six_v = b, 0.0
+            r = body_particle_range[b, 0]  # reference point: the body's first vertex
+            cx, cy, cz = q[r, 0], q[r, 1], q[r, 2]
+        six_v += _face_volume_gradient(q, t, tri_indices, cx, cy, cz, volume_gradient)
+    if body >= 0:
+        six_volume[c, body] += six_v
 
 
 @njit(cache=True)
@@ -206,6 +280,35 @@ def eval_body_volume(
     eval_volume_gradient(
         q, tri_indices, body_particle_range, body_tri_range, volume_gradient, body_volume
     )
+    eval_other_volumes(
+        q,
+        tri_indices,
+        body_particle_range,
+        body_tri_range,
+        body_volume_method,
+        body_mc_range,
+        mc_samples,
+        body_lo,
+        body_hi,
+        body_volume,
+    )
+
+
+@njit(cache=True)
+def eval_other_volumes(
+    q,
+    tri_indices,
+    body_particle_range,
+    body_tri_range,
+    body_volume_method,
+    body_mc_range,
+    mc_samples,
+    body_lo,
+    body_hi,
+    body_volume,
+):
+    """Replace the exact volume in body_volume (B,) [m^3] by the bounding or Monte Carlo
+    one for the bodies whose method says so, filling their body_lo, body_hi (B, 3)."""
     for b in range(body_volume_method.shape[0]):
         method = body_volume_method[b]
         if method == 0:
@@ -229,7 +332,34 @@ def eval_body_volume(
 @njit(cache=True)
 def eval_model_volume(m, q, w):
     """``eval_body_volume`` on a model's arrays: m is a ``ModelData``, w a ``Workspace``
-    (its body_volume, volume_gradient, body_lo and body_hi are filled)."""
+    (its body_volume, volume_gradient, body_lo and body_hi are filled). With a workspace
+    cut into several chunks (opt-in threads) the exact pass runs on threads."""
+    part = w.partition
+    if part.particle_start.shape[0] > 2:
+        eval_volume_gradient_threaded(
+            q,
+            m.body_particle_range,
+            part.particle_start,
+            part.tri_start,
+            part.tri_indices,
+            part.tri_body,
+            part.six_volume,
+            w.volume_gradient,
+            w.body_volume,
+        )
+        eval_other_volumes(
+            q,
+            m.tri_indices,
+            m.body_particle_range,
+            m.body_tri_range,
+            m.body_volume_method,
+            m.body_mc_range,
+            m.mc_samples,
+            w.body_lo,
+            w.body_hi,
+            w.body_volume,
+        )
+        return
     eval_body_volume(
         q,
         m.tri_indices,

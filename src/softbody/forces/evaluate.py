@@ -7,7 +7,11 @@ from numba import njit
 from softbody.forces.external import eval_external_forces, eval_grab_force
 from softbody.forces.gravity import eval_gravity
 from softbody.forces.pressure import eval_pressure_forces
-from softbody.forces.springs import eval_attachment_forces, eval_spring_forces
+from softbody.forces.springs import (
+    eval_attachment_forces,
+    eval_spring_forces,
+    eval_spring_forces_threaded,
+)
 from softbody.gas import eval_model_pressure
 from softbody.volume import eval_model_volume
 
@@ -21,10 +25,24 @@ def eval_forces(m, c, t, q, qd, w, f):
     """
     # weight, m g (initialises the accumulator)
     eval_gravity(m.particle_mass, m.gravity, f)
-    # damped Hooke springs: mesh edges, bending springs, user springs
-    eval_spring_forces(
-        q, qd, m.spring_indices, m.spring_rest_length, m.spring_stiffness, m.spring_damping, f
-    )
+    # damped Hooke springs: mesh edges, bending springs, user springs (on threads when the
+    # workspace is cut into chunks)
+    part = w.partition
+    if part.particle_start.shape[0] > 2:
+        eval_spring_forces_threaded(
+            q,
+            qd,
+            part.spring_start,
+            part.spring_indices,
+            part.spring_rest_length,
+            part.spring_stiffness,
+            part.spring_damping,
+            f,
+        )
+    else:
+        eval_spring_forces(
+            q, qd, m.spring_indices, m.spring_rest_length, m.spring_stiffness, m.spring_damping, f
+        )
     # springs to fixed points (the paper's hanging ball)
     eval_attachment_forces(
         q,

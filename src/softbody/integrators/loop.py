@@ -62,6 +62,16 @@ def _check_particles(q, qd, max_speed):
 
 
 @njit(cache=True)
+def _copy_state(q, qd, q_out, qd_out):
+    """q_out, qd_out = q, qd for (N, 3) arrays. An explicit loop: Numba's ``a[:] = b``
+    guards against overlap with a temporary copy and took 2-4x longer at 40k particles."""
+    for i in range(q.shape[0]):
+        for k in range(3):
+            q_out[i, k] = q[i, k]
+            qd_out[i, k] = qd[i, k]
+
+
+@njit(cache=True)
 def same_values(a, b):
     """Whether two (N, 3) arrays hold the same values (no temporary arrays)."""
     for i in range(a.shape[0]):
@@ -223,8 +233,7 @@ def simulate(
                 qd[i, k] = (c.pin_target[p, k] - q[i, k]) * inv
     for s in range(steps):
         t = t0 + s * dt
-        w.q0[:] = q
-        w.v0[:] = qd
+        _copy_state(q, qd, w.q0, w.v0)
         eval_forces(m, c, t, q, qd, w, w.f)
         status, index, value = _check_volumes(
             w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max
@@ -250,8 +259,7 @@ def simulate(
             w.cg_stats[1] += its
             w.cg_stats[2] = max(w.cg_stats[2], its)
         if integrator == 6:
-            w.qs[:] = q  # BDF2: contacts below may move particles; see after them
-            w.vs[:] = qd
+            _copy_state(q, qd, w.qs, w.vs)  # BDF2: contacts below may move particles
         needed = eval_contacts(
             m,
             c,
@@ -266,14 +274,12 @@ def simulate(
             collider_impulse,
         )
         if needed > 0:
-            q[:] = w.q0
-            qd[:] = w.v0
+            _copy_state(w.q0, w.v0, q, qd)
             return NEED_HASH, s, -1, float(needed)
         if integrator == 6:
             w.contacts_acted[0] = 1 if _contacts_acted(q, qd, w.qs, w.vs) else 0
         status, index, value = _check_particles(q, qd, max_speed)
         if status != OK:
-            q[:] = w.q0
-            qd[:] = w.v0
+            _copy_state(w.q0, w.v0, q, qd)
             return status, s, index, value
     return OK, steps, -1, 0.0

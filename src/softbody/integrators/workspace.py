@@ -6,6 +6,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from softbody.partition import Partition, build_partition
+
 
 class Workspace(NamedTuple):
     """Scratch for the step kernels; N particles, B bodies."""
@@ -51,10 +53,12 @@ class Workspace(NamedTuple):
     contacts_acted: np.ndarray  # (1,) BDF2: 1 when the last step's contacts acted
     q_end: np.ndarray  # (N, 3) BDF2: positions the last run ended with [m]
     v_end: np.ndarray  # (N, 3) BDF2: velocities the last run ended with [m/s]
+    partition: Partition  # chunks for opt-in threads (one chunk: serial kernels)
 
     @classmethod
-    def for_model(cls, model, hash_capacity: int | None = None) -> Workspace:
-        """Allocate scratch sized for ``model``."""
+    def for_model(cls, model, hash_capacity: int | None = None, chunk_count: int = 1) -> Workspace:
+        """Allocate scratch sized for ``model``; ``chunk_count`` > 1 cuts the particles
+        into that many chunks for threaded kernels (``softbody.partition``)."""
         n, b, c = model.particle_count, model.body_count, model.collider_count
         if model.soft_contact_mode == 2:
             table = 1 << max(4, int(np.ceil(np.log2(2 * max(model.tri_count, 1)))))
@@ -92,4 +96,5 @@ class Workspace(NamedTuple):
             np.zeros(1, dtype=np.int64),
             np.zeros((n, 3)),
             np.zeros((n, 3)),
+            build_partition(model, chunk_count),
         )

@@ -5,6 +5,7 @@ from __future__ import annotations
 import warnings
 import weakref
 
+import numba
 import numpy as np
 
 from softbody.errors import SimulationError, StabilityWarning
@@ -51,6 +52,12 @@ class Simulator:
     implicit_max_iterations : int
         ``implicit_euler`` and ``bdf2``: most CG iterations per step (a step that reaches it keeps
         the last iterate; :attr:`solver_iterations` tells).
+    threads : int
+        Threads for the force terms (springs and the exact volume pass), >= 1 and at most
+        ``numba.config.NUMBA_NUM_THREADS``. Default 1: serial. More threads cut the
+        particles into that many chunks (``softbody.partition``); results agree with the
+        serial ones to round-off and are the same in every run. Opt-in because a thread
+        that loses its core to another process stalls the whole step.
     implicit_preconditioner : str
         ``implicit_euler`` and ``bdf2``: ``"multigrid"`` (default; one algebraic-multigrid V-cycle
         of the spring Laplacian, built once, so the iteration count barely grows with mesh
@@ -71,6 +78,7 @@ class Simulator:
         implicit_tolerance: float = 1.0e-6,
         implicit_max_iterations: int = 200,
         implicit_preconditioner: str = "multigrid",
+        threads: int = 1,
     ):
         if not isinstance(model, Model):
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
@@ -118,7 +126,18 @@ class Simulator:
         self.stable_dt = largest_stable_step(
             self.integrator, self.stiffest_mode.omega, self.stiffest_mode.zeta
         )
-        self._work = Workspace.for_model(model)
+        available = numba.config.NUMBA_NUM_THREADS
+        if (
+            isinstance(threads, bool)
+            or not isinstance(threads, int | np.integer)
+            or not 1 <= threads <= available
+        ):
+            raise ValueError(
+                f"threads must be an integer from 1 to {available} (NUMBA_NUM_THREADS), "
+                f"got {threads!r}"
+            )
+        self.threads = int(threads)
+        self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
         self._control = control_data(model)
         if self.auto_dt:
@@ -228,7 +247,7 @@ class Simulator:
                 and _loop.same_values(state.particle_q, self._work.q_end)
                 and _loop.same_values(state.particle_qd, self._work.v_end)
             )
-            status, done, index, value = _loop.simulate(
+            status, done, index, value = self._simulate(
                 int(self.integrator),
                 remaining,
                 float(state.time),
@@ -260,12 +279,25 @@ class Simulator:
             if status == _loop.NEED_HASH:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
-                self._work = Workspace.for_model(model, hash_capacity=int(2 * value))
+                self._work = Workspace.for_model(
+                    model, hash_capacity=int(2 * value), chunk_count=self.threads
+                )
                 self._history = None  # the undone step overwrote BDF2's previous step
                 continue
             if status != _loop.OK:
                 raise self._blow_up(status, start_step + done, state.time, index, value)
         return state
+
+    def _simulate(self, *args):
+        """``loop.simulate`` on this simulator's thread count (restored afterwards)."""
+        if self.threads == 1:
+            return _loop.simulate(*args)
+        before = numba.get_num_threads()
+        numba.set_num_threads(self.threads)
+        try:
+            return _loop.simulate(*args)
+        finally:
+            numba.set_num_threads(before)
 
     def _blow_up(self, status, step, time, index, value) -> SimulationError:
         model = self.model
