@@ -330,37 +330,39 @@ def eval_other_volumes(
 
 
 @njit(cache=True)
+def _exact_volumes_on_threads(m, q, w):
+    """``eval_volume_gradient_threaded`` on the workspace's ``Partition``."""
+    part = w.partition
+    eval_volume_gradient_threaded(
+        q,
+        m.body_particle_range,
+        part.particle_start,
+        part.tri_start,
+        part.tri_indices,
+        part.tri_body,
+        part.six_volume,
+        w.volume_gradient,
+        w.body_volume,
+    )
+
+
+@njit(cache=True)
 def eval_model_volume(m, q, w):
     """``eval_body_volume`` on a model's arrays: m is a ``ModelData``, w a ``Workspace``
     (its body_volume, volume_gradient, body_lo and body_hi are filled). With a workspace
     cut into several chunks (opt-in threads) the exact pass runs on threads."""
-    part = w.partition
-    if part.particle_start.shape[0] > 2:
-        eval_volume_gradient_threaded(
-            q,
-            m.body_particle_range,
-            part.particle_start,
-            part.tri_start,
-            part.tri_indices,
-            part.tri_body,
-            part.six_volume,
-            w.volume_gradient,
-            w.body_volume,
-        )
-        eval_other_volumes(
+    if w.chunk_count > 1:
+        _exact_volumes_on_threads(m, q, w)
+    else:
+        eval_volume_gradient(
             q,
             m.tri_indices,
             m.body_particle_range,
             m.body_tri_range,
-            m.body_volume_method,
-            m.body_mc_range,
-            m.mc_samples,
-            w.body_lo,
-            w.body_hi,
+            w.volume_gradient,
             w.body_volume,
         )
-        return
-    eval_body_volume(
+    eval_other_volumes(
         q,
         m.tri_indices,
         m.body_particle_range,
@@ -370,6 +372,5 @@ def eval_model_volume(m, q, w):
         m.mc_samples,
         w.body_lo,
         w.body_hi,
-        w.volume_gradient,
         w.body_volume,
     )

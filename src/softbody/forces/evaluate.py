@@ -17,6 +17,21 @@ from softbody.volume import eval_model_volume
 
 
 @njit(cache=True)
+def _spring_forces_on_threads(q, qd, part, f):
+    """``eval_spring_forces_threaded`` on a ``Partition``'s springs."""
+    eval_spring_forces_threaded(
+        q,
+        qd,
+        part.spring_start,
+        part.spring_indices,
+        part.spring_rest_length,
+        part.spring_stiffness,
+        part.spring_damping,
+        f,
+    )
+
+
+@njit(cache=True)
 def eval_forces(m, c, t, q, qd, w, f):
     """All forces at time ``t`` [s] for positions ``q`` and velocities ``qd`` (N, 3).
 
@@ -27,18 +42,8 @@ def eval_forces(m, c, t, q, qd, w, f):
     eval_gravity(m.particle_mass, m.gravity, f)
     # damped Hooke springs: mesh edges, bending springs, user springs (on threads when the
     # workspace is cut into chunks)
-    part = w.partition
-    if part.particle_start.shape[0] > 2:
-        eval_spring_forces_threaded(
-            q,
-            qd,
-            part.spring_start,
-            part.spring_indices,
-            part.spring_rest_length,
-            part.spring_stiffness,
-            part.spring_damping,
-            f,
-        )
+    if w.chunk_count > 1:
+        _spring_forces_on_threads(q, qd, w.partition, f)
     else:
         eval_spring_forces(
             q, qd, m.spring_indices, m.spring_rest_length, m.spring_stiffness, m.spring_damping, f

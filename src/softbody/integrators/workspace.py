@@ -53,7 +53,8 @@ class Workspace(NamedTuple):
     contacts_acted: np.ndarray  # (1,) BDF2: 1 when the last step's contacts acted
     q_end: np.ndarray  # (N, 3) BDF2: positions the last run ended with [m]
     v_end: np.ndarray  # (N, 3) BDF2: velocities the last run ended with [m/s]
-    partition: Partition  # chunks for opt-in threads (one chunk: serial kernels)
+    partition: Partition  # chunks for opt-in threads
+    chunk_count: int  # chunks in ``partition``; 1: the serial kernels run
 
     @classmethod
     def for_model(cls, model, hash_capacity: int | None = None, chunk_count: int = 1) -> Workspace:
@@ -97,4 +98,5 @@ class Workspace(NamedTuple):
             np.zeros((n, 3)),
             np.zeros((n, 3)),
             build_partition(model, chunk_count),
+            int(chunk_count),
         )
