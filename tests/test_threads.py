@@ -11,7 +11,7 @@ from conftest import deformed
 from softbody.diagnostics import body_volume_by
 from softbody.forces.evaluate import eval_forces
 from softbody.integrators.workspace import Workspace
-from softbody.partition import build_partition
+from softbody.partition import build_partition, face_chunks, pack_partition, spring_chunks
 from softbody.sim.control import control_data
 
 
@@ -70,6 +70,33 @@ def test_partition_gives_every_spring_and_face_one_owner(chunk_count):
         assert np.array_equal(part.spring_rest_length, m.spring_rest_length[s])
         assert np.array_equal(part.spring_stiffness, m.spring_stiffness[s])
         assert np.array_equal(part.spring_damping, m.spring_damping[s])
+
+
+@pytest.mark.parametrize("chunk_count", [2, 3])
+def test_packed_partition_views_are_the_partition(chunk_count):
+    """The kernels' views of the two packed arrays are exactly the partition's arrays."""
+    model = two_bodies()
+    part = build_partition(model, chunk_count)
+    index, value = pack_partition(part)
+    s, f, b = model.spring_count, model.tri_count, model.body_count
+    springs = spring_chunks(index, value, s)
+    faces = face_chunks(index, value, s, f, b)
+    expected_springs = (
+        part.spring_start,
+        part.spring_indices,
+        part.spring_rest_length,
+        part.spring_stiffness,
+        part.spring_damping,
+    )
+    expected_faces = (
+        part.particle_start,
+        part.tri_start,
+        part.tri_indices,
+        part.tri_body,
+        part.six_volume,
+    )
+    for got, want in zip(springs + faces, expected_springs + expected_faces, strict=True):
+        assert got.shape == want.shape and np.array_equal(got, want)
 
 
 @pytest.mark.parametrize("chunk_count", [2, 3, 5])

@@ -27,6 +27,8 @@ from enum import IntEnum
 import numpy as np
 from numba import njit, prange
 
+from softbody.partition import face_chunks
+
 SIXTH = 1.0 / 6.0
 
 
@@ -331,16 +333,22 @@ def eval_other_volumes(
 
 @njit(cache=True)
 def _exact_volumes_on_threads(m, q, w):
-    """``eval_volume_gradient_threaded`` on the workspace's ``Partition``."""
-    part = w.partition
+    """``eval_volume_gradient_threaded`` on the workspace's packed partition."""
+    particle_start, tri_start, tri_indices, tri_body, six_volume = face_chunks(
+        w.chunk_index,
+        w.chunk_value,
+        m.spring_indices.shape[0],
+        m.tri_indices.shape[0],
+        m.body_particle_range.shape[0],
+    )
     eval_volume_gradient_threaded(
         q,
         m.body_particle_range,
-        part.particle_start,
-        part.tri_start,
-        part.tri_indices,
-        part.tri_body,
-        part.six_volume,
+        particle_start,
+        tri_start,
+        tri_indices,
+        tri_body,
+        six_volume,
         w.volume_gradient,
         w.body_volume,
     )
@@ -351,7 +359,7 @@ def eval_model_volume(m, q, w):
     """``eval_body_volume`` on a model's arrays: m is a ``ModelData``, w a ``Workspace``
     (its body_volume, volume_gradient, body_lo and body_hi are filled). With a workspace
     cut into several chunks (opt-in threads) the exact pass runs on threads."""
-    if w.chunk_count > 1:
+    if w.chunk_index[0] > 1:
         _exact_volumes_on_threads(m, q, w)
     else:
         eval_volume_gradient(

@@ -13,22 +13,17 @@ from softbody.forces.springs import (
     eval_spring_forces_threaded,
 )
 from softbody.gas import eval_model_pressure
+from softbody.partition import spring_chunks
 from softbody.volume import eval_model_volume
 
 
 @njit(cache=True)
-def _spring_forces_on_threads(q, qd, part, f):
-    """``eval_spring_forces_threaded`` on a ``Partition``'s springs."""
-    eval_spring_forces_threaded(
-        q,
-        qd,
-        part.spring_start,
-        part.spring_indices,
-        part.spring_rest_length,
-        part.spring_stiffness,
-        part.spring_damping,
-        f,
+def _spring_forces_on_threads(q, qd, m, w, f):
+    """``eval_spring_forces_threaded`` on the workspace's packed partition."""
+    start, indices, rest, stiffness, damping = spring_chunks(
+        w.chunk_index, w.chunk_value, m.spring_indices.shape[0]
     )
+    eval_spring_forces_threaded(q, qd, start, indices, rest, stiffness, damping, f)
 
 
 @njit(cache=True)
@@ -42,8 +37,8 @@ def eval_forces(m, c, t, q, qd, w, f):
     eval_gravity(m.particle_mass, m.gravity, f)
     # damped Hooke springs: mesh edges, bending springs, user springs (on threads when the
     # workspace is cut into chunks)
-    if w.chunk_count > 1:
-        _spring_forces_on_threads(q, qd, w.partition, f)
+    if w.chunk_index[0] > 1:
+        _spring_forces_on_threads(q, qd, m, w, f)
     else:
         eval_spring_forces(
             q, qd, m.spring_indices, m.spring_rest_length, m.spring_stiffness, m.spring_damping, f

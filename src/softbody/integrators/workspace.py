@@ -6,7 +6,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from softbody.partition import Partition, build_partition
+from softbody.partition import build_partition, pack_partition
 
 
 class Workspace(NamedTuple):
@@ -53,8 +53,9 @@ class Workspace(NamedTuple):
     contacts_acted: np.ndarray  # (1,) BDF2: 1 when the last step's contacts acted
     q_end: np.ndarray  # (N, 3) BDF2: positions the last run ended with [m]
     v_end: np.ndarray  # (N, 3) BDF2: velocities the last run ended with [m/s]
-    partition: Partition  # chunks for opt-in threads
-    chunk_count: int  # chunks in ``partition``; 1: the serial kernels run
+    chunk_index: np.ndarray  # opt-in threads: the packed ``Partition``'s integers; [0] is
+    # the chunk count (1: the serial kernels run)
+    chunk_value: np.ndarray  # and its reals (``softbody.partition.pack_partition``)
 
     @classmethod
     def for_model(cls, model, hash_capacity: int | None = None, chunk_count: int = 1) -> Workspace:
@@ -97,6 +98,5 @@ class Workspace(NamedTuple):
             np.zeros(1, dtype=np.int64),
             np.zeros((n, 3)),
             np.zeros((n, 3)),
-            build_partition(model, chunk_count),
-            int(chunk_count),
+            *pack_partition(build_partition(model, chunk_count)),
         )
