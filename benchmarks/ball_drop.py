@@ -279,7 +279,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--min-subdivisions", type=int, default=2)
     parser.add_argument("--max-subdivisions", type=int, default=7)
+    parser.add_argument(
+        "--plot-only", action="store_true", help="redraw the plot from results/ball_drop.json"
+    )
     args = parser.parse_args()
+    if args.plot_only:
+        plot(json.loads((RESULTS / "ball_drop.json").read_text()), RESULTS / "ball_drop.png")
+        return
     rows = []
     for s in range(args.min_subdivisions, args.max_subdivisions + 1):
         model = ball_drop(s)
@@ -378,12 +384,18 @@ def main() -> None:
         else None,
     }
     (RESULTS / "ball_drop.json").write_text(json.dumps(result, indent=2))
+    plot(result, RESULTS / "ball_drop.png")
+    print(f"wrote {RESULTS / 'ball_drop.json'} and .png")
 
+
+def plot(result: dict, path: Path) -> None:
+    """Simulated seconds per wall second against vertices, per integrator and Bullet."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    rows = result["sizes"]
     fig, ax = plt.subplots(figsize=(9, 5.5), dpi=110)
     n = [r["vertex_count"] for r in rows]
 
@@ -414,17 +426,18 @@ def main() -> None:
     ax.set_xlabel("vertices")
     ax.set_ylabel("simulated seconds per wall second")
     ax.set_title(
-        "Ball drop (1 m, 1 kg, inflated), each at its largest stable dt\n"
+        "Ball drop (1 m, 1 kg, inflated): explicit schemes at 0.9 of their stable dt, "
+        "implicit ones at 1/60 s\n"
         "filled: the 2 s drop checked round and bouncing; hollow: failed or not checked",
         fontsize=10,
     )
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    tmp = RESULTS / "ball_drop.tmp.png"
+    tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp)
-    os.replace(tmp, RESULTS / "ball_drop.png")
-    print(f"wrote {RESULTS / 'ball_drop.json'} and .png")
+    os.replace(tmp, path)
+    plt.close(fig)
 
 
 if __name__ == "__main__":
