@@ -7,7 +7,8 @@ folder named after a digest of every kernel source file of the package makes any
 change to them start a fresh cache. The files that define the tuples the kernels take
 (``Workspace``, ``Partition``, ``ModelData``) count too: after fields were added to
 ``Workspace`` during development, a run from the old cache folder crashed with a
-segmentation fault and a fresh cache did not. Set NUMBA_CACHE_DIR to choose the location yourself.
+segmentation fault and a fresh cache did not. Set NUMBA_CACHE_DIR to choose the
+location yourself.
 """
 
 from __future__ import annotations

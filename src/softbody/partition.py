@@ -17,8 +17,9 @@ The step kernels receive a partition packed into two flat arrays (``pack_partiti
 one of integers and one of reals, and take views of them (``spring_chunks``,
 ``face_chunks``): a ``Workspace`` that carried the ten arrays as a nested tuple made
 every serial step of a 162-vertex ball about 40% slower, even with the threaded code
-compiled out (more arguments to every kernel that takes the workspace; two more arrays
-cost nothing measurable).
+compiled out, while two more flat arrays cost nothing measurable (the likely cause:
+every kernel that takes the workspace gets some 70 more arguments, which changes what
+LLVM inlines; not confirmed).
 """
 
 from __future__ import annotations
