@@ -150,13 +150,14 @@ def test_threaded_run_matches_serial_and_repeats_exactly():
 def test_threaded_forces_serve_every_integrator(integrator, dt):
     """Midpoint (two force evaluations per step) and implicit Euler (forces, then a CG
     solve at tolerance 1e-6) on two threads follow the serial run through the fall and
-    the ground contact: 1 s of simulated time, agreement to 1e-10 m (round-off: the two
-    differed by 4e-15 m here; the margin allows a CG stop to fall one iteration apart)."""
+    the ground contact: 1 s of simulated time, agreement to 1e-8 m. Round-off alone
+    made 4e-15 m here; the margin covers a CG solve that stops one iteration apart on
+    some step (its error is ~1e-6 of dv ~ g dt, times dt: ~3e-9 m)."""
     steps = round(1.0 / dt)
     serial, threaded = drop(1, steps, integrator, dt), drop(2, steps, integrator, dt)
     # the balls hit the ground: it took an impulse of several N s (1.5 kg at ~3 m/s)
     assert abs(serial.collider_impulse[0, 1]) > 1.0
-    assert np.abs(threaded.particle_q - serial.particle_q).max() < 1e-10
+    assert np.abs(threaded.particle_q - serial.particle_q).max() < 1e-8
 
 
 @pytest.mark.parametrize("threads", [0, -1, 1.5, True, "2", 10**6])
