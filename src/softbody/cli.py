@@ -78,6 +78,7 @@ def _run(args) -> int:
         outputs=outputs,
         strict_stability=True,
         progress_stream=sys.stdout,
+        threads=args.threads,
     )
     t = summary["timings_s"]
     print(
@@ -198,6 +199,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--meshes", choices=["obj", "ply"], help="also write a mesh per frame")
     run.add_argument("--usd", action="store_true", help="also write a USD point cache")
+    run.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="threads for the force terms (default 1; pays off only on large meshes)",
+    )
     run.add_argument("--no-video", action="store_true", help="skip the MP4")
     run.add_argument("--no-gif", action="store_true", help="skip the GIF")
     run.set_defaults(func=_run)

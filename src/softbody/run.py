@@ -78,11 +78,13 @@ def run_scene(
     outputs: Outputs = Outputs(),
     strict_stability: bool = False,
     progress_stream=None,
+    threads: int = 1,
 ) -> dict:
     """Simulate ``scene`` and write its files into ``out``; returns the JSON summary.
 
     ``strict_stability`` turns a dt above the stability estimate into an error (the
-    CLI's behaviour) instead of a warning.
+    CLI's behaviour) instead of a warning. ``threads``: the simulator's opt-in threads
+    for the force terms (``Simulator``).
     """
     from softbody.render.frame import FrameRenderer
     from softbody.render.plots import plot_bounding_volumes, plot_time_series
@@ -97,7 +99,7 @@ def run_scene(
     with warnings.catch_warnings():
         if strict_stability:
             warnings.simplefilter("error", StabilityWarning)
-        sim = Simulator(model, integrator=integrator, dt=dt)
+        sim = Simulator(model, integrator=integrator, dt=dt, threads=threads)
     # compile (first run) or load the kernels now, so that the timings below are the
     # simulation's and not the compiler's
     t0 = time.perf_counter()
@@ -218,6 +220,7 @@ def run_scene(
             "softbody_version": __version__,
             "parameters": scene.data,
             "integrator": sim.integrator.name.lower(),
+            "threads": sim.threads,
             "dt_s": sim.dt if auto else dt,
             "dt_auto": auto,
             "stable_dt_estimate_s": sim.stable_dt,
