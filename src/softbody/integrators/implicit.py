@@ -280,6 +280,26 @@ def _offdiagonal_sum(mg, i, x):
     return s0, s1, s2
 
 
+@njit(cache=True, inline="always")
+def _upper_offdiagonal_sum(mg, i, x):
+    """``_offdiagonal_sum`` over particle i's springs to particles j > i only (its entries
+    are sorted by j, so these are a suffix)."""
+    s0 = s1 = s2 = 0.0
+    start, end = mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]
+    while start < end and mg.vertex_neighbor[start] < i:
+        start += 1
+    for e in range(start, end):
+        j = mg.vertex_neighbor[e]
+        ux, uy, uz = mg.entry_coef[e, 0], mg.entry_coef[e, 1], mg.entry_coef[e, 2]
+        beta = mg.entry_coef[e, 4]
+        xj0, xj1, xj2 = x[j, 0], x[j, 1], x[j, 2]
+        ax = mg.entry_coef[e, 3] * (ux * xj0 + uy * xj1 + uz * xj2)
+        s0 += ax * ux + beta * xj0
+        s1 += ax * uy + beta * xj1
+        s2 += ax * uz + beta * xj2
+    return s0, s1, s2
+
+
 @njit(cache=True)
 def _block_gauss_seidel(m, mg, w, inv_mass, forward):
     """One block Gauss-Seidel sweep with the true spring blocks on the finest level,
@@ -320,17 +340,15 @@ def _precondition(m, mg, w, diag, inv_mass, r, z):
             mg.b[i, k] = r[i, k]
             mg.x[i, k] = 0.0
     _block_gauss_seidel(m, mg, w, inv_mass, True)
-    # residual of the true spring matrix after the sweep (0 on pinned rows)
+    # residual of the true spring matrix after the sweep (0 on pinned rows). The sweep
+    # started from x = 0, and row i's equation held when x_i was set, with x_j = 0 for
+    # every j > i: what is left of b_i - (A x)_i is those springs' blocks times their new
+    # x_j. Half the entries of the full residual, and no diagonal block product.
     for i in range(n):
         if inv_mass[i] == 0.0:
             mg.r[i, 0] = mg.r[i, 1] = mg.r[i, 2] = 0.0
             continue
-        s0, s1, s2 = _offdiagonal_sum(mg, i, mg.x)
-        d = mg.block[i]
-        x0, x1, x2 = mg.x[i, 0], mg.x[i, 1], mg.x[i, 2]
-        mg.r[i, 0] = mg.b[i, 0] + s0 - (d[0, 0] * x0 + d[0, 1] * x1 + d[0, 2] * x2)
-        mg.r[i, 1] = mg.b[i, 1] + s1 - (d[1, 0] * x0 + d[1, 1] * x1 + d[1, 2] * x2)
-        mg.r[i, 2] = mg.b[i, 2] + s2 - (d[2, 0] * x0 + d[2, 1] * x1 + d[2, 2] * x2)
+        mg.r[i, 0], mg.r[i, 1], mg.r[i, 2] = _upper_offdiagonal_sum(mg, i, mg.x)
     # coarse correction with the Laplacian hierarchy (the dense solve when it is 1 level)
     if mg.level_count > 0:
         restrict(mg, 0, mg.r[:n])

@@ -246,7 +246,9 @@ def build_multigrid(model) -> Multigrid:
 
     total = int(vec_offset[-1])
     ends = model.spring_indices.reshape(-1).astype(np.int64)
-    order = np.argsort(ends, kind="stable")
+    # each particle's entries sorted by the particle at the other end, so the springs to
+    # higher-numbered particles are a suffix (the smoother's residual reads only those)
+    order = np.lexsort((ends[np.arange(ends.shape[0]) ^ 1], ends))
     vertex_spring_ptr = np.zeros(n + 1, dtype=np.int64)
     vertex_spring_ptr[1:] = np.cumsum(np.bincount(ends, minlength=n))
     s_count = model.spring_count
