@@ -264,11 +264,11 @@ def _invert_3x3(a, out):
 
 
 @njit(cache=True, inline="always")
-def _offdiagonal_sum(mg, i, x):
-    """-sum over particle i's springs of their off-diagonal block times x_j (the blocks
-    are -(alpha u u^T + beta I))."""
+def _entries_sum(mg, x, first, last):
+    """Sum over a particle's entries first..last-1 of their spring block
+    (alpha u u^T + beta I) times x_j: minus the off-diagonal blocks times x."""
     s0 = s1 = s2 = 0.0
-    for e in range(mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]):
+    for e in range(first, last):
         j = mg.vertex_neighbor[e]
         ux, uy, uz = mg.entry_coef[e, 0], mg.entry_coef[e, 1], mg.entry_coef[e, 2]
         beta = mg.entry_coef[e, 4]
@@ -281,43 +281,54 @@ def _offdiagonal_sum(mg, i, x):
 
 
 @njit(cache=True, inline="always")
-def _upper_offdiagonal_sum(mg, i, x):
-    """``_offdiagonal_sum`` over particle i's springs to particles j > i only (its entries
-    are sorted by j, so these are a suffix)."""
-    s0 = s1 = s2 = 0.0
-    start, end = mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]
-    while start < end and mg.vertex_neighbor[start] < i:
-        start += 1
-    for e in range(start, end):
-        j = mg.vertex_neighbor[e]
-        ux, uy, uz = mg.entry_coef[e, 0], mg.entry_coef[e, 1], mg.entry_coef[e, 2]
-        beta = mg.entry_coef[e, 4]
-        xj0, xj1, xj2 = x[j, 0], x[j, 1], x[j, 2]
-        ax = mg.entry_coef[e, 3] * (ux * xj0 + uy * xj1 + uz * xj2)
-        s0 += ax * ux + beta * xj0
-        s1 += ax * uy + beta * xj1
-        s2 += ax * uz + beta * xj2
-    return s0, s1, s2
+def _offdiagonal_sum(mg, i, x):
+    """-sum over particle i's springs of their off-diagonal block times x_j (the blocks
+    are -(alpha u u^T + beta I))."""
+    return _entries_sum(mg, x, mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1])
+
+
+@njit(cache=True, inline="always")
+def _first_later_entry(mg, i):
+    """Particle i's first entry to a particle j > i (entries are sorted by j: those to
+    earlier particles come first)."""
+    e, end = mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]
+    while e < end and mg.vertex_neighbor[e] < i:
+        e += 1
+    return e
+
+
+@njit(cache=True, inline="always")
+def _solve_row(mg, i, s0, s1, s2):
+    """x_i = D_i^-1 s, D_i particle i's diagonal block."""
+    d = mg.block_inv[i]
+    mg.x[i, 0] = d[0, 0] * s0 + d[0, 1] * s1 + d[0, 2] * s2
+    mg.x[i, 1] = d[1, 0] * s0 + d[1, 1] * s1 + d[1, 2] * s2
+    mg.x[i, 2] = d[2, 0] * s0 + d[2, 1] * s1 + d[2, 2] * s2
 
 
 @njit(cache=True)
-def _block_gauss_seidel(m, mg, w, inv_mass, forward):
-    """One block Gauss-Seidel sweep with the true spring blocks on the finest level,
-    x = mg.x[:N] for b = mg.b[:N]; pinned rows stay 0."""
-    n = inv_mass.shape[0]
-    x, b = mg.x, mg.b
-    for step in range(n):
-        i = step if forward else n - 1 - step
+def _forward_sweep_from_zero(mg, inv_mass, b):
+    """x = mg.x[:N] after one forward block Gauss-Seidel sweep from x = 0 for b (N, 3),
+    with the true spring blocks; pinned rows 0. Row i reads only its springs to earlier
+    particles, as the later x_j are still 0: nothing is cleared first, and half the
+    entries are read."""
+    for i in range(inv_mass.shape[0]):
+        if inv_mass[i] == 0.0:
+            mg.x[i, 0] = mg.x[i, 1] = mg.x[i, 2] = 0.0
+            continue
+        s0, s1, s2 = _entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], _first_later_entry(mg, i))
+        _solve_row(mg, i, s0 + b[i, 0], s1 + b[i, 1], s2 + b[i, 2])
+
+
+@njit(cache=True)
+def _backward_sweep(mg, inv_mass, b):
+    """One backward block Gauss-Seidel sweep on x = mg.x[:N] in place for b (N, 3), with
+    the true spring blocks; pinned rows are left as they are."""
+    for i in range(inv_mass.shape[0] - 1, -1, -1):
         if inv_mass[i] == 0.0:
             continue
-        s0, s1, s2 = _offdiagonal_sum(mg, i, x)
-        s0 += b[i, 0]
-        s1 += b[i, 1]
-        s2 += b[i, 2]
-        d = mg.block_inv[i]
-        x[i, 0] = d[0, 0] * s0 + d[0, 1] * s1 + d[0, 2] * s2
-        x[i, 1] = d[1, 0] * s0 + d[1, 1] * s1 + d[1, 2] * s2
-        x[i, 2] = d[2, 0] * s0 + d[2, 1] * s1 + d[2, 2] * s2
+        s0, s1, s2 = _offdiagonal_sum(mg, i, mg.x)
+        _solve_row(mg, i, s0 + b[i, 0], s1 + b[i, 1], s2 + b[i, 2])
 
 
 @njit(cache=True)
@@ -335,20 +346,17 @@ def _precondition(m, mg, w, diag, inv_mass, r, z):
             for k in range(3):
                 z[i, k] = r[i, k] / diag[i]
         return
-    for i in range(n):
-        for k in range(3):
-            mg.b[i, k] = r[i, k]
-            mg.x[i, k] = 0.0
-    _block_gauss_seidel(m, mg, w, inv_mass, True)
+    _forward_sweep_from_zero(mg, inv_mass, r)
     # residual of the true spring matrix after the sweep (0 on pinned rows). The sweep
     # started from x = 0, and row i's equation held when x_i was set, with x_j = 0 for
-    # every j > i: what is left of b_i - (A x)_i is those springs' blocks times their new
-    # x_j. Half the entries of the full residual, and no diagonal block product.
+    # every j > i: what is left of r_i - (A x)_i is those springs' blocks times their new
+    # x_j. The other half of the entries, and no diagonal block product.
     for i in range(n):
         if inv_mass[i] == 0.0:
             mg.r[i, 0] = mg.r[i, 1] = mg.r[i, 2] = 0.0
             continue
-        mg.r[i, 0], mg.r[i, 1], mg.r[i, 2] = _upper_offdiagonal_sum(mg, i, mg.x)
+        last = mg.vertex_spring_ptr[i + 1]
+        mg.r[i, 0], mg.r[i, 1], mg.r[i, 2] = _entries_sum(mg, mg.x, _first_later_entry(mg, i), last)
     # coarse correction with the Laplacian hierarchy (the dense solve when it is 1 level)
     if mg.level_count > 0:
         restrict(mg, 0, mg.r[:n])
@@ -357,18 +365,17 @@ def _precondition(m, mg, w, diag, inv_mass, r, z):
     else:
         for i in range(n):
             for k in range(3):
-                mg.r[i, k], mg.x[i, k] = mg.x[i, k], mg.r[i, k]
-                mg.b[i, k], mg.x[i, k] = mg.x[i, k], mg.b[i, k]
-        # now b holds the residual, r the smoothed x, x the right-hand side
+                # the residual is the dense solve's right-hand side; keep the smoothed x
+                mg.b[i, k] = mg.r[i, k]
+                mg.r[i, k] = mg.x[i, k]
         _coarse_solve(mg)
         for i in range(n):
             for k in range(3):
                 mg.x[i, k] += mg.r[i, k]
-                mg.b[i, k] = r[i, k]
     for i in range(n):
         if inv_mass[i] == 0.0:
             mg.x[i, 0] = mg.x[i, 1] = mg.x[i, 2] = 0.0
-    _block_gauss_seidel(m, mg, w, inv_mass, False)
+    _backward_sweep(mg, inv_mass, r)
     for i in range(n):
         for k in range(3):
             z[i, k] = mg.x[i, k]
