@@ -181,8 +181,6 @@ def eval_contacts(
             q,
             qd,
             collider_impulse,
-            w.scratch[1],
-            w.scratch[2],
         )
     return 0
 
