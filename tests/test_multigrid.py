@@ -127,10 +127,9 @@ def pinned_attached_ball() -> sb.Model:
     return builder.finalize()
 
 
-def test_hybrid_preconditioner_is_spd_on_the_free_particles():
-    """The solver's preconditioner (block Gauss-Seidel with the true spring blocks, then
-    the Laplacian hierarchy) is symmetric, zero on pinned rows and positive definite on
-    the free ones, with pins, bending springs and an attachment."""
+def smoother_ready_ball():
+    """The pinned, attached ball after five implicit steps, with the smoother's spring
+    blocks prepared at its state: (model, workspace, model data, multigrid)."""
     from softbody.integrators import implicit as im
 
     model = pinned_attached_ball()
@@ -149,6 +148,16 @@ def test_hybrid_preconditioner_is_spd_on_the_free_particles():
         w.spring_b,
     )
     im._prepare_blocks(m, c, DT, q, w, mg)
+    return model, w, m, mg
+
+
+def test_hybrid_preconditioner_is_spd_on_the_free_particles():
+    """The solver's preconditioner (block Gauss-Seidel with the true spring blocks, then
+    the Laplacian hierarchy) is symmetric, zero on pinned rows and positive definite on
+    the free ones, with pins, bending springs and an attachment."""
+    from softbody.integrators import implicit as im
+
+    model, w, m, mg = smoother_ready_ball()
     n = model.particle_count
     b = dense_operator(
         lambda r, z: im._precondition(m, mg, w, w.cg_diag, m.particle_inv_mass, r, z), n
@@ -169,22 +178,7 @@ def test_forward_sweep_and_its_residual_read_half_the_entries():
     attachment."""
     from softbody.integrators import implicit as im
 
-    model = pinned_attached_ball()
-    sim = sb.Simulator(model, integrator="implicit_euler", dt=DT)
-    state = model.state()
-    sim.run(state, 5)
-    w, m, c, mg = sim._work, model.data, sim._neutral, sim._multigrid
-    q = state.particle_q.copy()
-    im._prepare_springs(
-        q,
-        m.spring_indices,
-        m.spring_rest_length,
-        m.spring_stiffness,
-        w.spring_u,
-        w.spring_a,
-        w.spring_b,
-    )
-    im._prepare_blocks(m, c, DT, q, w, mg)
+    model, _, m, mg = smoother_ready_ball()
     n, inv_mass = model.particle_count, m.particle_inv_mass
     b = np.random.default_rng(3).normal(size=(n, 3))
     # the textbook sweep: x = 0, then row by row x_i = D_i^-1 (b_i + sum_j B_ij x_j)
