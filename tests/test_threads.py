@@ -51,9 +51,6 @@ def test_partition_gives_every_spring_and_face_one_owner(chunk_count):
         (part.spring_start, part.spring_indices, m.spring_indices),
         (part.tri_start, part.tri_indices, m.tri_indices),
     ):
-        if chunk_count == 1:
-            assert rows.shape[0] == 0  # the serial kernels read the model's arrays
-            continue
         # the same rows as the model's, each once
         key = np.sort(rows, axis=1).tolist()
         assert sorted(map(tuple, key)) == sorted(map(tuple, np.sort(model_rows, axis=1)))
@@ -63,13 +60,18 @@ def test_partition_gives_every_spring_and_face_one_owner(chunk_count):
                 assert np.all(owners == c)
             else:
                 assert np.all(owners.min(axis=1) != owners.max(axis=1))
-    if chunk_count > 1:
-        # the parameters travel with their springs
-        order = {tuple(r): s for s, r in enumerate(m.spring_indices.tolist())}
-        s = np.array([order[tuple(r)] for r in part.spring_indices.tolist()])
-        assert np.array_equal(part.spring_rest_length, m.spring_rest_length[s])
-        assert np.array_equal(part.spring_stiffness, m.spring_stiffness[s])
-        assert np.array_equal(part.spring_damping, m.spring_damping[s])
+    # the parameters travel with their springs
+    order = {tuple(r): s for s, r in enumerate(m.spring_indices.tolist())}
+    s = np.array([order[tuple(r)] for r in part.spring_indices.tolist()])
+    assert np.array_equal(part.spring_rest_length, m.spring_rest_length[s])
+    assert np.array_equal(part.spring_stiffness, m.spring_stiffness[s])
+    assert np.array_equal(part.spring_damping, m.spring_damping[s])
+    # one chunk: everything in it, nothing crossing, and nothing packed for the kernels
+    if chunk_count == 1:
+        assert part.spring_start.tolist() == [0, model.spring_count, model.spring_count]
+        assert part.tri_start.tolist() == [0, model.tri_count, model.tri_count]
+        index, value = pack_partition(part)
+        assert index.tolist() == [1] and value.shape == (0,)
 
 
 @pytest.mark.parametrize("chunk_count", [2, 3])

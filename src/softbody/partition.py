@@ -61,22 +61,13 @@ def _group(owner: np.ndarray, chunk_count: int) -> tuple[np.ndarray, np.ndarray]
 
 def build_partition(model, chunk_count: int) -> Partition:
     """Cut a model's particles into ``chunk_count`` >= 1 equal contiguous ranges (1: one
-    chunk, nothing crossing; the serial kernels then ignore the partition)."""
+    chunk, nothing crossing; ``pack_partition`` then keeps nothing, as the serial kernels
+    read the model's arrays)."""
     if int(chunk_count) != chunk_count or chunk_count < 1:
         raise ValueError(f"chunk_count must be an integer >= 1, got {chunk_count!r}")
     chunk_count = int(chunk_count)
     m = model.data
     particle_count = model.particle_count
-    if chunk_count == 1:
-        # serial: the kernels do not read the copies, so keep none
-        m = m._replace(
-            spring_indices=m.spring_indices[:0],
-            spring_rest_length=m.spring_rest_length[:0],
-            spring_stiffness=m.spring_stiffness[:0],
-            spring_damping=m.spring_damping[:0],
-            tri_indices=m.tri_indices[:0],
-            tri_body=m.tri_body[:0],
-        )
     particle_start = (np.arange(chunk_count + 1) * particle_count) // chunk_count
     particle_start = particle_start.astype(np.int64)
     chunk_of = np.repeat(np.arange(chunk_count), np.diff(particle_start))

@@ -18,7 +18,7 @@ from softbody.volume import eval_model_volume
 
 
 @njit(cache=True)
-def _spring_forces_on_threads(q, qd, m, w, f):
+def _spring_forces_on_threads(m, q, qd, w, f):
     """``eval_spring_forces_threaded`` on the workspace's packed partition."""
     start, indices, rest, stiffness, damping = spring_chunks(
         w.chunk_index, w.chunk_value, m.spring_indices.shape[0]
@@ -38,7 +38,7 @@ def eval_forces(m, c, t, q, qd, w, f):
     # damped Hooke springs: mesh edges, bending springs, user springs (on threads when the
     # workspace is cut into chunks)
     if w.chunk_index[0] > 1:
-        _spring_forces_on_threads(q, qd, m, w, f)
+        _spring_forces_on_threads(m, q, qd, w, f)
     else:
         eval_spring_forces(
             q, qd, m.spring_indices, m.spring_rest_length, m.spring_stiffness, m.spring_damping, f
