@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 import softbody as sb
+from results_io import RESULTS, save_figure, write_json
 
-RESULTS = Path(__file__).parent / "results"
 INTEGRATORS = [
     "symplectic_euler",
     "velocity_verlet",
@@ -383,7 +383,7 @@ def main() -> None:
         if any("bullet" in r for r in rows)
         else None,
     }
-    (RESULTS / "ball_drop.json").write_text(json.dumps(result, indent=2))
+    write_json(RESULTS / "ball_drop.json", result)
     plot(result, RESULTS / "ball_drop.png")
     print(f"wrote {RESULTS / 'ball_drop.json'} and .png")
 
@@ -434,9 +434,7 @@ def plot(result: dict, path: Path) -> None:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp)
-    os.replace(tmp, path)
+    save_figure(fig, path)
     plt.close(fig)
 
 

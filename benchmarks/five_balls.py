@@ -13,17 +13,15 @@ Usage: python benchmarks/five_balls.py
 
 from __future__ import annotations
 
-import json
 import os
 import time
-from pathlib import Path
 
 import numpy as np
 
 import softbody as sb
+from results_io import RESULTS, save_figure, write_json
 from softbody.scenes.loader import load_scene
 
-RESULTS = Path(__file__).parent / "results"
 DURATION = 10.0
 RUNS = [
     ("midpoint", "scene dt", {}),
@@ -94,7 +92,7 @@ def main() -> None:
         "duration_s": DURATION,
         "runs": rows,
     }
-    (RESULTS / "five_balls.json").write_text(json.dumps(result, indent=2))
+    write_json(RESULTS / "five_balls.json", result)
 
     import matplotlib
 
@@ -112,9 +110,7 @@ def main() -> None:
     ax.set_title("Five-ball scene (810 vertices), one thread, float64", fontsize=10)
     ax.invert_yaxis()
     fig.tight_layout()
-    tmp = RESULTS / "five_balls.tmp.png"
-    fig.savefig(tmp)
-    os.replace(tmp, RESULTS / "five_balls.png")
+    save_figure(fig, RESULTS / "five_balls.png")
     print(f"wrote {RESULTS / 'five_balls.json'} and .png")
 
 

@@ -9,17 +9,13 @@ Writes results/implicit_energy.{json,png}. Usage: python benchmarks/implicit_ene
 
 from __future__ import annotations
 
-import json
-import os
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
 import softbody as sb
-
-RESULTS = Path(__file__).parent / "results"
+from results_io import RESULTS, save_figure, write_json
 
 
 def vibrating_ball(damping: float) -> sb.Model:
@@ -81,17 +77,14 @@ def main() -> None:
             f"({-100 * energy[-1] / kinetic0:.1f}% of the {kinetic0:.3g} J kick lost)",
             flush=True,
         )
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "implicit_energy.json").write_text(
-        json.dumps(
-            {
-                "benchmark": "implicit_energy",
-                "date": time.strftime("%Y-%m-%d"),
-                "kick_energy_J": float(kinetic0),
-                "runs": out,
-            },
-            indent=2,
-        )
+    write_json(
+        RESULTS / "implicit_energy.json",
+        {
+            "benchmark": "implicit_energy",
+            "date": time.strftime("%Y-%m-%d"),
+            "kick_energy_J": float(kinetic0),
+            "runs": out,
+        },
     )
 
     import matplotlib
@@ -113,9 +106,7 @@ def main() -> None:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    tmp = RESULTS / "implicit_energy.tmp.png"
-    fig.savefig(tmp)
-    os.replace(tmp, RESULTS / "implicit_energy.png")
+    save_figure(fig, RESULTS / "implicit_energy.png")
     print(f"wrote {RESULTS / 'implicit_energy.json'} and .png")
 
 

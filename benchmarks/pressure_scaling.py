@@ -19,7 +19,6 @@ Usage: python benchmarks/pressure_scaling.py [--max-subdivisions 7] [--repeats 5
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -30,12 +29,12 @@ import numpy as np
 from numba import njit
 
 import softbody as sb
+from results_io import RESULTS, save_figure, write_json
 from softbody.forces.pressure import eval_pressure_forces
 from softbody.gas import eval_model_pressure
 from softbody.integrators.workspace import Workspace
 from softbody.volume import eval_model_volume
 
-RESULTS = Path(__file__).parent / "results"
 INTEGRATORS = ["symplectic_euler", "velocity_verlet", "midpoint", "rk4", "euler"]
 
 
@@ -203,9 +202,7 @@ def plot(result: dict, path: Path) -> None:
     ax.legend(fontsize=8)
     fig.text(0.01, 0.01, result["machine"]["cpu"] + f", {result['date']}", fontsize=7, color="0.4")
     fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp)
-    os.replace(tmp, path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -263,9 +260,7 @@ def main() -> None:
         "pressure_trend_ms": {"slope": float(slope), "intercept": float(intercept)},
     }
     json_path = args.out / "pressure_scaling.json"
-    tmp = json_path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2))
-    os.replace(tmp, json_path)
+    write_json(json_path, result)
     plot(result, args.out / "pressure_scaling.png")
     print(f"wrote {json_path} and {args.out / 'pressure_scaling.png'}")
 

@@ -9,13 +9,12 @@ Needs Debian's chromium and the test extras (viser, playwright).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import socket
 import time
-from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results"
+from results_io import RESULTS, write_json
+
 PAGE_FPS = """() => new Promise(done => { let n = 0; const t0 = performance.now();
   function tick() { n++; if (performance.now() - t0 < 2000) requestAnimationFrame(tick);
   else done(n / ((performance.now() - t0) / 1000)); } requestAnimationFrame(tick); })"""
@@ -91,7 +90,7 @@ def main() -> None:
         "renderer": "headless chromium, software WebGL",
         "scenes": rows,
     }
-    (RESULTS / "viewer_realtime.json").write_text(json.dumps(out, indent=2))
+    write_json(RESULTS / "viewer_realtime.json", out)
     print(f"wrote {RESULTS / 'viewer_realtime.json'}")
 
 
