@@ -104,7 +104,7 @@ def test_summary_records_parameters_and_diagnostics(run_dir):
     ends on the first frame at or after the 0.5 s asked for."""
     summary = json.loads((run_dir / "bounding-volumes-summary.json").read_text())
     assert summary["parameters"]["bodies"][0]["name"] == "capsule"
-    assert summary["integrator"] == "midpoint"
+    assert summary["integrator"] == "velocity_verlet"
     assert summary["threads"] == THREADS
     # the timings are bookkeeping, not a speed claim (speed is never asserted: this
     # machine is shared, and the check failed once under load): compile time is kept

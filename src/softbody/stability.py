@@ -1,24 +1,35 @@
 """Largest stable time step, from spring stiffness, masses and pressure stiffness.
 
 The stiffest vibration mode bounds explicit time steps. Its squared angular frequency is
-the largest eigenvalue of M^-1/2 K M^-1/2; K, the stiffness matrix, has three parts, each
-bounded separately and added (Weyl's inequality):
+the largest eigenvalue of M^-1/2 K M^-1/2; K, the stiffness matrix, has parts bounded
+separately and added (Weyl's inequality), split by whether spring damping acts on them:
 
-* springs: block k d d^T + k (1 - L0/L)(I - d d^T) per spring, norm <= k max(1, |1 - L0/L|);
-  Gershgorin on the spring-by-spring matrix gives max over springs (i, j) of
-  sqrt(k) (R_i / m_i + R_j / m_j), R_i the sum of sqrt(k) over springs at i (exact for
-  one spring, the Anderson-Morley bound for equal springs);
-* the local pressure term (P - P_a) d2V/dx2: for a face (i, j, l) the block coupling i to
-  j is (P - P_a)/6 [x_l - x_i]_x, of norm |P - P_a| |x_l - x_i| / 6 (Gershgorin by rows);
-* the rank-one term -P'(V) g g^T with g = dV/dx (the breathing mode), whose one nonzero
-  eigenvalue |P'(V)| sum_i |g_i|^2 / m_i adds to the bound.
+* damped: the axial spring blocks k u u^T (and the attachments'); Gershgorin on the
+  spring-by-spring matrix gives max over springs (i, j) of sqrt(k) (R_i / m_i + R_j / m_j),
+  R_i the sum of sqrt(k) over springs at i (exact for one spring, the Anderson-Morley
+  bound for equal springs). Spring damping c u u^T acts on exactly this part, with
+  c / k [s] per spring;
+* undamped: the transverse (geometric) spring blocks k (1 - L0/L)(I - u u^T), bounded
+  the same way with k |1 - L0/L|; the local pressure term (P - P_a) d2V/dx2, for a face
+  (i, j, l) a block coupling i to j of norm |P - P_a| |x_l - x_i| / 6 (Gershgorin by
+  rows); and the rank-one term -P'(V) g g^T with g = dV/dx (the breathing mode), whose
+  one nonzero eigenvalue |P'(V)| sum_i |g_i|^2 / m_i adds to the bound.
 
-Spring damping proportional to stiffness gives the stiffest mode a damping ratio
-zeta = (c/k) omega_spring^2 / (2 omega). The stable step is then the largest h for which
-the scheme's amplification matrix on the damped oscillator x'' = -omega^2 x - 2 zeta omega x'
-has spectral radius <= 1. Explicit Euler and Midpoint amplify undamped oscillation at any
-h (their estimate is ~0 without damping); RK4 is stable to omega h ~ 2.8, symplectic Euler
-and velocity Verlet to omega h = 2.
+A mode then has squared frequency lambda = lambda_d + lambda_u with lambda_d in
+[0, omega_damped^2], lambda_u in [0, omega_undamped^2], their sum at most omega^2 (the
+springs bounded whole, each block of norm k max(1, |1 - L0/L|), plus pressure), and
+damping rate (the d in
+x'' = -lambda x - d x') between beta_min lambda_d and beta_max lambda_d, beta = c / k,
+and at most the largest damping rate (the same Gershgorin bound on M^-1 C, c for k).
+The stable step is the largest h for which the scheme's amplification matrix on every
+such oscillator has spectral radius <= 1. Checking the stiffest mode alone is not enough:
+with damping proportional to stiffness a strongly damped stiff mode can be stable at a
+step where a less stiff, less damped one grows (the paper's ball under velocity Verlet:
+tested against the ball's linearised equations). RK4 is stable to omega h ~ 2.8,
+symplectic Euler and velocity Verlet to omega h = 2 undamped. Explicit Euler and Midpoint
+amplify every undamped vibration, by (omega h)^2 / 2 and (omega h)^4 / 8 per step, at any
+h; for them the estimate is the step at which no mode grows faster than
+``TOLERATED_GROWTH_RATE`` (one e-fold per 10 simulated seconds).
 """
 
 from __future__ import annotations
@@ -31,53 +42,87 @@ import numpy as np
 from softbody.gas import GasLaw
 from softbody.integrators import Integrator
 
+TOLERATED_GROWTH_RATE = 0.1
+"""Growth rate [1/s] of the fastest-growing mode that the step estimate accepts."""
+
 
 @dataclass(frozen=True)
 class StiffestMode:
-    """Bounds on the stiffest vibration of a model."""
+    """Bounds on the vibration frequencies of a model."""
 
     omega: float
-    """Upper bound on the highest angular frequency [rad/s]."""
+    """Upper bound on the highest angular frequency [rad/s]; at most the damped and
+    undamped bounds added, less where a spring's two parts overlap."""
     zeta: float
-    """Damping ratio of that mode (0 = undamped)."""
-    omega_spring: float
-    """Part of the bound from springs alone [rad/s]."""
+    """Damping ratio of that mode if its damped part is at its bound (0 = undamped)."""
+    omega_damped: float
+    """Bound on the part spring damping acts on: axial springs, attachments [rad/s]."""
+    omega_undamped: float
+    """Bound on the rest: transverse (stretched) springs, pressure [rad/s]."""
+    damping_per_stiffness: tuple[float, float]
+    """Smallest and largest c / k over damped springs and attachments [s]."""
+    damping_rate: float
+    """Bound on the largest eigenvalue of M^-1 C, C the damping matrix [1/s]."""
     omega_pressure: float
     """Part of the bound from the pressure terms alone [rad/s]."""
 
 
+def _gershgorin_springs(root_sum, stiffness, i, j, inv):
+    """max over springs of sqrt(k) (R_i / m_i + R_j / m_j) (squared frequency bound)."""
+    if len(stiffness) == 0:
+        return 0.0
+    return float((np.sqrt(stiffness) * (root_sum[i] * inv[i] + root_sum[j] * inv[j])).max())
+
+
+def _spring_bound(n, inv, ends, stiffness, anchored, anchored_stiffness):
+    """Squared frequency bound of springs ``ends`` (S, 2) and anchored springs on
+    particles ``anchored`` (A,), stiffness per spring [N/m]."""
+    root_sum = np.zeros(n)
+    np.add.at(root_sum, ends[:, 0], np.sqrt(stiffness))
+    np.add.at(root_sum, ends[:, 1], np.sqrt(stiffness))
+    np.add.at(root_sum, anchored, np.sqrt(anchored_stiffness))
+    w2 = _gershgorin_springs(root_sum, stiffness, ends[:, 0], ends[:, 1], inv)
+    if len(anchored):
+        rows = np.sqrt(anchored_stiffness) * root_sum[anchored] * inv[anchored]
+        w2 = max(w2, float(rows.max()))
+    return w2
+
+
+def _stretch(length, rest_length):
+    """|1 - L0 / L|, 1 where L = 0 (the transverse stiffness factor)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(length > 0, np.abs(1.0 - rest_length / length), 1.0)
+
+
 def stiffest_mode(model, q: np.ndarray | None = None) -> StiffestMode:
-    """Bound the highest vibration frequency of ``model`` at positions ``q`` (N, 3) [m].
+    """Bound the vibration frequencies of ``model`` at positions ``q`` (N, 3) [m].
 
     The gas is taken at its largest scheduled value, so the bound holds for the whole run.
+    Attachments are taken at their default anchors.
     """
     q = model.particle_q if q is None else np.asarray(q, dtype=np.float64)
     inv = model.particle_inv_mass
     n = model.particle_count
-    # springs: Gershgorin on the edge matrix sqrt(k_s k_t) b_s^T M^-1 b_t (same nonzero
-    # spectrum as M^-1/2 K M^-1/2): row s = sqrt(k_s) (R_i / m_i + R_j / m_j) with
-    # R_i = sum of sqrt(k) over the springs at i; exact for a single spring
-    idx = model.spring_indices
-    root_sum = np.zeros(n)
-    k_eff = np.zeros(0)
-    if len(idx):
-        i, j = idx[:, 0], idx[:, 1]
-        length = np.linalg.norm(q[j] - q[i], axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            geometric = np.abs(1.0 - model.spring_rest_length / length)
-        k_eff = model.spring_stiffness * np.maximum(1.0, np.nan_to_num(geometric))
-        np.add.at(root_sum, i, np.sqrt(k_eff))
-        np.add.at(root_sum, j, np.sqrt(k_eff))
+    idx = model.spring_indices.reshape(-1, 2)
+    k = model.spring_stiffness
     a = model.attachment_particle
-    if len(a):
-        np.add.at(root_sum, a, np.sqrt(model.attachment_stiffness))
-    w2_spring = 0.0
-    if len(idx):
-        rows = np.sqrt(k_eff) * (root_sum[i] * inv[i] + root_sum[j] * inv[j])
-        w2_spring = float(rows.max())
-    if len(a):
-        rows = np.sqrt(model.attachment_stiffness) * root_sum[a] * inv[a]
-        w2_spring = max(w2_spring, float(rows.max()))
+    ka = model.attachment_stiffness
+    w2_damped = _spring_bound(n, inv, idx, k, a, ka)
+    length = np.linalg.norm(q[idx[:, 1]] - q[idx[:, 0]], axis=1)
+    anchor_length = np.linalg.norm(model.attachment_anchor - q[a], axis=1)
+    stretch = _stretch(length, model.spring_rest_length)
+    anchor_stretch = _stretch(anchor_length, model.attachment_rest_length)
+    w2_transverse = _spring_bound(n, inv, idx, k * stretch, a, ka * anchor_stretch)
+    # a spring's block has norm k max(1, |1 - L0/L|) (axial and transverse parts are
+    # orthogonal), so bounding the springs whole is tighter than adding the two parts
+    w2_springs = _spring_bound(
+        n, inv, idx, k * np.maximum(1.0, stretch), a, ka * np.maximum(1.0, anchor_stretch)
+    )
+    ratios = np.concatenate(
+        [model.spring_damping[k > 0] / k[k > 0], model.attachment_damping[ka > 0] / ka[ka > 0]]
+    )
+    beta = (float(ratios.min()), float(ratios.max())) if len(ratios) else (0.0, 0.0)
+    damping_rate = _spring_bound(n, inv, idx, model.spring_damping, a, model.attachment_damping)
 
     pressure_rows = np.zeros(n)
     rank_one = 0.0
@@ -114,16 +159,17 @@ def stiffest_mode(model, q: np.ndarray | None = None) -> StiffestMode:
 
     # Weyl: the largest eigenvalue of a sum is at most the sum of the largest eigenvalues
     w2_pressure = float(pressure_rows.max(initial=0.0)) + rank_one
-    w2 = w2_spring + w2_pressure
-    omega = np.sqrt(w2)
-    zeta = 0.0
-    if len(idx) and omega > 0:
-        stiff = model.spring_stiffness > 0
-        if np.any(stiff):
-            ratio = float(np.min(model.spring_damping[stiff] / model.spring_stiffness[stiff]))
-            zeta = ratio * w2_spring / (2.0 * omega)
+    w2_undamped = w2_transverse + w2_pressure
+    omega = float(np.sqrt(min(w2_damped + w2_undamped, w2_springs + w2_pressure)))
+    zeta = beta[0] * w2_damped / (2.0 * omega) if omega > 0 else 0.0
     return StiffestMode(
-        float(omega), float(zeta), float(np.sqrt(w2_spring)), float(np.sqrt(w2_pressure))
+        omega,
+        float(zeta),
+        float(np.sqrt(w2_damped)),
+        float(np.sqrt(w2_undamped)),
+        beta,
+        damping_rate,
+        float(np.sqrt(w2_pressure)),
     )
 
 
@@ -160,23 +206,89 @@ def amplification_matrix(integrator: Integrator, h: float, omega: float, zeta: f
     return np.array(cols).T
 
 
-def _spectral_radius(m: np.ndarray) -> float:
-    return float(np.max(np.abs(np.linalg.eigvals(m))))
+def step_radius(integrator: Integrator, h: float, lam: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Spectral radius of one explicit step of ``integrator`` on x'' = -lam x - d x', for
+    arrays of squared frequencies ``lam`` [1/s^2] and damping rates ``d`` [1/s]; the same
+    matrices as :func:`amplification_matrix` (omega^2 = lam, 2 zeta omega = d), in closed
+    form over whole arrays."""
+    integrator = Integrator(integrator)
+    lam, d = np.broadcast_arrays(np.asarray(lam, dtype=np.float64), np.asarray(d, np.float64))
+    one, zero = np.ones_like(lam), np.zeros_like(lam)
+    if integrator in (Integrator.EULER, Integrator.MIDPOINT, Integrator.RK4):
+        # sum over p of (h a)^p / p!, a = [[0, 1], [-lam, -d]]
+        a00, a01, a10, a11 = zero, h * one, -h * lam, -h * d
+        g = [one, zero, zero, one]
+        t = [one, zero, zero, one]
+        for p in range(1, integrator.order + 1):
+            t = [
+                (t[0] * a00 + t[1] * a10) / p,
+                (t[0] * a01 + t[1] * a11) / p,
+                (t[2] * a00 + t[3] * a10) / p,
+                (t[2] * a01 + t[3] * a11) / p,
+            ]
+            g = [gi + ti for gi, ti in zip(g, t, strict=True)]
+    elif integrator == Integrator.SYMPLECTIC_EULER:
+        v_x, v_v = -h * lam, one - h * d
+        g = [one + h * v_x, h * v_v, v_x, v_v]
+    elif integrator == Integrator.VELOCITY_VERLET:
+        vh_x, vh_v = -0.5 * h * lam, one - 0.5 * h * d
+        x_x, x_v = one + h * vh_x, h * vh_v
+        g = [
+            x_x,
+            x_v,
+            vh_x + 0.5 * h * (-lam * x_x - d * vh_x),
+            vh_v + 0.5 * h * (-lam * x_v - d * vh_v),
+        ]
+    else:
+        raise ValueError(f"{integrator.name.lower()} is not an explicit one-step scheme")
+    half_trace = 0.5 * (g[0] + g[3])
+    root = np.sqrt((half_trace**2 - (g[0] * g[3] - g[1] * g[2])).astype(np.complex128))
+    return np.maximum(np.abs(half_trace + root), np.abs(half_trace - root))
 
 
 def largest_stable_step(
-    integrator: Integrator, omega: float, zeta: float, *, tolerance: float = 1e-12
+    integrator: Integrator,
+    omega: float,
+    zeta: float,
+    *,
+    omega_undamped: float = 0.0,
+    omega_total: float | None = None,
+    damping_per_stiffness: tuple[float, float] | None = None,
+    damping_rate: float = np.inf,
+    growth_rate: float = 0.0,
+    tolerance: float = 1e-12,
 ) -> float:
-    """Largest h [s] with spectral radius <= 1 + tolerance for every step up to h."""
+    """Largest h [s] such that for every step up to h no mode grows faster than
+    ``growth_rate`` [1/s] (spectral radius <= exp(growth_rate h) (1 + tolerance)).
+
+    The modes (module docstring): damped part lambda_d = s omega^2 for s in [0, 1] with
+    damping rate beta lambda_d, beta = 2 zeta / omega (stiffness-proportional damping, so
+    the damping ratio falls with the frequency) or each end of ``damping_per_stiffness``
+    [s], at most ``damping_rate`` [1/s]; plus an undamped part in [0, omega_undamped^2];
+    the two adding to at most ``omega_total``^2 (default: no limit beyond the parts).
+    """
     integrator = Integrator(integrator)
-    if omega <= 0 or integrator.implicit:
+    total = float(np.hypot(omega, omega_undamped) if omega_total is None else omega_total)
+    if total <= 0 or integrator.implicit:
         # backward Euler: |1 / (1 - h lambda)| <= 1 whenever Re(lambda) <= 0
         return float("inf")
+    if damping_per_stiffness is None:
+        damping_per_stiffness = (2.0 * zeta / omega if omega > 0 else 0.0,) * 2
+    s_damped = np.linspace(0.0, 1.0, 129)[:, None, None]
+    s_undamped = np.linspace(0.0, 1.0, 9 if omega_undamped > 0 else 1)[None, :, None]
+    beta = np.array(sorted(set(damping_per_stiffness)))[None, None, :]
+    lam_damped = s_damped * min(omega, total) ** 2
+    lam_undamped = np.clip(
+        np.minimum(s_undamped * omega_undamped**2, total**2 - lam_damped), 0, None
+    )
+    lam = (lam_damped + lam_undamped + 0.0 * beta).ravel()
+    d = (np.minimum(beta * lam_damped, damping_rate) + 0.0 * s_undamped).ravel()
 
     def stable(h):
-        return _spectral_radius(amplification_matrix(integrator, h, omega, zeta)) <= 1 + tolerance
+        bound = np.exp(growth_rate * h) * (1.0 + tolerance)
+        return bool(np.all(step_radius(integrator, h, lam, d) <= bound))
 
-    grid = np.geomspace(1e-6, 10.0, 400) / omega
+    grid = np.geomspace(1e-6, 10.0, 200) / total
     good = 0.0
     for h in grid:
         if not stable(h):
@@ -191,13 +303,28 @@ def largest_stable_step(
     return float(lo)
 
 
+def mode_stable_step(integrator: Integrator, mode: StiffestMode) -> float:
+    """Largest stable step [s] of ``integrator`` for the modes bounded by ``mode``, at
+    ``TOLERATED_GROWTH_RATE``."""
+    return largest_stable_step(
+        integrator,
+        mode.omega_damped,
+        0.0,
+        omega_undamped=mode.omega_undamped,
+        omega_total=mode.omega,
+        damping_per_stiffness=mode.damping_per_stiffness,
+        damping_rate=mode.damping_rate,
+        growth_rate=TOLERATED_GROWTH_RATE,
+    )
+
+
 def stable_dt(
     model, integrator: str | Integrator = "midpoint", q: np.ndarray | None = None
 ) -> float:
     """Estimate of the largest stable time step [s] for ``model`` with ``integrator``.
 
-    See the module docstring for the derivation. Without damping, Euler's and Midpoint's
-    estimate is ~0: they amplify undamped oscillation at any step size.
+    See the module docstring for the derivation. Euler and Midpoint amplify undamped
+    vibration at any step size; their estimate is the step at which that growth stays
+    below ``TOLERATED_GROWTH_RATE`` (tiny for Euler).
     """
-    mode = stiffest_mode(model, q)
-    return largest_stable_step(Integrator.parse(integrator), mode.omega, mode.zeta)
+    return mode_stable_step(Integrator.parse(integrator), stiffest_mode(model, q))

@@ -16,7 +16,7 @@ from softbody.integrators.workspace import Workspace
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
 from softbody.sim.state import State
-from softbody.stability import largest_stable_step, stiffest_mode
+from softbody.stability import mode_stable_step, stiffest_mode
 
 #: With dt="auto": the fraction of the stability estimate used, and the largest step [s].
 AUTO_SAFETY = 0.8
@@ -123,9 +123,7 @@ class Simulator:
         # BDF2: which state, at which step and dt, the workspace's previous step belongs to
         self._history: tuple | None = None
         self.stiffest_mode = stiffest_mode(model)
-        self.stable_dt = largest_stable_step(
-            self.integrator, self.stiffest_mode.omega, self.stiffest_mode.zeta
-        )
+        self.stable_dt = mode_stable_step(self.integrator, self.stiffest_mode)
         available = numba.config.NUMBA_NUM_THREADS
         if (
             isinstance(threads, bool)
@@ -160,10 +158,11 @@ class Simulator:
             f"dt = {self.dt:.3g} s exceeds the stable estimate {self.stable_dt:.3g} s for "
             f"{name} (stiffest mode {mode.omega:.3g} rad/s, damping ratio {mode.zeta:.2g})"
         )
-        if self.integrator in (Integrator.EULER, Integrator.MIDPOINT) and mode.zeta < 1e-3:
+        weak = mode.zeta < 1e-3 or mode.omega_undamped > 0
+        if self.integrator in (Integrator.EULER, Integrator.MIDPOINT) and weak:
             text += (
-                "; euler and midpoint amplify undamped vibration at any dt: add spring "
-                "damping or use rk4, symplectic_euler or velocity_verlet"
+                "; euler and midpoint amplify undamped vibration (pressure, stretched "
+                "springs) at any dt: use rk4, symplectic_euler or velocity_verlet"
             )
         else:
             text += "; reduce dt, stiffness or pressure, or add mass"
@@ -192,7 +191,7 @@ class Simulator:
                 mode = stiffest_mode(self.model, state.particle_q)
                 self._auto_limit = min(
                     MAX_AUTO_DT,
-                    AUTO_SAFETY * largest_stable_step(self.integrator, mode.omega, mode.zeta),
+                    AUTO_SAFETY * mode_stable_step(self.integrator, mode),
                 )
                 self._auto_time = state.time
             limit = self._auto_limit
