@@ -288,7 +288,7 @@ def largest_stable_step(
         bound = np.exp(growth_rate * h) * (1.0 + tolerance)
         return bool(np.all(step_radius(integrator, h, lam, d) <= bound))
 
-    grid = np.geomspace(1e-6, 10.0, 200) / total
+    grid = np.geomspace(1e-6, 10.0, 50) / total
     good = 0.0
     for h in grid:
         if not stable(h):
@@ -297,7 +297,7 @@ def largest_stable_step(
     else:
         return float(grid[-1])
     lo, hi = good, h
-    for _ in range(60):
+    for _ in range(48):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if stable(mid) else (lo, mid)
     return float(lo)
