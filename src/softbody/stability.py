@@ -18,9 +18,10 @@ separately and added (Weyl's inequality), split by whether spring damping acts o
 A mode then has squared frequency lambda = lambda_d + lambda_u with lambda_d in
 [0, omega_damped^2], lambda_u in [0, omega_undamped^2], their sum at most omega^2 (the
 springs bounded whole, each block of norm k max(1, |1 - L0/L|), plus pressure), and
-damping rate (the d in
-x'' = -lambda x - d x') between beta_min lambda_d and beta_max lambda_d, beta = c / k,
-and at most the largest damping rate (the same Gershgorin bound on M^-1 C, c for k).
+damping rate (the d in x'' = -lambda x - d x') between beta_min lambda_d and
+beta_max lambda_d, beta = c / k, and at most the largest damping rate (the same
+Gershgorin bound on M^-1 C, c for k). Dampers without stiffness (k = 0, c > 0) may give
+any mode the largest damping rate.
 The stable step is the largest h for which the scheme's amplification matrix on every
 such oscillator has spectral radius <= 1. Checking the stiffest mode alone is not enough:
 with damping proportional to stiffness a strongly damped stiff mode can be stable at a
@@ -29,7 +30,8 @@ tested against the ball's linearised equations). RK4 is stable to omega h ~ 2.8,
 symplectic Euler and velocity Verlet to omega h = 2 undamped. Explicit Euler and Midpoint
 amplify every undamped vibration, by (omega h)^2 / 2 and (omega h)^4 / 8 per step, at any
 h; for them the estimate is the step at which no mode grows faster than
-``TOLERATED_GROWTH_RATE`` (one e-fold per 10 simulated seconds).
+``TOLERATED_GROWTH_RATE`` (one e-fold per 10 simulated seconds) or, for slow modes,
+1e-3 of the mode's own rate.
 """
 
 from __future__ import annotations
@@ -60,7 +62,8 @@ class StiffestMode:
     omega_undamped: float
     """Bound on the rest: transverse (stretched) springs, pressure [rad/s]."""
     damping_per_stiffness: tuple[float, float]
-    """Smallest and largest c / k over damped springs and attachments [s]."""
+    """Smallest and largest c / k over damped springs and attachments [s]; the largest is
+    inf where a damper has no stiffness."""
     damping_rate: float
     """Bound on the largest eigenvalue of M^-1 C, C the damping matrix [1/s]."""
     omega_pressure: float
@@ -122,6 +125,11 @@ def stiffest_mode(model, q: np.ndarray | None = None) -> StiffestMode:
         [model.spring_damping[k > 0] / k[k > 0], model.attachment_damping[ka > 0] / ka[ka > 0]]
     )
     beta = (float(ratios.min()), float(ratios.max())) if len(ratios) else (0.0, 0.0)
+    dampers = np.any(model.spring_damping[k == 0] > 0) or np.any(
+        model.attachment_damping[ka == 0] > 0
+    )
+    if dampers:
+        beta = (beta[0], np.inf)
     damping_rate = _spring_bound(n, inv, idx, model.spring_damping, a, model.attachment_damping)
 
     pressure_rows = np.zeros(n)
@@ -259,7 +267,8 @@ def largest_stable_step(
     tolerance: float = 1e-12,
 ) -> float:
     """Largest h [s] such that for every step up to h no mode grows faster than
-    ``growth_rate`` [1/s] (spectral radius <= exp(growth_rate h) (1 + tolerance)).
+    ``growth_rate`` [1/s] or 1e-3 of its own rate sqrt(lambda) + d (spectral radius <=
+    exp(that h) (1 + tolerance)).
 
     The modes (module docstring): damped part lambda_d = s omega^2 for s in [0, 1] with
     damping rate beta lambda_d, beta = 2 zeta / omega (stiffness-proportional damping, so
@@ -269,26 +278,36 @@ def largest_stable_step(
     """
     integrator = Integrator(integrator)
     total = float(np.hypot(omega, omega_undamped) if omega_total is None else omega_total)
-    if total <= 0 or integrator.implicit:
+    rate = total if np.isinf(damping_rate) else max(total, damping_rate)
+    if rate <= 0 or integrator.implicit:
         # backward Euler: |1 / (1 - h lambda)| <= 1 whenever Re(lambda) <= 0
         return float("inf")
     if damping_per_stiffness is None:
         damping_per_stiffness = (2.0 * zeta / omega if omega > 0 else 0.0,) * 2
     s_damped = np.linspace(0.0, 1.0, 129)[:, None, None]
     s_undamped = np.linspace(0.0, 1.0, 9 if omega_undamped > 0 else 1)[None, :, None]
-    beta = np.array(sorted(set(damping_per_stiffness)))[None, None, :]
+    low, high = damping_per_stiffness
+    # the two ends and their geometric mean (damping ratios can spread over decades)
+    middle = np.sqrt(low * high) if np.isfinite(high) else low
+    beta = np.array(sorted({low, middle, high}))[None, None, :]
     lam_damped = s_damped * min(omega, total) ** 2
     lam_undamped = np.clip(
         np.minimum(s_undamped * omega_undamped**2, total**2 - lam_damped), 0, None
     )
-    lam = (lam_damped + lam_undamped + 0.0 * beta).ravel()
-    d = (np.minimum(beta * lam_damped, damping_rate) + 0.0 * s_undamped).ravel()
+    with np.errstate(invalid="ignore"):  # inf * 0: a pure damper on a mode of any stiffness
+        d = np.where(np.isinf(beta), damping_rate, beta * lam_damped)
+    lam, d = np.broadcast_arrays(lam_damped + lam_undamped, np.minimum(d, damping_rate))
+    lam, d = lam.ravel(), d.ravel()
+
+    # growth accepted per mode: growth_rate, but never more than 1e-3 of the mode's own
+    # rate, so slow modes (a soft damper, say) keep their sharp limits
+    accepted = np.minimum(growth_rate, 1e-3 * (np.sqrt(lam) + d))
 
     def stable(h):
-        bound = np.exp(growth_rate * h) * (1.0 + tolerance)
+        bound = np.exp(accepted * h) * (1.0 + tolerance)
         return bool(np.all(step_radius(integrator, h, lam, d) <= bound))
 
-    grid = np.geomspace(1e-6, 10.0, 50) / total
+    grid = np.geomspace(1e-6, 10.0, 50) / rate
     good = 0.0
     for h in grid:
         if not stable(h):
