@@ -37,52 +37,55 @@ def eval_body_motion(
 ):
     """Bounds (B, 3), mass-weighted velocity (B, 3) and movable mass (B,) of each body."""
     for b in range(body_particle_range.shape[0]):
-        for k in range(3):
-            body_lo[b, k] = np.inf
-            body_hi[b, k] = -np.inf
-            body_velocity[b, k] = 0.0
-        mass = 0.0
+        # sums and bounds in registers, written once per body
+        lx = ly = lz = np.inf
+        hx = hy = hz = -np.inf
+        px = py = pz = mass = 0.0
         for i in range(body_particle_range[b, 0], body_particle_range[b, 1]):
-            for k in range(3):
-                x = q[i, k]
-                body_lo[b, k] = min(body_lo[b, k], x)
-                body_hi[b, k] = max(body_hi[b, k], x)
+            x, y, z = q[i, 0], q[i, 1], q[i, 2]
+            lx, ly, lz = min(lx, x), min(ly, y), min(lz, z)
+            hx, hy, hz = max(hx, x), max(hy, y), max(hz, z)
             if particle_inv_mass[i] > 0.0:
                 m = particle_mass[i]
                 mass += m
-                for k in range(3):
-                    body_velocity[b, k] += m * qd[i, k]
+                px += m * qd[i, 0]
+                py += m * qd[i, 1]
+                pz += m * qd[i, 2]
+        body_lo[b, 0], body_lo[b, 1], body_lo[b, 2] = lx, ly, lz
+        body_hi[b, 0], body_hi[b, 1], body_hi[b, 2] = hx, hy, hz
         body_free_mass[b] = mass
         if mass > 0.0:
-            for k in range(3):
-                body_velocity[b, k] /= mass
+            px, py, pz = px / mass, py / mass, pz / mass
+        body_velocity[b, 0], body_velocity[b, 1], body_velocity[b, 2] = px, py, pz
 
 
 @njit(cache=True)
-def _fit_bounding_object(q, begin, end, shape, lo, hi, center, axes):
-    """Centre and semi-axes of a body's bounding box (1), sphere (2) or ellipsoid (3)."""
+def _fit_bounding_object(q, begin, end, shape, b, lo, hi, center, axes):
+    """Centre and semi-axes (rows b of center, axes (B, 3)) of body b's bounding box (1),
+    sphere (2) or ellipsoid (3), from its bounds lo, hi (B, 3)."""
     for k in range(3):
-        center[k] = 0.5 * (lo[k] + hi[k])
-        axes[k] = max(0.5 * (hi[k] - lo[k]), 1e-12)
+        center[b, k] = 0.5 * (lo[b, k] + hi[b, k])
+        axes[b, k] = max(0.5 * (hi[b, k] - lo[b, k]), 1e-12)
     if shape == 1:
         return
+    cx, cy, cz = center[b, 0], center[b, 1], center[b, 2]
+    # scaled distance: by the box's half extents for the ellipsoid, plain for the sphere
+    wx, wy, wz = 1.0, 1.0, 1.0
+    if shape == 3:
+        wx, wy, wz = 1.0 / axes[b, 0], 1.0 / axes[b, 1], 1.0 / axes[b, 2]
     s2 = 0.0
     for i in range(begin, end):
-        acc = 0.0
-        for k in range(3):
-            d = q[i, k] - center[k]
-            if shape == 3:
-                d /= axes[k]
-            acc += d * d
-        s2 = max(s2, acc)
+        dx, dy, dz = (q[i, 0] - cx) * wx, (q[i, 1] - cy) * wy, (q[i, 2] - cz) * wz
+        s2 = max(s2, dx * dx + dy * dy + dz * dz)
     s = np.sqrt(s2)
     for k in range(3):
-        axes[k] = s if shape == 2 else s * axes[k]
+        axes[b, k] = s if shape == 2 else s * axes[b, k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _respond(v, u, n, e, keep):
-    """New velocity (3-tuple) for relative velocity v - u against normal n."""
+    """New velocity (3-tuple) for velocity v against normal n, relative to velocity u
+    (all 3-tuples of numbers: passing array views here cost far more than the test)."""
     vx, vy, vz = v[0] - u[0], v[1] - u[1], v[2] - u[2]
     vn = vx * n[0] + vy * n[1] + vz * n[2]
     if vn >= 0.0:
@@ -112,11 +115,10 @@ def eval_soft_contacts_bounding(
     body_center,
     body_axes,
     body_dv,
-    n,
 ):
     """The paper's soft-soft collisions against bounding objects (module docstring).
 
-    body_* arrays are scratch (B, 3) / (B,); n is scratch (3,).
+    body_* arrays are scratch (B, 3) / (B,).
     """
     bodies = body_particle_range.shape[0]
     eval_body_motion(
@@ -136,10 +138,11 @@ def eval_soft_contacts_bounding(
             body_particle_range[b, 0],
             body_particle_range[b, 1],
             body_contact_shape[b],
-            body_lo[b],
-            body_hi[b],
-            body_center[b],
-            body_axes[b],
+            b,
+            body_lo,
+            body_hi,
+            body_center,
+            body_axes,
         )
         for k in range(3):
             body_dv[b, k] = 0.0
@@ -154,48 +157,58 @@ def eval_soft_contacts_bounding(
                     overlap = False
             if not overlap:
                 continue
-            c, ax = body_center[b], body_axes[b]
+            # the other body's object and velocity as numbers (read once per pair)
+            cx, cy, cz = body_center[b, 0], body_center[b, 1], body_center[b, 2]
+            ax, ay, az = body_axes[b, 0], body_axes[b, 1], body_axes[b, 2]
+            iax, iay, iaz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
+            u = (body_velocity[b, 0], body_velocity[b, 1], body_velocity[b, 2])
+            share = 1.0 / body_free_mass[b]
             shape = body_contact_shape[b]
             for i in range(body_particle_range[a, 0], body_particle_range[a, 1]):
                 if particle_inv_mass[i] == 0.0:
                     continue
-                dx, dy, dz = q[i, 0] - c[0], q[i, 1] - c[1], q[i, 2] - c[2]
+                dx, dy, dz = q[i, 0] - cx, q[i, 1] - cy, q[i, 2] - cz
                 if shape == 1:
-                    px, py, pz = ax[0] - abs(dx), ax[1] - abs(dy), ax[2] - abs(dz)
+                    px, py, pz = ax - abs(dx), ay - abs(dy), az - abs(dz)
                     if px <= 0.0 or py <= 0.0 or pz <= 0.0:
                         continue
-                    n[0] = n[1] = n[2] = 0.0
+                    nx = ny = nz = 0.0
                     if px <= py and px <= pz:
-                        n[0] = 1.0 if dx >= 0.0 else -1.0
-                        q[i, 0] = c[0] + n[0] * ax[0]
+                        nx = 1.0 if dx >= 0.0 else -1.0
+                        q[i, 0] = cx + nx * ax
                     elif py <= pz:
-                        n[1] = 1.0 if dy >= 0.0 else -1.0
-                        q[i, 1] = c[1] + n[1] * ax[1]
+                        ny = 1.0 if dy >= 0.0 else -1.0
+                        q[i, 1] = cy + ny * ay
                     else:
-                        n[2] = 1.0 if dz >= 0.0 else -1.0
-                        q[i, 2] = c[2] + n[2] * ax[2]
+                        nz = 1.0 if dz >= 0.0 else -1.0
+                        q[i, 2] = cz + nz * az
                 else:
-                    f = (dx / ax[0]) ** 2 + (dy / ax[1]) ** 2 + (dz / ax[2]) ** 2
+                    f = dx * dx * iax + dy * dy * iay + dz * dz * iaz
                     if f >= 1.0:
                         continue
                     if f == 0.0:
-                        dx, dy, dz, f = 0.0, ax[1], 0.0, 1.0
+                        dx, dy, dz, f = 0.0, ay, 0.0, 1.0
                     s = 1.0 / np.sqrt(f)  # move along the ray from the centre to F = 1
-                    q[i, 0], q[i, 1], q[i, 2] = c[0] + s * dx, c[1] + s * dy, c[2] + s * dz
-                    gx, gy, gz = s * dx / ax[0] ** 2, s * dy / ax[1] ** 2, s * dz / ax[2] ** 2
+                    q[i, 0], q[i, 1], q[i, 2] = cx + s * dx, cy + s * dy, cz + s * dz
+                    gx, gy, gz = s * dx * iax, s * dy * iay, s * dz * iaz
                     g = np.sqrt(gx * gx + gy * gy + gz * gz)
-                    n[0], n[1], n[2] = gx / g, gy / g, gz / g
-                nvx, nvy, nvz = _respond(qd[i], body_velocity[b], n, restitution, keep)
-                m = particle_mass[i]
-                body_dv[b, 0] -= m * (nvx - qd[i, 0]) / body_free_mass[b]
-                body_dv[b, 1] -= m * (nvy - qd[i, 1]) / body_free_mass[b]
-                body_dv[b, 2] -= m * (nvz - qd[i, 2]) / body_free_mass[b]
+                    nx, ny, nz = gx / g, gy / g, gz / g
+                v = (qd[i, 0], qd[i, 1], qd[i, 2])
+                nvx, nvy, nvz = _respond(v, u, (nx, ny, nz), restitution, keep)
+                m = particle_mass[i] * share
+                body_dv[b, 0] -= m * (nvx - v[0])
+                body_dv[b, 1] -= m * (nvy - v[1])
+                body_dv[b, 2] -= m * (nvz - v[2])
                 qd[i, 0], qd[i, 1], qd[i, 2] = nvx, nvy, nvz
     for b in range(bodies):
+        dvx, dvy, dvz = body_dv[b, 0], body_dv[b, 1], body_dv[b, 2]
+        if dvx == 0.0 and dvy == 0.0 and dvz == 0.0:
+            continue  # nothing hit this body
         for i in range(body_particle_range[b, 0], body_particle_range[b, 1]):
             if particle_inv_mass[i] > 0.0:
-                for k in range(3):
-                    qd[i, k] += body_dv[b, k]
+                qd[i, 0] += dvx
+                qd[i, 1] += dvy
+                qd[i, 2] += dvz
 
 
 @njit(cache=True)

@@ -139,7 +139,6 @@ def eval_contacts(
             w.body_center,
             w.body_axes,
             w.body_dv,
-            w.scratch[0],
         )
     elif m.soft_contact_mode == 2:
         needed = eval_soft_contacts_surface(
