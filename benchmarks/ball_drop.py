@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
 import tracemalloc
 import warnings
@@ -37,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 import softbody as sb
-from results_io import RESULTS, save_figure, write_json
+from results_io import RESULTS, run_record, save_figure, write_json
 
 INTEGRATORS = [
     "symplectic_euler",
@@ -381,24 +380,21 @@ def main() -> None:
     if any("bullet" in r for r in rows):
         realtime["bullet"] = max(bullet_ok) if bullet_ok else 0
     print("largest real-time ball drop (vertices):", realtime)
-    RESULTS.mkdir(exist_ok=True)
-    result = {
-        "benchmark": "ball_drop",
-        "date": time.strftime("%Y-%m-%d"),
-        "cores": os.cpu_count(),
-        "threads": 1,
-        "dtype": "float64",
-        "sizes": rows,
-        "largest_realtime_vertex_count": realtime,
-        "implicit_tolerance": IMPLICIT_TOLERANCE,
-        "bullet": {
+    result = run_record(
+        "ball_drop",
+        threads=1,
+        dtype="float64",
+        sizes=rows,
+        largest_realtime_vertex_count=realtime,
+        implicit_tolerance=IMPLICIT_TOLERANCE,
+        bullet={
             "kPR_tried": list(BULLET_KPRS),
             "dt_s": BULLET_DT,
             "position_iterations_tried": list(BULLET_ITERATIONS),
         }
         if any("bullet" in r for r in rows)
         else None,
-    }
+    )
     write_json(RESULTS / "ball_drop.json", result)
     plot(result, RESULTS / "ball_drop.png")
     print(f"wrote {RESULTS / 'ball_drop.json'} and .png")

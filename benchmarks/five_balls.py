@@ -16,13 +16,12 @@ Usage: python benchmarks/five_balls.py
 
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
 
 import softbody as sb
-from results_io import RESULTS, save_figure, write_json
+from results_io import RESULTS, run_record, save_figure, write_json
 from softbody.scenes.loader import load_scene
 
 DURATION = 10.0
@@ -107,17 +106,14 @@ def main() -> None:
             f"kinetic energy {row['kinetic_energy_ratio']:.2f}x RK4's  ok={row['ok']}",
             flush=True,
         )
-    RESULTS.mkdir(exist_ok=True)
-    result = {
-        "benchmark": "five_balls",
-        "date": time.strftime("%Y-%m-%d"),
-        "cores": os.cpu_count(),
-        "threads": 1,
-        "dtype": "float64",
-        "duration_s": DURATION,
-        "reference_kinetic_energy_j": reference_energy,
-        "runs": rows,
-    }
+    result = run_record(
+        "five_balls",
+        threads=1,
+        dtype="float64",
+        duration_s=DURATION,
+        reference_kinetic_energy_j=reference_energy,
+        runs=rows,
+    )
     write_json(RESULTS / "five_balls.json", result)
 
     import matplotlib

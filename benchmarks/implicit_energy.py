@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 
 import softbody as sb
-from results_io import RESULTS, save_figure, write_json
+from results_io import RESULTS, run_record, save_figure, write_json
 
 
 def vibrating_ball(damping: float) -> sb.Model:
@@ -79,12 +79,7 @@ def main() -> None:
         )
     write_json(
         RESULTS / "implicit_energy.json",
-        {
-            "benchmark": "implicit_energy",
-            "date": time.strftime("%Y-%m-%d"),
-            "kick_energy_J": float(kinetic0),
-            "runs": out,
-        },
+        run_record("implicit_energy", kick_energy_J=float(kinetic0), runs=out),
     )
 
     import matplotlib

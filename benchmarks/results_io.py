@@ -6,9 +6,20 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from pathlib import Path
 
 RESULTS = Path(__file__).parent / "results"
+
+
+def run_record(benchmark: str, **fields) -> dict:
+    """A result's common head (benchmark name, date, core count), then ``fields``."""
+    return {
+        "benchmark": benchmark,
+        "date": time.strftime("%Y-%m-%d"),
+        "cores": os.cpu_count(),
+        **fields,
+    }
 
 
 def write_json(path: Path, data: dict) -> None:

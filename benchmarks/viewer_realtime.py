@@ -9,11 +9,10 @@ Needs Debian's chromium and the test extras (viser, playwright).
 from __future__ import annotations
 
 import argparse
-import os
 import socket
 import time
 
-from results_io import RESULTS, write_json
+from results_io import RESULTS, run_record, write_json
 
 PAGE_FPS = """() => new Promise(done => { let n = 0; const t0 = performance.now();
   function tick() { n++; if (performance.now() - t0 < 2000) requestAnimationFrame(tick);
@@ -82,14 +81,7 @@ def main() -> None:
             page.close()
             viewer.stop()
         browser.close()
-    RESULTS.mkdir(exist_ok=True)
-    out = {
-        "benchmark": "viewer_realtime",
-        "date": time.strftime("%Y-%m-%d"),
-        "cores": os.cpu_count(),
-        "renderer": "headless chromium, software WebGL",
-        "scenes": rows,
-    }
+    out = run_record("viewer_realtime", renderer="headless chromium, software WebGL", scenes=rows)
     write_json(RESULTS / "viewer_realtime.json", out)
     print(f"wrote {RESULTS / 'viewer_realtime.json'}")
 
