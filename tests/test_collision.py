@@ -319,3 +319,79 @@ def test_bad_colliders_are_refused():
         builder.add_collider(sb.ColliderBox(half_extents=(1.0, 0.0, 1.0)))
     with pytest.raises(ValueError, match="soft contact mode must be"):
         builder.set_soft_contact("sticky")
+
+
+def _fit_reference(x, shape):
+    """Centre and semi-axes of the paper's bounding object of points x (N, 3): the box
+    of their bounds; the sphere about the box centre through the farthest point; the
+    ellipsoid with the box's proportions through the farthest point (section 3.5)."""
+    lo, hi = x.min(axis=0), x.max(axis=0)
+    c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    if shape == "bounding_box":
+        return c, h
+    if shape == "bounding_sphere":
+        return c, np.full(3, np.linalg.norm(x - c, axis=1).max())
+    return c, h * np.sqrt((((x - c) / h) ** 2).sum(axis=1).max())
+
+
+@pytest.mark.parametrize("shape", ["bounding_box", "bounding_sphere", "bounding_ellipsoid"])
+def test_bounding_contact_moves_vertices_to_the_other_object(shape):
+    """One pass of the paper's soft-soft contact on two overlapping balls (seed 4 for
+    their velocities): every vertex inside the other ball's bounding object (fitted
+    before the pass) ends on its surface, on the nearest face of a box or along the ray
+    from the centre of a sphere or ellipsoid; the others stay; and the impulses cancel,
+    so the total momentum is unchanged (to round-off)."""
+    from softbody.collision.soft import eval_soft_contacts_bounding
+    from softbody.integrators.workspace import Workspace
+
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("bounding", restitution=0.5, friction=0.2)
+    for center, scale in (((-0.3, 0.0, 0.0), (1.0, 0.8, 1.0)), ((0.3, 0.1, 0.0), (0.7, 1.0, 1.0))):
+        mesh = sb.icosphere(2, radius=0.5)
+        mesh = sb.TriMesh(mesh.vertices * scale + center, mesh.faces)
+        builder.add_soft_body(
+            mesh, mass=1.0, stiffness=500.0, damping=1.0, gas=300.0, contact_shape=shape
+        )
+    model = builder.finalize()
+    q = model.particle_q.copy()
+    qd = np.random.default_rng(4).normal(size=q.shape)
+    q0, p0 = q.copy(), (model.particle_mass[:, None] * qd).sum(axis=0)
+    w, m = Workspace.for_model(model), model.data
+    eval_soft_contacts_bounding(
+        m.particle_mass,
+        m.particle_inv_mass,
+        m.body_particle_range,
+        m.body_contact_shape,
+        m.soft_contact_restitution,
+        m.soft_contact_friction,
+        q,
+        qd,
+        w.body_lo,
+        w.body_hi,
+        w.body_velocity,
+        w.body_free_mass,
+        w.body_center,
+        w.body_axes,
+        w.body_dv,
+    )
+    (a0, a1), (b0, b1) = model.body_particle_range
+    moved = 0
+    for mine, other in ((slice(a0, a1), slice(b0, b1)), (slice(b0, b1), slice(a0, a1))):
+        c, axes = _fit_reference(q0[other], shape)
+        d = q0[mine] - c
+        expected = q0[mine].copy()
+        if shape == "bounding_box":
+            depth = axes - np.abs(d)
+            inside = np.all(depth > 0, axis=1)
+            k = np.argmin(depth, axis=1)
+            rows = np.nonzero(inside)[0]
+            expected[rows, k[rows]] = c[k[rows]] + np.sign(d[rows, k[rows]]) * axes[k[rows]]
+        else:
+            f = ((d / axes) ** 2).sum(axis=1)
+            inside = f < 1
+            expected[inside] = c + d[inside] / np.sqrt(f[inside])[:, None]
+        moved += inside.sum()
+        assert np.allclose(q[mine], expected, rtol=0, atol=1e-12)
+    assert moved > 10  # the balls do overlap
+    p1 = (model.particle_mass[:, None] * qd).sum(axis=0)
+    assert np.allclose(p1, p0, rtol=0, atol=1e-12)
