@@ -10,7 +10,7 @@ import pytest
 import softbody as sb
 from conftest import ball_model, settle
 from softbody.integrators import Integrator
-from softbody.stability import amplification_matrix, largest_stable_step
+from softbody.stability import amplification_matrix, largest_stable_step, step_radius
 
 
 def two_masses(m1=1.0, m2=3.0, k=400.0, rest_length=0.0):
@@ -322,3 +322,16 @@ def test_pure_damper_limits_match_closed_form():
     for integrator, limit in limits.items():
         # the estimate accepts growth up to 1e-3 of the mode's rate: 0.1% past the limit
         assert sb.stable_dt(model, integrator) == pytest.approx(limit / d, rel=2e-3)
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "velocity_verlet", "rk4"])
+def test_step_radius_is_accurate_at_small_steps(integrator):
+    """An overdamped oscillator (omega = 1, d = 16 /s) is stable under these schemes for
+    every step from 1e-10 s to 0.1 s: the amplification's eigenvalues are real, in (0, 1)
+    (e.g. 1 - h d + O(h^2)), so the computed spectral radius must not exceed 1. The
+    textbook discriminant trace^2 / 4 - det cancels to rounding at small h (radius
+    1 + 9e-9 at h = 1e-9 s), which made the estimate's scan reject tiny steps: 2e-22 s
+    for symplectic Euler on a 40,962-vertex ball whose step is 8e-6 s."""
+    h = np.geomspace(1e-10, 1e-1, 200)
+    radius = step_radius(Integrator.parse(integrator), h, 1.0, 16.0)
+    assert radius.max() <= 1.0
