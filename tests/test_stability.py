@@ -320,9 +320,9 @@ def test_spectral_bounds_are_the_linearised_balls_eigenvalues(subdivisions):
     from finite-difference Jacobians of the force (dense; every spring is stretched, so
     the transverse stiffness k (1 - L0/L) is the |1 - L0/L| the bounds take) equal the
     spectral bounds' whole stiffness and damping rate: to 1e-9 for 42 vertices (solved
-    densely) and to Lanczos' tolerance 1e-3 for 162. The whole is at most the damped and
+    densely) and to Lanczos' tolerance (LANCZOS_TOLERANCE) for 162. The whole is at most the damped and
     undamped parts' sum (Weyl), and the estimate uses SPECTRAL_MARGIN times these."""
-    from softbody.stability import spectral_bounds, stiffest_mode
+    from softbody.stability import LANCZOS_TOLERANCE, spectral_bounds, stiffest_mode
 
     def ball(tied: bool) -> sb.Model:
         builder = sb.ModelBuilder(gravity=(0, 0, 0))
@@ -349,7 +349,7 @@ def test_spectral_bounds_are_the_linearised_balls_eigenvalues(subdivisions):
     damped, undamped, total, damping_rate = spectral_bounds(
         model, q, pressure - model.body_ambient_pressure, -pressure / volume, grad
     )
-    rel = 1e-9 if subdivisions == 1 else 1e-3
+    rel = 1e-9 if subdivisions == 1 else LANCZOS_TOLERANCE
     assert total == pytest.approx(whole, rel=max(rel, 1e-6))  # 1e-6: the difference step
     assert damping_rate == pytest.approx(rate, rel=rel)
     assert total <= (damped + undamped) * (1 + rel) ** 2  # Weyl

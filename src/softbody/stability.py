@@ -58,13 +58,19 @@ TOLERATED_GROWTH_RATE = 0.1
 
 SPECTRAL_MARGIN = 1.15
 """Factor on the largest eigenvalues found by Lanczos before they replace a Gershgorin
-bound. It covers Lanczos' tolerance (1e-3) and the change of the spectrum as bodies move
+bound. It covers Lanczos' tolerance (``LANCZOS_TOLERANCE``) and the change of the spectrum as bodies move
 and deform after the estimate: over each built-in scene's run (inflation, squashing
 against walls and floors) the largest eigenvalue of the damped part and of the damping
 rose by at most 7% from its value at the start."""
 
 DENSE_EIGEN_SIZE = 300
 """Operators up to this size (3 x particles) are built whole and solved densely."""
+
+LANCZOS_TOLERANCE = 1e-2
+"""ARPACK's relative tolerance for the largest eigenvalue (its Ritz residual at most this
+times the eigenvalue, so the eigenvalue is at most this fraction low). On the 40,962-vertex
+ball it made the four runs 3.4x faster than 1e-3 (0.56 s against 1.92 s) and the step
+estimate 0.24% longer, well inside ``SPECTRAL_MARGIN``."""
 
 
 @dataclass(frozen=True)
@@ -118,8 +124,8 @@ def _stretch(length, rest_length):
 
 def _largest_eigenvalue(matvec, size: int, seed: int = 0) -> float:
     """Largest eigenvalue of the symmetric operator ``matvec`` on vectors of ``size``:
-    dense for small operators, else Lanczos (ARPACK, relative tolerance 1e-3, from a
-    seeded random start); inf if Lanczos does not converge."""
+    dense for small operators, else Lanczos (ARPACK, relative tolerance
+    ``LANCZOS_TOLERANCE``, from a seeded random start); inf if Lanczos does not converge."""
     if size <= DENSE_EIGEN_SIZE:
         a = np.column_stack([matvec(e) for e in np.eye(size)])
         return float(np.linalg.eigvalsh(0.5 * (a + a.T))[-1])
@@ -130,7 +136,7 @@ def _largest_eigenvalue(matvec, size: int, seed: int = 0) -> float:
         return 0.0  # ARPACK stops on a zero operator
     operator = LinearOperator((size, size), matvec=matvec, dtype=np.float64)
     try:
-        top = eigsh(operator, k=1, which="LA", v0=v0, tol=1e-3, return_eigenvectors=False)
+        top = eigsh(operator, k=1, which="LA", v0=v0, tol=LANCZOS_TOLERANCE, return_eigenvectors=False)
     except ArpackNoConvergence:
         return float("inf")
     return float(top[0])
