@@ -2,16 +2,19 @@
 
 The case (issue 5): an icosphere of radius 1 m and 1 kg, inflated (nRT = 300 J, springs
 500 N/m), dropped from 1 m onto the ground. Each integrator runs at its largest stable
-step (0.9 x the estimate; implicit Euler at 1/60 s, CG tolerance 1e-3, multigrid
-preconditioner). Steps per second are measured over at least half a second of wall time
-(best of 3), so sizes that would take hours to simulate 2 s are still measured. Wherever
-the full 2 s drop takes at most 90 s, it is then simulated and checked (volume within
-[0.7, 1.5] of its start, the centre of mass back up at least 5 cm after the first
-contact, and at the end the kinetic energy of motion relative to the centre of mass
-below 5% of the drop energy m g h, so a ball shaking from a too-long step fails), so no
-broken scene counts as real time. Peak memory per vertex is the
-tracemalloc peak of building the model, the simulator and one step, divided by the
-vertex count.
+step (0.9 x the estimate; implicit Euler and BDF2 at 1/60 s with the multigrid
+preconditioner, at CG tolerance 1e-3 and again at 1e-2: on the 10,242-vertex ball the
+error each tolerance adds to the drop is measured against a solve to 1e-6). Steps per
+second are measured over at least half a second of wall time (best of 3), so sizes that
+would take hours to simulate 2 s are still measured. Wherever the full 2 s drop takes at
+most 90 s, it is then simulated and checked (volume within [0.7, 1.5] of its start, the
+centre of mass back up at least 5 cm after the first contact, and at the end the kinetic
+energy of motion relative to the centre of mass below 5% of the drop energy m g h, so a
+ball shaking from a too-long step fails), so no broken scene counts as real time. Peak
+memory per vertex is the tracemalloc peak of building the model, a simulator and one
+step, divided by the vertex count, for implicit Euler (with its multigrid hierarchy) and
+for velocity Verlet (with its stability estimate's Lanczos runs), each after a pass on a
+small ball so that loading the compiled kernels is not counted.
 
 With panda3d installed (``pip install -e ".[bench]"``), the same drop runs in Bullet's
 soft body with its pressure coefficient kPR at Bullet's usual fixed 1/60 s step, in the
@@ -38,14 +41,24 @@ import numpy as np
 import softbody as sb
 from results_io import RESULTS, run_record, save_figure, write_json
 
-INTEGRATORS = [
-    "symplectic_euler",
-    "velocity_verlet",
-    "midpoint",
-    "rk4",
-    "implicit_euler",
-    "bdf2",
-]
+#: implicit schemes' CG tolerance (relative residual) in the runs named after them; the
+#: full-drop check below shows the ball stays round and bouncing with it
+IMPLICIT_TOLERANCE = 1e-3
+#: the looser tolerance of the runs named "<scheme> cg 1e-2"; ``tolerance_error`` below
+#: measures what it costs in accuracy against a tight solve
+LOOSE_TOLERANCE = 1e-2
+
+#: run name -> (integrator, CG tolerance or None for the explicit schemes)
+RUNS = {
+    "symplectic_euler": ("symplectic_euler", None),
+    "velocity_verlet": ("velocity_verlet", None),
+    "midpoint": ("midpoint", None),
+    "rk4": ("rk4", None),
+    "implicit_euler": ("implicit_euler", IMPLICIT_TOLERANCE),
+    "bdf2": ("bdf2", IMPLICIT_TOLERANCE),
+    "implicit_euler cg 1e-2": ("implicit_euler", LOOSE_TOLERANCE),
+    "bdf2 cg 1e-2": ("bdf2", LOOSE_TOLERANCE),
+}
 
 
 def ball_drop(subdivisions: int) -> sb.Model:
@@ -61,16 +74,10 @@ def ball_drop(subdivisions: int) -> sb.Model:
     return builder.finalize()
 
 
-#: implicit Euler's CG tolerance here (relative residual); the full-drop check below shows
-#: the ball stays round and bouncing with it
-IMPLICIT_TOLERANCE = 1e-3
-
-
-def simulator(model, integrator) -> sb.Simulator:
-    if integrator in ("implicit_euler", "bdf2"):
-        return sb.Simulator(
-            model, integrator=integrator, dt=1 / 60, implicit_tolerance=IMPLICIT_TOLERANCE
-        )
+def simulator(model, run: str) -> sb.Simulator:
+    integrator, tolerance = RUNS[run]
+    if tolerance is not None:
+        return sb.Simulator(model, integrator=integrator, dt=1 / 60, implicit_tolerance=tolerance)
     probe = sb.Simulator(model, integrator=integrator, dt=1e-6)
     return sb.Simulator(model, integrator=integrator, dt=0.9 * probe.stable_dt)
 
@@ -278,16 +285,80 @@ def bullet_entry(subdivisions: int) -> dict:
     return result
 
 
-def memory_per_vertex(subdivisions: int) -> float:
+def _peak_bytes(subdivisions: int, integrator: str) -> tuple[int, int]:
+    """tracemalloc peak [bytes] of building the model, a simulator and one step, and the
+    vertex count."""
     tracemalloc.start()
     model = ball_drop(subdivisions)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sb.StabilityWarning)
-        sim = sb.Simulator(model, integrator="implicit_euler", dt=1 / 60)
+        sim = sb.Simulator(model, integrator=integrator, dt=1 / 60)
     sim.run(model.state(), 1)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    return peak / model.particle_count
+    return peak, model.particle_count
+
+
+def memory_per_vertex(subdivisions: int) -> dict:
+    """Peak memory per vertex [bytes] of the implicit Euler simulator (model, multigrid
+    hierarchy, one step) and of an explicit one (velocity Verlet: model, its stability
+    estimate's Lanczos runs, one step). A first pass on a small ball loads the compiled
+    kernels, whose loading would otherwise count toward the first size measured."""
+    out = {}
+    for integrator in ("implicit_euler", "velocity_verlet"):
+        _peak_bytes(1, integrator)
+        peak, count = _peak_bytes(subdivisions, integrator)
+        out[integrator] = peak / count
+    return out
+
+
+#: the ball (10,242 vertices) on which the CG tolerance's error is measured
+TOLERANCE_CHECK_SUBDIVISIONS = 5
+#: the tight CG tolerance the looser ones are compared with
+TIGHT_TOLERANCE = 1e-6
+
+
+def _drop_track(model, integrator: str, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Centre-of-mass height [m] and volume / start volume after every 1/60 s step of the
+    2 s drop."""
+    sim = sb.Simulator(
+        model,
+        integrator=integrator,
+        dt=1 / 60,
+        implicit_tolerance=tolerance,
+        implicit_max_iterations=1000,
+    )
+    state = model.state()
+    v0 = sb.body_volume(model, state)[0]
+    heights, ratios = [], []
+    while state.time < 2.0 - 1e-9:
+        sim.run(state, 1)
+        heights.append(sb.body_center_of_mass(model, state)[0, 1])
+        ratios.append(sb.body_volume(model, state)[0] / v0)
+    return np.array(heights), np.array(ratios)
+
+
+def tolerance_error(subdivisions: int) -> dict:
+    """What an inexact CG solve costs: for each implicit scheme, the largest difference over
+    the 2 s drop in centre-of-mass height [m] and in volume / start volume between its run
+    at each benchmark tolerance and at TIGHT_TOLERANCE; for scale, the difference in height
+    between the two schemes themselves (both tight), a measure of their own time error."""
+    model = ball_drop(subdivisions)
+    result = {"vertex_count": model.particle_count, "tight_tolerance": TIGHT_TOLERANCE}
+    tight = {}
+    for integrator in ("implicit_euler", "bdf2"):
+        tight[integrator] = _drop_track(model, integrator, TIGHT_TOLERANCE)
+        for tolerance in (IMPLICIT_TOLERANCE, LOOSE_TOLERANCE):
+            heights, ratios = _drop_track(model, integrator, tolerance)
+            result[f"{integrator} cg {tolerance:g}"] = {
+                "max_height_difference_m": float(np.abs(heights - tight[integrator][0]).max()),
+                "max_volume_ratio_difference": float(np.abs(ratios - tight[integrator][1]).max()),
+            }
+    result["schemes_max_height_difference_m"] = float(
+        np.abs(tight["implicit_euler"][0] - tight["bdf2"][0]).max()
+    )
+    print("CG tolerance error:", result, flush=True)
+    return result
 
 
 def main() -> None:
@@ -306,10 +377,10 @@ def main() -> None:
         model = ball_drop(s)
         row = {
             "vertex_count": model.particle_count,
-            "bytes_per_vertex": memory_per_vertex(s),
+            "peak_bytes_per_vertex": memory_per_vertex(s),
             "integrators": {},
         }
-        for name in INTEGRATORS:
+        for name in RUNS:
             sim = simulator(model, name)
             rate = steps_per_second(model, sim)
             entry = {
@@ -363,7 +434,7 @@ def main() -> None:
             pass
         rows.append(row)
     realtime = {}
-    for name in INTEGRATORS:
+    for name in RUNS:
         good = [
             r["vertex_count"]
             for r in rows
@@ -387,6 +458,8 @@ def main() -> None:
         sizes=rows,
         largest_realtime_vertex_count=realtime,
         implicit_tolerance=IMPLICIT_TOLERANCE,
+        loose_tolerance=LOOSE_TOLERANCE,
+        tolerance_error=tolerance_error(min(TOLERANCE_CHECK_SUBDIVISIONS, args.max_subdivisions)),
         bullet={
             "kPR_tried": list(BULLET_KPRS),
             "dt_s": BULLET_DT,
@@ -422,8 +495,9 @@ def plot(result: dict, path: Path) -> None:
         if good:
             ax.plot([g[0] for g in good], [g[1] for g in good], style[0], color=color)
 
-    for k, name in enumerate(INTEGRATORS):
-        plot(n, [r["integrators"][name] for r in rows], "o-", f"C{k}", name)
+    for k, name in enumerate(RUNS):
+        style = "o:" if name.endswith(" cg 1e-2") else "o-"
+        plot(n, [r["integrators"][name] for r in rows], style, f"C{k}", name)
     if any("bullet" in r for r in rows):
         plot(
             [r["vertex_count"] for r in rows if "bullet" in r],
