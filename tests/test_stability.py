@@ -320,8 +320,9 @@ def test_spectral_bounds_are_the_linearised_balls_eigenvalues(subdivisions):
     from finite-difference Jacobians of the force (dense; every spring is stretched, so
     the transverse stiffness k (1 - L0/L) is the |1 - L0/L| the bounds take) equal the
     spectral bounds' whole stiffness and damping rate: to 1e-9 for 42 vertices (solved
-    densely) and to Lanczos' tolerance (LANCZOS_TOLERANCE) for 162. The whole is at most the damped and
-    undamped parts' sum (Weyl), and the estimate uses SPECTRAL_MARGIN times these."""
+    densely) and to Lanczos' tolerance (LANCZOS_TOLERANCE) for 162. The whole is at most
+    the damped and undamped parts' sum (Weyl), and the estimate uses SPECTRAL_MARGIN times
+    these."""
     from softbody.stability import LANCZOS_TOLERANCE, spectral_bounds, stiffest_mode
 
     def ball(tied: bool) -> sb.Model:

@@ -58,10 +58,10 @@ TOLERATED_GROWTH_RATE = 0.1
 
 SPECTRAL_MARGIN = 1.15
 """Factor on the largest eigenvalues found by Lanczos before they replace a Gershgorin
-bound. It covers Lanczos' tolerance (``LANCZOS_TOLERANCE``) and the change of the spectrum as bodies move
-and deform after the estimate: over each built-in scene's run (inflation, squashing
-against walls and floors) the largest eigenvalue of the damped part and of the damping
-rose by at most 7% from its value at the start."""
+bound. It covers Lanczos' tolerance (``LANCZOS_TOLERANCE``) and the change of the
+spectrum as bodies move and deform after the estimate: over each built-in scene's run
+(inflation, squashing against walls and floors) the largest eigenvalue of the damped
+part and of the damping rose by at most 7% from its value at the start."""
 
 DENSE_EIGEN_SIZE = 300
 """Operators up to this size (3 x particles) are built whole and solved densely."""
@@ -136,7 +136,9 @@ def _largest_eigenvalue(matvec, size: int, seed: int = 0) -> float:
         return 0.0  # ARPACK stops on a zero operator
     operator = LinearOperator((size, size), matvec=matvec, dtype=np.float64)
     try:
-        top = eigsh(operator, k=1, which="LA", v0=v0, tol=LANCZOS_TOLERANCE, return_eigenvectors=False)
+        top = eigsh(
+            operator, k=1, which="LA", v0=v0, tol=LANCZOS_TOLERANCE, return_eigenvectors=False
+        )
     except ArpackNoConvergence:
         return float("inf")
     return float(top[0])
