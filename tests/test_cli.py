@@ -157,6 +157,35 @@ def test_errors_are_one_line_and_write_nothing(tmp_path, capsys, argv, match):
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_scene_cg_tolerance_reaches_the_implicit_solve(tmp_path):
+    """simulation.implicit_tolerance is the CG tolerance of a run's implicit solve: the
+    summary records it, a loose tolerance changes the result (so it reached the solver),
+    and by little: each step's dv is solved to 1% instead of 1e-6, so after 0.25 s of the
+    hanging balls at 1/60 s their volumes (0.98 to 1.42 of rest, set by their gas) agree
+    to 1e-3 of the rest volume (measured: about 1e-4)."""
+    from softbody.run import Outputs, run_scene
+    from softbody.scenes import load_scene
+
+    bodies = {}
+    for tolerance in (1e-6, 1e-2):
+        scene = load_scene("hanging-ball", [f"simulation.implicit_tolerance={tolerance}"])
+        out = tmp_path / str(tolerance)
+        summary = run_scene(
+            scene,
+            out,
+            integrator="implicit_euler",
+            dt=1 / 60,
+            duration=0.25,
+            outputs=Outputs(video=False, gif=False),
+        )
+        assert summary["implicit_tolerance"] == tolerance
+        bodies[tolerance] = np.array([b["volume_m3"] for b in summary["bodies"]])
+    rest = np.array([b["rest_volume_m3"] for b in summary["bodies"]])
+    difference = np.abs(bodies[1e-2] - bodies[1e-6])
+    assert difference.max() > 0
+    assert np.all(difference < 1e-3 * rest)
+
+
 def test_blow_up_is_one_line_and_leaves_nothing(tmp_path, capsys):
     """A run that blows up (explicit Euler without damping, forced past the estimate
     in a scene file) stops with the body and step, and writes no file."""

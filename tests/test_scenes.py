@@ -59,13 +59,21 @@ def test_hand_is_closed_manifold_and_paper_sized():
 
 
 def test_overrides_change_the_model():
-    """--set style overrides reach the model: gas amount, dt, contact mode."""
+    """--set style overrides reach the model: gas amount, dt, contact mode, CG tolerance."""
     scene = load_scene(
-        "bouncing-balls", ["bodies.2.gas.nrt=77", "simulation.dt=0.0002", 'contact.mode="surface"']
+        "bouncing-balls",
+        [
+            "bodies.2.gas.nrt=77",
+            "simulation.dt=0.0002",
+            'contact.mode="surface"',
+            "simulation.implicit_tolerance=0.01",
+        ],
     )
     assert scene.model.body_gas_value[2] == 77.0
     assert scene.dt == 0.0002
     assert scene.model.soft_contact_mode == 2
+    assert scene.implicit_tolerance == 0.01
+    assert load_scene("bouncing-balls").implicit_tolerance == 1e-6  # the Simulator's default
 
 
 @pytest.mark.parametrize(
@@ -78,6 +86,8 @@ def test_overrides_change_the_model():
         ("bodies.0.mass=-1", "mass must be > 0"),
         ('bodies.0.gas.law="vdw"', "unknown gas law"),
         ("simulation", "must look like key=value"),
+        ("simulation.implicit_tolerance=1", r"implicit_tolerance must lie in \(0, 1\), got 1"),
+        ('simulation.implicit_tolerance="nan"', r"implicit_tolerance must lie in \(0, 1\)"),
     ],
 )
 def test_bad_overrides_name_the_key(override, match):

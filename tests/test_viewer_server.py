@@ -10,21 +10,47 @@ import pytest
 import softbody as sb
 
 
-@pytest.fixture
-def viewer():
+def start_viewer(**options):
+    """The hanging-ball scene in a viewer on a free port, its simulator built with
+    ``options`` (keyword options of ``Simulator``)."""
     from softbody.scenes import load_scene
     from softbody.viewer.app import show
 
     scene = load_scene("hanging-ball")
-    sim = sb.Simulator(scene.model, integrator=scene.integrator, dt=scene.dt)
+    sim = sb.Simulator(scene.model, integrator=scene.integrator, dt=scene.dt, **options)
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    v = show(
+    return show(
         scene.model, scene.model.state(), sim, port=port, block=False, body_names=scene.body_names
     )
+
+
+@pytest.fixture
+def viewer():
+    v = start_viewer()
     yield v
     v.stop()
+
+
+def test_rebuilt_simulators_keep_the_callers_options():
+    """A slider or integrator change builds a new Simulator, and Reset builds the first
+    one again: each keeps the options the caller's simulator had (CG tolerance, speed
+    limit, threads), not the defaults."""
+    options = {"implicit_tolerance": 1e-2, "max_speed": 50.0, "implicit_max_iterations": 30}
+    v = start_viewer(**options)
+    try:
+        expected = v.sim.options
+        assert {k: expected[k] for k in options} == options
+        v.integrator_menu.value = "implicit_euler"
+        v.stiffness_sliders[0].value = 0.5 * v.stiffness_sliders[0].value
+        v._rebuild()
+        assert v.sim.integrator == sb.Integrator.IMPLICIT_EULER
+        assert v.sim.options == expected
+        v._reset()
+        assert v.sim.options == expected
+    finally:
+        v.stop()
 
 
 def test_keeps_up_with_the_wall_clock(viewer):

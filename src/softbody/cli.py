@@ -110,7 +110,10 @@ def _view(args) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("error", StabilityWarning)
         sim = Simulator(
-            scene.model, integrator=args.integrator or scene.integrator, dt=args.dt or scene.dt
+            scene.model,
+            integrator=args.integrator or scene.integrator,
+            dt=args.dt or scene.dt,
+            implicit_tolerance=scene.implicit_tolerance,
         )
     cam = scene.render.camera
     viewer = show(

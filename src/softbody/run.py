@@ -99,7 +99,13 @@ def run_scene(
     with warnings.catch_warnings():
         if strict_stability:
             warnings.simplefilter("error", StabilityWarning)
-        sim = Simulator(model, integrator=integrator, dt=dt, threads=threads)
+        sim = Simulator(
+            model,
+            integrator=integrator,
+            dt=dt,
+            threads=threads,
+            implicit_tolerance=scene.implicit_tolerance,
+        )
     # compile (first run) or load the kernels now, so that the timings below are the
     # simulation's and not the compiler's
     t0 = time.perf_counter()
@@ -221,6 +227,7 @@ def run_scene(
             "parameters": scene.data,
             "integrator": sim.integrator.name.lower(),
             "threads": sim.threads,
+            "implicit_tolerance": sim.implicit_tolerance if sim.integrator.implicit else None,
             "dt_s": sim.dt if auto else dt,
             "dt_auto": auto,
             "stable_dt_estimate_s": sim.stable_dt,

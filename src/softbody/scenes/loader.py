@@ -42,7 +42,7 @@ class SceneError(ValueError):
 
 
 # -- schema: allowed keys per table ------------------------------------------------------
-SIMULATION_KEYS = {"integrator", "dt", "duration", "gravity"}
+SIMULATION_KEYS = {"integrator", "dt", "duration", "gravity", "implicit_tolerance"}
 CONTACT_KEYS = {"mode", "restitution", "friction", "margin"}
 RENDER_KEYS = {
     "width",
@@ -372,6 +372,17 @@ def _dt(value) -> float | str:
     return dt
 
 
+def _tolerance(value) -> float:
+    """simulation.implicit_tolerance: the implicit schemes' relative CG residual, in (0, 1)."""
+    try:
+        tolerance = float(value)
+    except (TypeError, ValueError):
+        tolerance = np.nan
+    if not (np.isfinite(tolerance) and 0 < tolerance < 1):
+        raise SceneError(f"simulation.implicit_tolerance must lie in (0, 1), got {value!r}")
+    return tolerance
+
+
 @dataclass
 class Scene:
     """A loaded scene: the model and how to run and draw it."""
@@ -387,6 +398,8 @@ class Scene:
     duration: float
     render: RenderSettings
     body_names: list[str]
+    implicit_tolerance: float = 1e-6
+    """``implicit_euler`` and ``bdf2``: the CG solve's relative residual (``Simulator``)."""
 
 
 def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
@@ -546,6 +559,7 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
         duration=duration,
         render=render,
         body_names=names,
+        implicit_tolerance=_tolerance(sim.get("implicit_tolerance", 1e-6)),
     )
 
 

@@ -146,6 +146,21 @@ class Simulator:
             warnings.warn(self.stability_note(), StabilityWarning, stacklevel=2)
 
     @property
+    def options(self) -> dict:
+        """The keyword options this simulator was built with, other than the model,
+        integrator and dt: ``Simulator(model, integrator=..., dt=..., **sim.options)``
+        builds one that solves, checks and threads the same way (the viewer does this when
+        the integrator or the model changes)."""
+        return {
+            "max_speed": self.max_speed,
+            "volume_limits": self.volume_limits,
+            "implicit_tolerance": self.implicit_tolerance,
+            "implicit_max_iterations": self.implicit_max_iterations,
+            "implicit_preconditioner": self.implicit_preconditioner,
+            "threads": self.threads,
+        }
+
+    @property
     def solver_iterations(self) -> tuple[float, int]:
         """``implicit_euler``, ``bdf2``: (mean, most) CG iterations per step over the
         last :meth:`run` call; (0, 0) for explicit integrators."""

@@ -125,6 +125,8 @@ class Viewer:
         self.state = state.copy()
         self.integrator = simulator.integrator.name.lower()
         self.dt = simulator.dt
+        # the caller's solver, checks and threads carry over to every rebuilt simulator
+        self.sim_options = simulator.options
         self.control = model.control()
         self.body_names = body_names or [f"body {b}" for b in range(model.body_count)]
         colors = body_colors or PALETTE
@@ -147,7 +149,7 @@ class Viewer:
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", StabilityWarning)
-            self.sim = Simulator(model, integrator=self.integrator, dt=self.dt)
+            self.sim = Simulator(model, integrator=self.integrator, dt=self.dt, **self.sim_options)
         # compile (or load) the kernels now, so the page never shows a frozen scene
         self.sim.run(self.state.copy(), 1, self.control)
 
@@ -422,7 +424,9 @@ class Viewer:
             self.model = self.initial_model
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", StabilityWarning)
-                self.sim = Simulator(self.model, integrator=self.integrator, dt=self.dt)
+                self.sim = Simulator(
+                    self.model, integrator=self.integrator, dt=self.dt, **self.sim_options
+                )
             self.state = self.initial_state.copy()
             self.control = self.model.control()
             self._history.clear()
@@ -493,7 +497,12 @@ class Viewer:
             )
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", StabilityWarning)
-                self.sim = Simulator(model, integrator=self.integrator_menu.value, dt=self.dt)
+                self.sim = Simulator(
+                    model,
+                    integrator=self.integrator_menu.value,
+                    dt=self.dt,
+                    **self.sim_options,
+                )
             self.message = str(caught[0].message) if caught else ""
             self.model = model
             control = model.control()
