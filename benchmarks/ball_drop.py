@@ -23,7 +23,10 @@ same process. Bullet's position-solver iterations (4, 8, ..., 128), each with kP
 both sides are timed with a valid ball; the ratio softbody (fastest valid integrator) /
 Bullet is printed per size.
 
-Writes results/ball_drop.{json,png}.
+Writes results/ball_drop.{json,png}. After each size, the sizes measured so far go to
+results/ball_drop.partial.json (removed when the run completes), so a run stopped or
+crashed at a large size keeps what it measured and the last complete result is left as
+it was.
 Usage: python benchmarks/ball_drop.py [--max-subdivisions 7]
 """
 
@@ -47,6 +50,8 @@ IMPLICIT_TOLERANCE = 1e-3
 #: the looser tolerance of the runs named "<scheme> cg 1e-2"; ``tolerance_error`` below
 #: measures what it costs in accuracy against a tight solve
 LOOSE_TOLERANCE = 1e-2
+#: the sizes measured so far, while a run is going on
+PARTIAL = RESULTS / "ball_drop.partial.json"
 
 #: run name -> (integrator, CG tolerance or None for the explicit schemes)
 RUNS = {
@@ -434,6 +439,7 @@ def main() -> None:
         except ImportError:
             pass
         rows.append(row)
+        write_json(PARTIAL, run_record("ball_drop", threads=1, dtype="float64", sizes=rows))
     realtime = {}
     for name in RUNS:
         good = [
@@ -471,6 +477,7 @@ def main() -> None:
     )
     write_json(RESULTS / "ball_drop.json", result)
     plot(result, RESULTS / "ball_drop.png")
+    PARTIAL.unlink(missing_ok=True)
     print(f"wrote {RESULTS / 'ball_drop.json'} and .png")
 
 
