@@ -7,8 +7,11 @@ Two modes, chosen per model:
   box, fitted each step as in ``softbody.volume``). A vertex inside is moved out to the
   object's surface; its velocity relative to the other body's mean velocity is reflected
   and scaled (restitution, friction), and the opposite impulse goes to the other body,
-  spread over its particles by mass, so momentum is conserved. All bodies are tested
-  against the objects as they were at the start of the pass (order independent).
+  spread over its particles by mass, so momentum is conserved. A body's mean velocity and
+  mass count its pinned particles too: their share of the impulse goes to whatever holds
+  them, so a body pinned all over is an immovable obstacle, and one free particle on a
+  pinned body does not take a whole body's impulse. All bodies are tested against the
+  objects as they were at the start of the pass (order independent).
 * ``surface`` (beyond the paper): vertices are tested against the other body's actual
   triangles, found through a spatial hash of triangle bounding boxes. A vertex behind the
   nearest triangle (within ``contact_margin``) is separated from it by a mass-weighted
@@ -33,9 +36,10 @@ def eval_body_motion(
     body_lo,
     body_hi,
     body_velocity,
-    body_free_mass,
+    body_mass,
 ):
-    """Bounds (B, 3), mass-weighted velocity (B, 3) and movable mass (B,) of each body."""
+    """Bounds (B, 3), mass-weighted velocity (B, 3) and mass (B,) of each body, over all
+    its particles (pinned ones with their set velocities)."""
     for b in range(body_particle_range.shape[0]):
         # sums and bounds in registers, written once per body
         lx = ly = lz = np.inf
@@ -45,15 +49,14 @@ def eval_body_motion(
             x, y, z = q[i, 0], q[i, 1], q[i, 2]
             lx, ly, lz = min(lx, x), min(ly, y), min(lz, z)
             hx, hy, hz = max(hx, x), max(hy, y), max(hz, z)
-            if particle_inv_mass[i] > 0.0:
-                m = particle_mass[i]
-                mass += m
-                px += m * qd[i, 0]
-                py += m * qd[i, 1]
-                pz += m * qd[i, 2]
+            m = particle_mass[i]
+            mass += m
+            px += m * qd[i, 0]
+            py += m * qd[i, 1]
+            pz += m * qd[i, 2]
         body_lo[b, 0], body_lo[b, 1], body_lo[b, 2] = lx, ly, lz
         body_hi[b, 0], body_hi[b, 1], body_hi[b, 2] = hx, hy, hz
-        body_free_mass[b] = mass
+        body_mass[b] = mass
         if mass > 0.0:
             px, py, pz = px / mass, py / mass, pz / mass
         body_velocity[b, 0], body_velocity[b, 1], body_velocity[b, 2] = px, py, pz
@@ -111,7 +114,7 @@ def eval_soft_contacts_bounding(
     body_lo,
     body_hi,
     body_velocity,
-    body_free_mass,
+    body_mass,
     body_center,
     body_axes,
     body_dv,
@@ -130,7 +133,7 @@ def eval_soft_contacts_bounding(
         body_lo,
         body_hi,
         body_velocity,
-        body_free_mass,
+        body_mass,
     )
     for b in range(bodies):
         _fit_bounding_object(
@@ -149,8 +152,8 @@ def eval_soft_contacts_bounding(
     keep = 1.0 - friction
     for a in range(bodies):
         for b in range(bodies):
-            if a == b or body_free_mass[b] == 0.0:
-                continue
+            if a == b or body_mass[b] == 0.0:
+                continue  # a body of massless particles: nothing to test against
             overlap = True
             for k in range(3):
                 if body_hi[a, k] < body_lo[b, k] or body_hi[b, k] < body_lo[a, k]:
@@ -162,7 +165,7 @@ def eval_soft_contacts_bounding(
             ax, ay, az = body_axes[b, 0], body_axes[b, 1], body_axes[b, 2]
             iax, iay, iaz = 1.0 / (ax * ax), 1.0 / (ay * ay), 1.0 / (az * az)
             u = (body_velocity[b, 0], body_velocity[b, 1], body_velocity[b, 2])
-            share = 1.0 / body_free_mass[b]
+            share = 1.0 / body_mass[b]
             shape = body_contact_shape[b]
             for i in range(body_particle_range[a, 0], body_particle_range[a, 1]):
                 if particle_inv_mass[i] == 0.0:
@@ -333,7 +336,7 @@ def eval_soft_contacts_surface(
     body_lo,
     body_hi,
     body_velocity,
-    body_free_mass,
+    body_mass,
     hash_start,
     hash_count,
     hash_entries,
@@ -353,7 +356,7 @@ def eval_soft_contacts_surface(
         body_lo,
         body_hi,
         body_velocity,
-        body_free_mass,
+        body_mass,
     )
     any_overlap = False
     for a in range(bodies):

@@ -25,7 +25,7 @@ class Workspace(NamedTuple):
     body_lo: np.ndarray  # (B, 3) [m]
     body_hi: np.ndarray  # (B, 3) [m]
     body_velocity: np.ndarray  # (B, 3) mass-weighted mean velocity [m/s]
-    body_free_mass: np.ndarray  # (B,) mass of the movable particles [kg]
+    body_mass: np.ndarray  # (B,) mass of all its particles, pinned ones too [kg]
     body_center: np.ndarray  # (B, 3) bounding-object centres [m]
     body_axes: np.ndarray  # (B, 3) bounding-object semi-axes [m]
     body_dv: np.ndarray  # (B, 3) velocity change from soft contacts [m/s]
