@@ -334,28 +334,11 @@ def _fit_reference(x, shape):
     return c, h * np.sqrt((((x - c) / h) ** 2).sum(axis=1).max())
 
 
-@pytest.mark.parametrize("shape", ["bounding_box", "bounding_sphere", "bounding_ellipsoid"])
-def test_bounding_contact_moves_vertices_to_the_other_object(shape):
-    """One pass of the paper's soft-soft contact on two overlapping balls (seed 4 for
-    their velocities): every vertex inside the other ball's bounding object (fitted
-    before the pass) ends on its surface, on the nearest face of a box or along the ray
-    from the centre of a sphere or ellipsoid; the others stay; and the impulses cancel,
-    so the total momentum is unchanged (to round-off)."""
+def bounding_contact_pass(model, q, qd):
+    """One pass of the paper's soft-soft contact kernel on q, qd (N, 3) in place."""
     from softbody.collision.soft import eval_soft_contacts_bounding
     from softbody.integrators.workspace import Workspace
 
-    builder = sb.ModelBuilder(gravity=(0, 0, 0))
-    builder.set_soft_contact("bounding", restitution=0.5, friction=0.2)
-    for center, scale in (((-0.3, 0.0, 0.0), (1.0, 0.8, 1.0)), ((0.3, 0.1, 0.0), (0.7, 1.0, 1.0))):
-        mesh = sb.icosphere(2, radius=0.5)
-        mesh = sb.TriMesh(mesh.vertices * scale + center, mesh.faces)
-        builder.add_soft_body(
-            mesh, mass=1.0, stiffness=500.0, damping=1.0, gas=300.0, contact_shape=shape
-        )
-    model = builder.finalize()
-    q = model.particle_q.copy()
-    qd = np.random.default_rng(4).normal(size=q.shape)
-    q0, p0 = q.copy(), (model.particle_mass[:, None] * qd).sum(axis=0)
     w, m = Workspace.for_model(model), model.data
     eval_soft_contacts_bounding(
         m.particle_mass,
@@ -374,6 +357,28 @@ def test_bounding_contact_moves_vertices_to_the_other_object(shape):
         w.body_axes,
         w.body_dv,
     )
+
+
+@pytest.mark.parametrize("shape", ["bounding_box", "bounding_sphere", "bounding_ellipsoid"])
+def test_bounding_contact_moves_vertices_to_the_other_object(shape):
+    """One pass of the paper's soft-soft contact on two overlapping balls (seed 4 for
+    their velocities): every vertex inside the other ball's bounding object (fitted
+    before the pass) ends on its surface, on the nearest face of a box or along the ray
+    from the centre of a sphere or ellipsoid; the others stay; and the impulses cancel,
+    so the total momentum is unchanged (to round-off)."""
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("bounding", restitution=0.5, friction=0.2)
+    for center, scale in (((-0.3, 0.0, 0.0), (1.0, 0.8, 1.0)), ((0.3, 0.1, 0.0), (0.7, 1.0, 1.0))):
+        mesh = sb.icosphere(2, radius=0.5)
+        mesh = sb.TriMesh(mesh.vertices * scale + center, mesh.faces)
+        builder.add_soft_body(
+            mesh, mass=1.0, stiffness=500.0, damping=1.0, gas=300.0, contact_shape=shape
+        )
+    model = builder.finalize()
+    q = model.particle_q.copy()
+    qd = np.random.default_rng(4).normal(size=q.shape)
+    q0, p0 = q.copy(), (model.particle_mass[:, None] * qd).sum(axis=0)
+    bounding_contact_pass(model, q, qd)
     (a0, a1), (b0, b1) = model.body_particle_range
     moved = 0
     for mine, other in ((slice(a0, a1), slice(b0, b1)), (slice(b0, b1), slice(a0, a1))):
@@ -412,9 +417,6 @@ def test_bounding_contact_against_a_pinned_body(pinned):
     it, stays on top (its vertices are kept outside the 0.5 m sphere; a ball squashed
     around it could bring its centroid a little inside, so the bound is 0.4 m) and,
     losing energy in every contact, never rises above its start."""
-    from softbody.collision.soft import eval_soft_contacts_bounding
-    from softbody.integrators.workspace import Workspace
-
     restitution = 0.5
 
     def two_balls(height):
@@ -436,24 +438,7 @@ def test_bounding_contact_against_a_pinned_body(pinned):
     q = model.particle_q.copy()
     qd = np.random.default_rng(5).normal(size=q.shape)
     q0, qd0 = q.copy(), qd.copy()
-    w, m = Workspace.for_model(model), model.data
-    eval_soft_contacts_bounding(
-        m.particle_mass,
-        m.particle_inv_mass,
-        m.body_particle_range,
-        m.body_contact_shape,
-        m.soft_contact_restitution,
-        m.soft_contact_friction,
-        q,
-        qd,
-        w.body_lo,
-        w.body_hi,
-        w.body_velocity,
-        w.body_mass,
-        w.body_center,
-        w.body_axes,
-        w.body_dv,
-    )
+    bounding_contact_pass(model, q, qd)
     held = slice(0, pinned)
     assert np.array_equal(q[held], q0[held]) and np.array_equal(qd[held], qd0[held])
     c, axes = _fit_reference(q0[:42], "bounding_sphere")
