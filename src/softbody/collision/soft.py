@@ -29,7 +29,6 @@ from numba import njit
 @njit(cache=True)
 def eval_body_motion(
     particle_mass,
-    particle_inv_mass,
     body_particle_range,
     q,
     qd,
@@ -126,7 +125,6 @@ def eval_soft_contacts_bounding(
     bodies = body_particle_range.shape[0]
     eval_body_motion(
         particle_mass,
-        particle_inv_mass,
         body_particle_range,
         q,
         qd,
@@ -349,7 +347,6 @@ def eval_soft_contacts_surface(
     bodies = body_particle_range.shape[0]
     eval_body_motion(
         particle_mass,
-        particle_inv_mass,
         body_particle_range,
         q,
         qd,
