@@ -44,8 +44,8 @@ def drop(subdivisions: int, integrator: str, dt: float) -> dict:
 def main() -> None:
     sizes = []
     for sub in SUBDIVISIONS:
-        vertices = ball_drop(sub).particle_count
         model = ball_drop(sub)
+        vertices = model.particle_count
         stable = sb.Simulator(model, integrator="velocity_verlet", dt=1e-6).stable_dt
         reference = drop(sub, "velocity_verlet", 0.9 * stable)
         print(
