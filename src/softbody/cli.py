@@ -24,6 +24,7 @@ INTEGRATORS = [
     "velocity_verlet",
     "implicit_euler",
     "bdf2",
+    "projective",
 ]
 
 

@@ -54,6 +54,15 @@ def eval_forces(m, c, t, q, qd, w, f):
         m.attachment_damping,
         f,
     )
+    eval_body_forces(m, c, t, q, qd, w, f)
+
+
+@njit(cache=True)
+def eval_body_forces(m, c, t, q, qd, w, f):
+    """The terms of :func:`eval_forces` after gravity, springs and attachments, added
+    into ``f`` (N, 3) [N]: external and grab forces, and the gas pressure (refreshing
+    w.body_volume, w.body_pressure, w.volume_gradient). Projective dynamics takes the
+    springs and attachments into its matrix and these as forces."""
     # per-step external forces from Control
     eval_external_forces(c.particle_f, f)
     # a grabbed particle pulled toward a target (interactive use)

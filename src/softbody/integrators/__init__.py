@@ -1,5 +1,6 @@
 """Time integrators: explicit Euler, Midpoint (RK2), RK4, symplectic Euler, velocity Verlet,
-implicit (backward) Euler and BDF2."""
+implicit (backward) Euler and BDF2, and projective dynamics (backward Euler by
+local-global iterations)."""
 
 from __future__ import annotations
 
@@ -18,21 +19,29 @@ class Integrator(IntEnum):
     VELOCITY_VERLET = 4
     IMPLICIT_EULER = 5
     BDF2 = 6
+    PROJECTIVE = 7
 
     @property
     def order(self) -> int:
         """Global order of accuracy for smooth problems."""
-        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 2}[int(self)]
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 2, 7: 1}[int(self)]
 
     @property
     def force_evaluations(self) -> int:
-        """Force evaluations per step (the implicit schemes add their CG iterations)."""
-        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 1}[int(self)]
+        """Force evaluations per step (the implicit schemes add their CG iterations;
+        projective dynamics evaluates the non-spring forces once per iteration)."""
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 1, 7: 1}[int(self)]
 
     @property
     def implicit(self) -> bool:
         """True for schemes that solve a linear system each step (unconditionally stable)."""
         return self in (Integrator.IMPLICIT_EULER, Integrator.BDF2)
+
+    @property
+    def explicit(self) -> bool:
+        """True for the explicit schemes, whose stable step the springs limit (the
+        spectral stability estimate is worth its Lanczos runs only for them)."""
+        return int(self) <= int(Integrator.VELOCITY_VERLET)
 
     @property
     def symplectic(self) -> bool:
@@ -54,6 +63,8 @@ class Integrator(IntEnum):
                 "implicit": "implicit_euler",
                 "backward_euler": "implicit_euler",
                 "implicit_bdf2": "bdf2",
+                "pd": "projective",
+                "projective_dynamics": "projective",
             }
             key = aliases.get(key, key)
             for member in cls:

@@ -10,6 +10,7 @@ from softbody.collision.response import eval_collider_contacts
 from softbody.collision.soft import eval_soft_contacts_bounding, eval_soft_contacts_surface
 from softbody.forces.evaluate import eval_forces
 from softbody.integrators.implicit import step_implicit
+from softbody.integrators.projective import step_projective
 from softbody.integrators.schemes import (
     step_euler,
     step_midpoint,
@@ -17,6 +18,7 @@ from softbody.integrators.schemes import (
     step_symplectic_euler,
     step_velocity_verlet,
 )
+from softbody.volume import eval_model_volume
 
 #: Status codes returned by :func:`simulate`.
 OK = 0
@@ -205,6 +207,8 @@ def simulate(
     cg_tolerance,
     cg_max_iterations,
     history,
+    pd,
+    pd_iterations,
 ):
     """Advance ``q``, ``qd`` (N, 3) in place by ``steps`` steps of ``dt`` [s] from ``t0``.
 
@@ -217,7 +221,8 @@ def simulate(
     step); collider_impulse (C, 3) accumulates the impulse they receive. ``mg`` is implicit
     Euler's and BDF2's preconditioner (``integrators.multigrid``; an empty one means
     Jacobi); ``history`` is True when w.q_prev, w.v_prev hold the step before ``q``, ``qd``
-    (BDF2).
+    (BDF2). ``pd`` is projective dynamics' factored matrix (``integrators.projective``)
+    and ``pd_iterations`` its local-global iterations per step.
     """
     for k in range(collider_q.shape[0]):
         for d in range(3):
@@ -231,7 +236,12 @@ def simulate(
     for s in range(steps):
         t = t0 + s * dt
         _copy_state(q, qd, w.q0, w.v0)
-        eval_forces(m, c, t, q, qd, w, w.f)
+        if integrator == 7:
+            # projective dynamics evaluates its forces at its iterates: the checks below
+            # need only the volumes
+            eval_model_volume(m, q, w)
+        else:
+            eval_forces(m, c, t, q, qd, w, w.f)
         status, index, value = _check_volumes(
             w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max
         )
@@ -247,6 +257,8 @@ def simulate(
             step_symplectic_euler(m, c, t, dt, q, qd, w)
         elif integrator == 4:
             step_velocity_verlet(m, c, t, dt, q, qd, w)
+        elif integrator == 7:
+            step_projective(m, c, t, dt, q, qd, w, pd, pd_iterations)
         else:
             # BDF2 (6) needs the previous step: from this call, or ``history`` says the
             # workspace holds it from the call before; else it starts with backward Euler
