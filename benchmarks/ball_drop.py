@@ -134,13 +134,14 @@ def check_drop(model, sim) -> dict:
     rebound = float(heights[bottom:].max() - heights[bottom])
     shaking = internal_kinetic_energy(model, state)
     ok = 0.7 < min(ratios) and max(ratios) < 1.5 and rebound > 0.05
-    ok = ok and shaking < 0.05 * DROP_ENERGY
+    ok = bool(ok and shaking < 0.05 * DROP_ENERGY)
     return {
         "wall_s": wall,
         "simulated_per_wall_second": state.time / wall,
         "rebound_m": rebound,
         "volume_ratio_range": [min(ratios), max(ratios)],
         "internal_kinetic_energy_j": shaking,
+        "final_height_m": float(heights[-1]),
         "ok": ok,
     }
 
