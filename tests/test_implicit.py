@@ -22,6 +22,9 @@ def dropped_stiff_ball():
 
 
 IMPLICIT = ["implicit_euler", "bdf2"]
+#: the schemes that solve for backward Euler's (or BDF2's) end state, with projective
+#: dynamics (default two local-global iterations), for the tests that hold for all three
+SOLVED = [*IMPLICIT, "projective"]
 
 
 @pytest.mark.parametrize("integrator", IMPLICIT)
@@ -69,12 +72,15 @@ def test_icosahedron_settles_at_uniform_scaling_equilibrium(integrator):
     assert scale == pytest.approx(s, rel=1e-9)
 
 
-@pytest.mark.parametrize("integrator", IMPLICIT)
+@pytest.mark.parametrize("integrator", SOLVED)
 def test_energy_never_grows(integrator):
     """No damping, no gravity, closed gas: backward Euler is dissipative (|1/(1 - h l)| < 1
-    for every mode) and BDF2 A-stable, damping the modes with w dt >> 1, so the total
-    energy of a ball kicked into vibration never rises above its start (beyond CG
-    round-off, 1e-9 of it) and falls measurably over 200 steps of 5 ms."""
+    for every mode) and BDF2 A-stable, damping the modes with w dt >> 1 (projective
+    dynamics, at its default two iterations: its local and global steps each lower the
+    springs' incremental potential, and its explicit gas term is far inside its limit,
+    1 / omega_gas = 19 ms), so the total energy of a ball kicked into vibration never
+    rises above its start (beyond CG round-off, 1e-9 of it) and falls measurably over
+    200 steps of 5 ms."""
     model = ball_model(stiffness=500.0, damping=0.0, gas=300.0)
     state = model.state()
     rng = np.random.default_rng(3)
@@ -91,10 +97,12 @@ def test_energy_never_grows(integrator):
     assert totals[-1] < e0 - 1e-3 * sb.energies(model, model.state()).kinetic - 1e-12
 
 
-@pytest.mark.parametrize("integrator", IMPLICIT)
+@pytest.mark.parametrize("integrator", SOLVED)
 def test_momentum_is_conserved_without_gravity(integrator):
     """Internal forces and their Jacobians have zero column sums (translation invariance),
-    so with the linear solve converged (tolerance 1e-12) total momentum stays put."""
+    so with the linear solve converged (tolerance 1e-12) total momentum stays put.
+    Projective dynamics at any iteration count: its spring projections enter as equal and
+    opposite pairs and its matrix's spring part has zero column sums."""
     model = ball_model(damping=1.0)
     state = model.state()
     state.particle_qd[:] = np.random.default_rng(5).normal(scale=0.3, size=state.particle_qd.shape)
@@ -254,18 +262,24 @@ def test_bad_solver_settings():
         sb.Simulator(model, integrator="implicit", dt=1e-2, implicit_max_iterations=0)
 
 
-@pytest.mark.parametrize("integrator", IMPLICIT)
+@pytest.mark.parametrize("integrator", SOLVED)
 @pytest.mark.parametrize(
     "name", ["bouncing-balls", "hanging-ball", "hand-punch", "cloth-wind", "bounding-volumes"]
 )
 def test_built_in_scenes_are_stable_at_a_sixtieth_of_a_second(name, integrator):
     """Every built-in scene runs 2 s at dt = 1/60 s (4 to 80 times its explicit step)
-    without blowing up, every closed body's volume within [0.5, 3] of its rest volume."""
+    without blowing up, every closed body's volume within [0.5, 3] of its rest volume.
+    Projective dynamics warns on three of them (its estimate, 1 / omega_gas, counts only
+    the masses against the gas, 4.3-14 ms here) and runs them all: its matrix's springs
+    resist the volume mode too."""
     from softbody.scenes import load_scene
 
     model = load_scene(name).model
     state = model.state()
-    sb.Simulator(model, integrator=integrator, dt=1 / 60).run(state, 120)
+    with warnings.catch_warnings():
+        if integrator == "projective":
+            warnings.simplefilter("ignore", sb.StabilityWarning)
+        sb.Simulator(model, integrator=integrator, dt=1 / 60).run(state, 120)
     ratio = sb.body_volume(model, state) / model.body_rest_volume
     closed = model.body_closed == 1
     assert np.all((ratio[closed] > 0.5) & (ratio[closed] < 3.0))

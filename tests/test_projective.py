@@ -1,5 +1,6 @@
-"""Projective dynamics: its fixed point is backward Euler, it conserves momentum, holds
-the closed-form equilibria, and stays stable at large steps with the gas explicit."""
+"""Projective dynamics: its fixed point is backward Euler, it holds the closed-form
+equilibria, stays stable at large steps with the gas explicit, and sags at rest with
+few iterations. Momentum, energy and the built-in scenes: test_implicit (``SOLVED``)."""
 
 from __future__ import annotations
 
@@ -45,22 +46,6 @@ def test_fixed_point_is_backward_euler():
     assert residuals[3] < 1e-9
 
 
-@pytest.mark.parametrize("iterations", [1, 3])
-def test_momentum_is_conserved_without_gravity(iterations):
-    """Spring projections enter the right-hand side as equal and opposite pairs, the
-    closed surface's pressure forces sum to zero and the matrix's spring part has zero
-    column sums, so sum m x1 = sum m (x0 + h v0) at any iteration count: total momentum
-    stays put to round-off."""
-    model = ball_model(damping=1.0)
-    state = model.state()
-    state.particle_qd[:] = np.random.default_rng(5).normal(scale=0.3, size=state.particle_qd.shape)
-    p0 = (model.particle_mass[:, None] * state.particle_qd).sum(axis=0)
-    sim = sb.Simulator(model, integrator="projective", dt=1e-2, projective_iterations=iterations)
-    sim.run(state, 50)
-    p1 = (model.particle_mass[:, None] * state.particle_qd).sum(axis=0)
-    assert np.allclose(p1, p0, rtol=0, atol=1e-10)
-
-
 def test_icosahedron_settles_at_uniform_scaling_equilibrium():
     """Equilibrium is a fixed point of every local-global iteration (y = x0 there, and
     the projections then reproduce the spring forces that balance the gas), so even at
@@ -95,27 +80,6 @@ def test_hanging_particles_rest_at_hookes_extension():
     assert np.allclose(state.particle_q[top], (0.0, 0.0, 0.0), rtol=0, atol=0)
     assert np.allclose(state.particle_q[low], (0.0, -drop, 0.0), rtol=0, atol=1e-9)
     assert np.allclose(state.particle_q[hung], (2.0, -drop, 0.0), rtol=0, atol=1e-9)
-
-
-@pytest.mark.parametrize("iterations", [1, 4])
-def test_energy_never_grows(iterations):
-    """No damping, no gravity, closed gas: the local and global steps each lower the
-    step's incremental potential, and backward Euler, their limit, is dissipative, so
-    the total energy of a ball kicked into vibration never rises above its start
-    (beyond 1e-9 of it) and falls measurably over 200 steps of 5 ms."""
-    model = ball_model(stiffness=500.0, damping=0.0, gas=300.0)
-    state = model.state()
-    v = np.random.default_rng(3).normal(scale=0.2, size=state.particle_qd.shape)
-    state.particle_qd[:] = v - v.mean(axis=0)
-    sim = sb.Simulator(model, integrator="projective", dt=5e-3, projective_iterations=iterations)
-    e0 = sb.energies(model, state).total
-    totals = []
-    for _ in range(40):
-        sim.run(state, 5)
-        totals.append(sb.energies(model, state).total)
-    totals = np.array(totals)
-    assert np.all(totals <= e0 + 1e-9 * abs(e0))
-    assert totals[-1] < e0 - 1e-3 * sb.energies(model, model.state()).kinetic - 1e-12
 
 
 def test_stable_at_a_sixtieth_of_a_second_where_explicit_euler_blows_up():
@@ -178,21 +142,3 @@ def test_bad_iteration_counts():
     for bad in (0, -1, 1.5, True, "2"):
         with pytest.raises(ValueError, match="projective_iterations must be an integer >= 1"):
             sb.Simulator(model, integrator="projective", dt=1e-2, projective_iterations=bad)
-
-
-@pytest.mark.parametrize(
-    "name", ["bouncing-balls", "hanging-ball", "hand-punch", "cloth-wind", "bounding-volumes"]
-)
-def test_built_in_scenes_are_stable_at_a_sixtieth_of_a_second(name):
-    """Every built-in scene runs 2 s at dt = 1/60 s without blowing up, every closed
-    body's volume within [0.5, 3] of its rest volume, as for the implicit schemes."""
-    from softbody.scenes import load_scene
-
-    model = load_scene(name).model
-    state = model.state()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", sb.StabilityWarning)
-        sb.Simulator(model, integrator="projective", dt=1 / 60).run(state, 120)
-    ratio = sb.body_volume(model, state) / model.body_rest_volume
-    closed = model.body_closed == 1
-    assert np.all((ratio[closed] > 0.5) & (ratio[closed] < 3.0))

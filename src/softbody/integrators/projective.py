@@ -131,8 +131,9 @@ def build_projective(model, dt: float) -> Projective:
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be finite and > 0 seconds, got {dt!r}")
     n = model.particle_count
-    order = dissection_order(system_matrix(model, dt).tocsr(), model.particle_q)
-    a = system_matrix(model, dt)[order][:, order].tocsc()
+    matrix = system_matrix(model, dt)
+    order = dissection_order(matrix.tocsr(), model.particle_q)
+    a = matrix[order][:, order].tocsc()
     lu = spla.splu(
         a,
         permc_spec="NATURAL",
@@ -241,7 +242,7 @@ def _supernodes(n, indptr, indices, data):
     return col, row_ptr, rows, value_ptr, values
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True)
 def solve_factored(pd, b, out):
     """out = A^-1 b for b (N, 3) with the factored matrix of ``pd`` (two triangular
     solves on the three columns at once); ``out`` may be ``b``."""
