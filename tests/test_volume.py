@@ -26,6 +26,27 @@ def test_exact_volume_of_box_and_model_agree():
     assert volume_of(BOX, "exact") == pytest.approx(3.0, rel=1e-13)
 
 
+def test_volume_alone_equals_the_gradient_pass():
+    """The volume-only pass (checks, diagnostics) and the pass that also gives dV/dx (the
+    pressure force) sum the same divergence-theorem terms, about a different reference
+    point: equal to round-off on two randomly deformed bodies (seeded)."""
+    from softbody.volume import eval_exact_volume, eval_volume_gradient
+
+    builder = sb.ModelBuilder()
+    builder.add_soft_body(BOX, mass=1.0, stiffness=1.0, damping=0.0, gas=1.0)
+    builder.add_soft_body(
+        sb.icosphere(2, center=(3.0, 0.0, 0.0)), mass=1.0, stiffness=1.0, damping=0.0, gas=1.0
+    )
+    model = builder.finalize()
+    q = model.particle_q + np.random.default_rng(5).normal(0.0, 0.05, model.particle_q.shape)
+    args = (q, model.tri_indices, model.body_particle_range, model.body_tri_range)
+    alone, with_gradient = np.zeros(2), np.zeros(2)
+    eval_exact_volume(*args, alone)
+    eval_volume_gradient(*args, np.zeros_like(q), with_gradient)
+    assert alone == pytest.approx(with_gradient, rel=1e-12)
+    assert alone[1] == pytest.approx(4.0 / 3.0 * np.pi, rel=0.05)  # an icosphere of radius 1
+
+
 def test_bounding_box_of_box_is_the_box():
     """The bounding box of a box is the box: V = 8 hx hy hz."""
     assert volume_of(BOX, "bounding_box") == pytest.approx(8 * HX * HY * HZ, rel=1e-13)

