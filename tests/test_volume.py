@@ -28,8 +28,9 @@ def test_exact_volume_of_box_and_model_agree():
 
 def test_volume_alone_equals_the_gradient_pass():
     """The volume-only pass (checks, diagnostics) and the pass that also gives dV/dx (the
-    pressure force) sum the same divergence-theorem terms, about a different reference
-    point: equal to round-off on two randomly deformed bodies (seeded)."""
+    pressure force) sum the same divergence-theorem terms, written differently ((a - r) .
+    (b - r) x (c - r) against (a - r) . (b - a) x (c - a)): equal to round-off on two
+    randomly deformed bodies (seeded)."""
     from softbody.volume import eval_exact_volume, eval_volume_gradient
 
     builder = sb.ModelBuilder()
