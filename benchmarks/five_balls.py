@@ -69,8 +69,7 @@ def run(integrator: str, step: str, options: dict, reference_energy: float) -> d
         dt = scene.dt
     elif step == "1/60 s":
         dt = 1.0 / 60.0
-        if integrator != "projective":
-            options = {"implicit_tolerance": 1e-3, **options}
+        options = {"implicit_tolerance": 1e-3, **options}
     else:
         dt = 0.9 * sb.Simulator(model, integrator=integrator, dt=1e-6).stable_dt
     with warnings.catch_warnings():

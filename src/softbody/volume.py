@@ -371,6 +371,23 @@ def _exact_volumes_on_threads(m, q, w):
     )
 
 
+@njit(cache=True, inline="always")
+def _model_other_volumes(m, q, w):
+    """``eval_other_volumes`` on a model's arrays and a workspace."""
+    eval_other_volumes(
+        q,
+        m.tri_indices,
+        m.body_particle_range,
+        m.body_tri_range,
+        m.body_volume_method,
+        m.body_mc_range,
+        m.mc_samples,
+        w.body_lo,
+        w.body_hi,
+        w.body_volume,
+    )
+
+
 @njit(cache=True)
 def eval_model_volume(m, q, w):
     """``eval_body_volume`` on a model's arrays: m is a ``ModelData``, w a ``Workspace``
@@ -387,18 +404,7 @@ def eval_model_volume(m, q, w):
             w.volume_gradient,
             w.body_volume,
         )
-    eval_other_volumes(
-        q,
-        m.tri_indices,
-        m.body_particle_range,
-        m.body_tri_range,
-        m.body_volume_method,
-        m.body_mc_range,
-        m.mc_samples,
-        w.body_lo,
-        w.body_hi,
-        w.body_volume,
-    )
+    _model_other_volumes(m, q, w)
 
 
 @njit(cache=True)
@@ -406,15 +412,4 @@ def eval_model_volume_only(m, q, w):
     """Every body's volume by its own method into w.body_volume (B,) [m^3], without the
     gradient (``eval_model_volume`` fills both): for checks and diagnostics."""
     eval_exact_volume(q, m.tri_indices, m.body_particle_range, m.body_tri_range, w.body_volume)
-    eval_other_volumes(
-        q,
-        m.tri_indices,
-        m.body_particle_range,
-        m.body_tri_range,
-        m.body_volume_method,
-        m.body_mc_range,
-        m.mc_samples,
-        w.body_lo,
-        w.body_hi,
-        w.body_volume,
-    )
+    _model_other_volumes(m, q, w)
