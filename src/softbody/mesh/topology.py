@@ -5,6 +5,53 @@ from __future__ import annotations
 import numpy as np
 
 
+def unique_rows(
+    rows: np.ndarray,
+    *,
+    return_index: bool = False,
+    return_inverse: bool = False,
+    return_counts: bool = False,
+):
+    """``np.unique(rows, axis=0)`` for an integer array (R, C), with the same outputs
+    (unique rows sorted lexicographically, first occurrences, inverse (R,), counts), by
+    one stable sort of a combined integer key (or ``np.lexsort`` where the key would
+    overflow). NumPy's ``axis=0`` sorts the rows as opaque byte strings: at 163,842
+    vertices it took 2.0 s of the 2.8 s that building the ball drop's model took.
+    Returns the unique rows alone, or a tuple as ``np.unique`` does."""
+    a = np.asarray(rows)
+    if a.ndim != 2 or not np.issubdtype(a.dtype, np.integer):
+        raise ValueError(f"unique_rows needs a 2-D integer array, got {a.dtype} {a.shape}")
+    count = len(a)
+    if count == 0:
+        order = starts = np.zeros(0, dtype=np.int64)
+        new = np.zeros(0, dtype=bool)
+    else:
+        lo = a.min(axis=0).astype(np.int64)
+        span = [int(x) + 1 for x in a.max(axis=0).astype(np.int64) - lo]
+        if np.prod(np.array(span, dtype=float)) < 2.0**62:
+            key = np.zeros(count, dtype=np.int64)
+            for c in range(a.shape[1]):
+                key = key * span[c] + (a[:, c].astype(np.int64) - lo[c])
+            order = np.argsort(key, kind="stable")
+            sorted_key = key[order]
+            new = sorted_key[1:] != sorted_key[:-1]
+        else:
+            order = np.lexsort(a.T[::-1])
+            sorted_rows = a[order]
+            new = np.any(sorted_rows[1:] != sorted_rows[:-1], axis=1)
+        starts = np.flatnonzero(np.concatenate([[True], new]))
+    out = [a[order[starts]]]
+    if return_index:
+        out.append(order[starts])
+    if return_inverse:
+        inverse = np.empty(count, dtype=np.int64)
+        inverse[order] = np.cumsum(np.concatenate([[True], new])[:count]) - 1
+        out.append(inverse)
+    if return_counts:
+        out.append(np.diff(np.append(starts, count)))
+    return out[0] if len(out) == 1 else tuple(out)
+
+
 def half_edges(faces: np.ndarray) -> np.ndarray:
     """Directed edges of every triangle, (3F, 2): row ``3f + k`` is corner k -> corner k+1."""
     f = np.asarray(faces, dtype=np.int64)
@@ -14,7 +61,7 @@ def half_edges(faces: np.ndarray) -> np.ndarray:
 def unique_edges(faces: np.ndarray) -> np.ndarray:
     """Undirected edges used by the triangles, (E, 2) int64, each row sorted, rows sorted."""
     he = np.sort(half_edges(faces), axis=1)
-    return np.unique(he, axis=0)
+    return unique_rows(he)
 
 
 def edge_half_edge_groups(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -31,7 +78,7 @@ def edge_half_edge_groups(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
         with ``start = cumsum(counts) - counts``.
     """
     key = np.sort(half_edges(faces), axis=1)
-    edges, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    edges, inverse, counts = unique_rows(key, return_inverse=True, return_counts=True)
     order = np.argsort(inverse.reshape(-1), kind="stable")
     return edges, counts, order
 
@@ -52,7 +99,7 @@ def bending_pairs(faces: np.ndarray) -> np.ndarray:
     start = np.cumsum(counts) - counts
     two = start[counts == 2]
     pairs = np.sort(np.stack([opposite[order[two]], opposite[order[two + 1]]], axis=1), axis=1)
-    pairs = np.unique(pairs[pairs[:, 0] != pairs[:, 1]], axis=0)
+    pairs = unique_rows(pairs[pairs[:, 0] != pairs[:, 1]])
     n = int(f.max()) + 1
     is_edge = np.isin(pairs[:, 0] * n + pairs[:, 1], edges[:, 0] * n + edges[:, 1])
     return pairs[~is_edge]

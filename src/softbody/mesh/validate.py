@@ -17,7 +17,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from softbody.errors import MeshError, MeshWarning
-from softbody.mesh.topology import edge_half_edge_groups, half_edges
+from softbody.mesh.topology import edge_half_edge_groups, half_edges, unique_rows
 from softbody.mesh.tri_mesh import TriMesh
 
 #: Vertices closer than this fraction of the bounding-box diagonal are welded.
@@ -114,8 +114,7 @@ def _weld(vertices: np.ndarray, faces: np.ndarray, tolerance: float):
         return vertices, faces, 0
     lo = vertices.min(axis=0)
     keys = np.round((vertices - lo) / tolerance).astype(np.int64)
-    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    inverse = inverse.reshape(-1)
+    _, first, inverse = unique_rows(keys, return_index=True, return_inverse=True)
     # renumber groups by the position of their first vertex so unwelded meshes keep order
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(len(first))
@@ -145,7 +144,7 @@ def _nonmanifold_vertex_count(faces: np.ndarray, vertex_count: int) -> int:
     n = 3 * face_count
     graph = coo_matrix((np.ones(len(src)), (src, dst)), shape=(n, n))
     _, label = connected_components(graph, directed=False)
-    fans = np.unique(np.stack([corner_vertex, label], axis=1), axis=0)
+    fans = unique_rows(np.stack([corner_vertex, label], axis=1))
     fan_count = np.bincount(fans[:, 0], minlength=vertex_count)
     return int(np.count_nonzero(fan_count > 1))
 
