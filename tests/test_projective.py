@@ -61,6 +61,51 @@ def test_icosahedron_settles_at_uniform_scaling_equilibrium():
     assert scale == pytest.approx(s, rel=1e-9)
 
 
+@pytest.mark.parametrize("scene", ["bouncing-balls", None])
+def test_factor_solves_the_global_matrix_with_less_fill(scene):
+    """Reference: the factorisation's definition, A = P^T L D L^T P, so two triangular
+    solves invert the global matrix A (system_matrix) to round-off (relative residual
+    1e-12 here; A's condition numbers are 132 and 4,766), the five separate balls and a
+    2,562-vertex ball with a pinned vertex (an identity row). The nested-dissection order
+    is a permutation and, on that ball, leaves fewer entries in L than the natural
+    (Morton) order, by more than half, and than SuperLU's minimum degree order."""
+    import scipy.sparse.linalg as spla
+
+    from softbody.integrators.projective import (
+        build_projective,
+        dissection_order,
+        solve_factored,
+        system_matrix,
+    )
+    from softbody.scenes.loader import load_scene
+
+    if scene:
+        model = load_scene(scene).model
+    else:
+        builder = sb.ModelBuilder()
+        builder.add_soft_body(
+            sb.icosphere(4), mass=1.0, stiffness=500.0, damping=0.5, gas=300.0, pinned=[0]
+        )
+        model = builder.finalize()
+    dt = 1.0 / 60.0
+    factored = build_projective(model, dt)
+    a = system_matrix(model, dt)
+    b = np.random.default_rng(3).standard_normal((model.particle_count, 3))
+    x = np.zeros_like(b)
+    solve_factored(factored, b, x)
+    assert np.linalg.norm(a @ x - b) <= 1e-12 * np.linalg.norm(b)
+    order = dissection_order(a.tocsr(), model.particle_q)
+    np.testing.assert_array_equal(np.sort(order), np.arange(model.particle_count))
+    if scene is None:
+        options = {"diag_pivot_thresh": 0.0, "options": {"SymmetricMode": True}}
+        natural = spla.splu(a.tocsc(), permc_spec="NATURAL", **options).L.nnz
+        minimum_degree = spla.splu(a.tocsc(), permc_spec="MMD_AT_PLUS_A", **options).L.nnz
+        # SuperLU's L counts its unit diagonal; factor_nonzeros does not
+        n = model.particle_count
+        assert factored.factor_nonzeros < 0.5 * (natural - n)
+        assert factored.factor_nonzeros < minimum_degree - n
+
+
 def test_hanging_particles_rest_at_hookes_extension():
     """A particle hanging from a pinned particle by a spring, and another from an
     attachment, both damped, come to rest where k (L - L0) = m g: L = L0 + m g / k below
