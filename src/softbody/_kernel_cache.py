@@ -2,8 +2,8 @@
 
 Numba invalidates a cached function only when its own file changes, not when a kernel it
 calls from another module does: after editing ``collision/response.py``, the cached
-``integrators/loop.simulate`` would still run the old contact code. Putting the cache in a
-folder named after a digest of every kernel source file of the package makes any
+``integrators/loop.simulate_explicit`` would still run the old contact code. Putting the
+cache in a folder named after a digest of every kernel source file of the package makes any
 change to them start a fresh cache. The files that define the tuples the kernels take
 (``Workspace``, ``Partition``, ``ModelData``) count too: after fields were added to
 ``Workspace`` during development, a run from the old cache folder crashed with a

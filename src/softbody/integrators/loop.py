@@ -186,30 +186,29 @@ def eval_contacts(
     return 0
 
 
-@njit(cache=True)
 def simulate(
-    integrator,
-    steps,
-    t0,
-    dt,
+    integrator: int,
+    steps: int,
+    t0: float,
+    dt: float,
     m,
     c,
     q,
     qd,
     w,
-    max_speed,
-    ratio_min,
-    ratio_max,
+    max_speed: float,
+    ratio_min: float,
+    ratio_max: float,
     collider_q,
     collider_rot,
     collider_impulse,
     mg,
-    cg_tolerance,
-    cg_max_iterations,
-    history,
+    cg_tolerance: float,
+    cg_max_iterations: int,
+    history: bool,
     pd,
-    pd_iterations,
-):
+    pd_iterations: int,
+) -> tuple[int, int, int, float]:
     """Advance ``q``, ``qd`` (N, 3) in place by ``steps`` steps of ``dt`` [s] from ``t0``.
 
     integrator : int (``Integrator`` value). Returns (status, steps_done, index, value):
@@ -223,7 +222,27 @@ def simulate(
     Jacobi); ``history`` is True when w.q_prev, w.v_prev hold the step before ``q``, ``qd``
     (BDF2). ``pd`` is projective dynamics' factored matrix (``integrators.projective``)
     and ``pd_iterations`` its local-global iterations per step.
+
+    Each family of schemes has its own compiled loop (``simulate_explicit``,
+    ``simulate_implicit``, ``simulate_projective``), so a run compiles only its own
+    family's kernels: one loop over every scheme took 92 s to compile on an empty cache
+    here, 23 s of it the implicit solver's (``benchmarks/startup.py``).
     """
+    common = (steps, t0, dt, m, c, q, qd, w, max_speed, ratio_min, ratio_max)
+    colliders = (collider_q, collider_rot, collider_impulse)
+    if integrator <= 4:
+        return simulate_explicit(integrator, *common, *colliders)
+    if integrator == 7:
+        return simulate_projective(*common, *colliders, pd, pd_iterations)
+    return simulate_implicit(
+        integrator == 6, *common, *colliders, mg, cg_tolerance, cg_max_iterations, history
+    )
+
+
+@njit(cache=True)
+def _begin_run(steps, dt, m, c, q, qd, w, collider_q):
+    """Before the first step: the colliders' start poses, and pinned particles' velocity
+    to reach their targets at the end of the run."""
     for k in range(collider_q.shape[0]):
         for d in range(3):
             w.collider_q_start[k, d] = collider_q[k, d]
@@ -233,15 +252,34 @@ def simulate(
             i = m.pin_particle[p]
             for k in range(3):
                 qd[i, k] = (c.pin_target[p, k] - q[i, k]) * inv
+
+
+@njit(cache=True)
+def _end_step(m, c, t, dt, s, steps, q, qd, w, max_speed, collider_q, collider_rot, impulse):
+    """After a step from t to t + dt: contacts, then the particle checks; on a failure
+    the state goes back to the step's start. Returns (status, index, value)."""
+    needed = eval_contacts(
+        m, c, t + dt, (s + 1.0) / steps, steps * dt, q, qd, w, collider_q, collider_rot, impulse
+    )
+    if needed > 0:
+        _copy_state(w.q0, w.v0, q, qd)
+        return NEED_HASH, -1, float(needed)
+    status, index, value = _check_particles(q, qd, max_speed)
+    if status != OK:
+        _copy_state(w.q0, w.v0, q, qd)
+    return status, index, value
+
+
+@njit(cache=True)
+def simulate_explicit(
+    integrator, steps, t0, dt, m, c, q, qd, w, max_speed, ratio_min, ratio_max, cq, crot, ci
+):
+    """``simulate`` for the explicit schemes (``integrator`` 0-4)."""
+    _begin_run(steps, dt, m, c, q, qd, w, cq)
     for s in range(steps):
         t = t0 + s * dt
         _copy_state(q, qd, w.q0, w.v0)
-        if integrator == 7:
-            # projective dynamics evaluates its forces at its iterates: the checks below
-            # need only the volumes (not their gradient: half the time)
-            eval_model_volume_only(m, q, w)
-        else:
-            eval_forces(m, c, t, q, qd, w, w.f)
+        eval_forces(m, c, t, q, qd, w, w.f)
         status, index, value = _check_volumes(
             w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max
         )
@@ -255,40 +293,84 @@ def simulate(
             step_rk4(m, c, t, dt, q, qd, w)
         elif integrator == 3:
             step_symplectic_euler(m, c, t, dt, q, qd, w)
-        elif integrator == 4:
-            step_velocity_verlet(m, c, t, dt, q, qd, w)
-        elif integrator == 7:
-            step_projective(m, c, t, dt, q, qd, w, pd, pd_iterations)
         else:
-            # BDF2 (6) needs the previous step: from this call, or ``history`` says the
-            # workspace holds it from the call before; else it starts with backward Euler
-            bdf2 = integrator == 6 and (s > 0 or history) and w.contacts_acted[0] == 0
-            its = step_implicit(m, c, t, dt, q, qd, w, mg, cg_tolerance, cg_max_iterations, bdf2)
-            w.cg_stats[0] += 1
-            w.cg_stats[1] += its
-            w.cg_stats[2] = max(w.cg_stats[2], its)
-        if integrator == 6:
-            _copy_state(q, qd, w.qs, w.vs)  # BDF2: contacts below may move particles
-        needed = eval_contacts(
-            m,
-            c,
-            t + dt,
-            (s + 1.0) / steps,
-            steps * dt,
-            q,
-            qd,
-            w,
-            collider_q,
-            collider_rot,
-            collider_impulse,
-        )
-        if needed > 0:
-            _copy_state(w.q0, w.v0, q, qd)
-            return NEED_HASH, s, -1, float(needed)
-        if integrator == 6:
-            w.contacts_acted[0] = 1 if _contacts_acted(q, qd, w.qs, w.vs) else 0
-        status, index, value = _check_particles(q, qd, max_speed)
+            step_velocity_verlet(m, c, t, dt, q, qd, w)
+        status, index, value = _end_step(m, c, t, dt, s, steps, q, qd, w, max_speed, cq, crot, ci)
         if status != OK:
-            _copy_state(w.q0, w.v0, q, qd)
+            return status, s, index, value
+    return OK, steps, -1, 0.0
+
+
+@njit(cache=True)
+def simulate_implicit(
+    bdf2,
+    steps,
+    t0,
+    dt,
+    m,
+    c,
+    q,
+    qd,
+    w,
+    max_speed,
+    ratio_min,
+    ratio_max,
+    cq,
+    crot,
+    ci,
+    mg,
+    cg_tolerance,
+    cg_max_iterations,
+    history,
+):
+    """``simulate`` for backward Euler and (``bdf2``) BDF2."""
+    _begin_run(steps, dt, m, c, q, qd, w, cq)
+    for s in range(steps):
+        t = t0 + s * dt
+        _copy_state(q, qd, w.q0, w.v0)
+        eval_forces(m, c, t, q, qd, w, w.f)
+        status, index, value = _check_volumes(
+            w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max
+        )
+        if status != OK:
+            return status, s, index, value
+        # BDF2 needs the previous step: from this call, or ``history`` says the workspace
+        # holds it from the call before; else (and after contacts acted) backward Euler
+        two_step = bdf2 and (s > 0 or history) and w.contacts_acted[0] == 0
+        its = step_implicit(m, c, t, dt, q, qd, w, mg, cg_tolerance, cg_max_iterations, two_step)
+        w.cg_stats[0] += 1
+        w.cg_stats[1] += its
+        w.cg_stats[2] = max(w.cg_stats[2], its)
+        if bdf2:
+            _copy_state(q, qd, w.qs, w.vs)  # contacts may move particles
+        status, index, value = _end_step(m, c, t, dt, s, steps, q, qd, w, max_speed, cq, crot, ci)
+        if status != OK:
+            return status, s, index, value
+        if bdf2:
+            w.contacts_acted[0] = 1 if _contacts_acted(q, qd, w.qs, w.vs) else 0
+    return OK, steps, -1, 0.0
+
+
+@njit(cache=True)
+def simulate_projective(
+    steps, t0, dt, m, c, q, qd, w, max_speed, ratio_min, ratio_max, cq, crot, ci, pd, iterations
+):
+    """``simulate`` for projective dynamics, ``iterations`` local-global iterations per
+    step."""
+    _begin_run(steps, dt, m, c, q, qd, w, cq)
+    for s in range(steps):
+        t = t0 + s * dt
+        _copy_state(q, qd, w.q0, w.v0)
+        # projective dynamics evaluates its forces at its iterates: the checks below need
+        # only the volumes (not their gradient: half the time)
+        eval_model_volume_only(m, q, w)
+        status, index, value = _check_volumes(
+            w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max
+        )
+        if status != OK:
+            return status, s, index, value
+        step_projective(m, c, t, dt, q, qd, w, pd, iterations)
+        status, index, value = _end_step(m, c, t, dt, s, steps, q, qd, w, max_speed, cq, crot, ci)
+        if status != OK:
             return status, s, index, value
     return OK, steps, -1, 0.0
