@@ -180,7 +180,7 @@ def dissection_order(a: sp.csr_matrix, points: np.ndarray) -> np.ndarray:
     which are ordered the same way first (George 1973). On the ball drop's 40,962-vertex
     ball it leaves 22% fewer entries in the factor than SuperLU's minimum degree (1.92 M
     against 2.46 M) and the solve took 9-10 ms instead of 10.4-10.7. Compiled
-    (``_dissect``): 0.03 s at 40,962 particles, where the recursion over SciPy
+    (``_dissect``): 0.02 s at 40,962 particles, where the recursion over SciPy
     submatrices it replaces took 1.3 s (6.0 s at 163,842), the same order.
     Returns ``order`` (N,): the particle at each position.
     """
