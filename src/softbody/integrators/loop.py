@@ -255,6 +255,15 @@ def _begin_run(steps, dt, m, c, q, qd, w, collider_q):
 
 
 @njit(cache=True)
+def _start_step(m, c, t, q, qd, w, ratio_min, ratio_max):
+    """At a step's start: the state kept in w.q0, w.v0, the forces at it into w.f (with
+    the body volumes) and the volumes checked. Returns (status, index, value)."""
+    _copy_state(q, qd, w.q0, w.v0)
+    eval_forces(m, c, t, q, qd, w, w.f)
+    return _check_volumes(w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max)
+
+
+@njit(cache=True)
 def _end_step(m, c, t, dt, s, steps, q, qd, w, max_speed, collider_q, collider_rot, impulse):
     """After a step from t to t + dt: contacts, then the particle checks; on a failure
     the state goes back to the step's start. Returns (status, index, value)."""
@@ -278,11 +287,7 @@ def simulate_explicit(
     _begin_run(steps, dt, m, c, q, qd, w, cq)
     for s in range(steps):
         t = t0 + s * dt
-        _copy_state(q, qd, w.q0, w.v0)
-        eval_forces(m, c, t, q, qd, w, w.f)
-        status, index, value = _check_volumes(
-            w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max
-        )
+        status, index, value = _start_step(m, c, t, q, qd, w, ratio_min, ratio_max)
         if status != OK:
             return status, s, index, value
         if integrator == 0:
@@ -327,11 +332,7 @@ def simulate_implicit(
     _begin_run(steps, dt, m, c, q, qd, w, cq)
     for s in range(steps):
         t = t0 + s * dt
-        _copy_state(q, qd, w.q0, w.v0)
-        eval_forces(m, c, t, q, qd, w, w.f)
-        status, index, value = _check_volumes(
-            w.body_volume, m.body_rest_volume, m.body_closed, ratio_min, ratio_max
-        )
+        status, index, value = _start_step(m, c, t, q, qd, w, ratio_min, ratio_max)
         if status != OK:
             return status, s, index, value
         # BDF2 needs the previous step: from this call, or ``history`` says the workspace
