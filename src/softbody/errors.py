@@ -40,3 +40,8 @@ class SimulationError(RuntimeError):
 
 class StabilityWarning(UserWarning):
     """The time step exceeds the stability estimate of the chosen integrator."""
+
+
+class SizeLimitError(ValueError):
+    """A job would need more memory than :func:`softbody.limits.memory_limit` allows; the
+    message names the key or argument, the estimated memory and the limit."""
