@@ -12,7 +12,7 @@ from softbody.gas import eval_model_pressure, gas_energy, gas_value_at
 from softbody.integrators.workspace import Workspace
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
-from softbody.sim.state import State
+from softbody.sim.state import State, kernel_input
 from softbody.volume import eval_body_volume, eval_model_volume_only
 
 #: one scratch workspace per model for the measurements (allocating one took 15 ms at
@@ -67,14 +67,15 @@ def body_volume_by(model: Model, state: State, method: str) -> np.ndarray:
         samples = np.random.default_rng(0).random((4096, 2))
         mc_range = np.tile([0, 4096], (model.body_count, 1))
     w = _workspace(model)
+    state.conform(model)
     eval_body_volume(
         state.particle_q,
         model.tri_indices,
         model.body_particle_range,
         model.body_tri_range,
-        chosen,
-        mc_range,
-        samples,
+        kernel_input(chosen, np.int64),  # read-only like the model's own arrays
+        kernel_input(mc_range, np.int64),
+        kernel_input(samples),
         w.body_lo,
         w.body_hi,
         w.volume_gradient,
@@ -86,6 +87,7 @@ def body_volume_by(model: Model, state: State, method: str) -> np.ndarray:
 def body_volume(model: Model, state: State) -> np.ndarray:
     """Volume of each body by its own volume method [m^3], shape (B,); NaN for open
     surfaces (cloth)."""
+    state.conform(model)
     v = _volumes(model, state.particle_q).body_volume.copy()
     v[model.body_closed == 0] = np.nan
     return v
@@ -93,6 +95,7 @@ def body_volume(model: Model, state: State) -> np.ndarray:
 
 def body_pressure(model: Model, state: State, control: Control | None = None) -> np.ndarray:
     """Absolute gas pressure of each body at ``state.time`` [Pa], shape (B,)."""
+    state.conform(model)
     w = _volumes(model, state.particle_q)
     data = control_data(model) if control is None else control.write(model, control_data(model))
     m = model.data
@@ -175,6 +178,7 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
     ``control`` supplies gas overrides and attachment anchors when they differ from the
     model's.
     """
+    state.conform(model)
     q, qd = state.particle_q, state.particle_qd
     m = model.particle_mass
     bodies = model.body_count

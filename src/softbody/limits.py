@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
+
 from softbody.errors import SizeLimitError
 
 #: Fraction of physical memory a single job may plan to use.
@@ -68,11 +70,19 @@ def memory_limit() -> int:
 def format_bytes(n: float) -> str:
     """``1.5e9`` -> ``'1.4 GiB'``: a size for a message."""
     n = float(n)
+    if not np.isfinite(n):
+        return "more than any machine has"
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if abs(n) < 1024 or unit == "PiB":
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.3g} {unit}"
         n /= 1024
     raise AssertionError("unreachable")
+
+
+def format_count(n: float) -> str:
+    """``40962`` -> ``'40,962'``; past a trillion, ``'1e+300'``."""
+    n = float(n)
+    return f"{n:,.0f}" if abs(n) < 1e12 else f"{n:.3g}"
 
 
 def check_memory(key: str, estimate: float, what: str) -> None:
@@ -84,10 +94,14 @@ def check_memory(key: str, estimate: float, what: str) -> None:
     """
     limit = memory_limit()
     if not estimate <= limit:  # also refuses NaN
+        source = (
+            "SOFTBODY_MEMORY_LIMIT"
+            if os.environ.get("SOFTBODY_MEMORY_LIMIT", "").strip()
+            else "half of this machine's memory; set SOFTBODY_MEMORY_LIMIT to change it"
+        )
         raise SizeLimitError(
             f"{key}: {what} would need about {format_bytes(estimate)} of memory, over the "
-            f"limit of {format_bytes(limit)} (half of this machine's memory; set "
-            "SOFTBODY_MEMORY_LIMIT to change it)"
+            f"limit of {format_bytes(limit)} ({source})"
         )
 
 
@@ -96,7 +110,7 @@ def check_mesh_size(key: str, vertex_count: float, face_count: float) -> None:
     made: what it costs to build, validate and simulate (``BYTES_PER_PARTICLE``,
     ``BYTES_PER_FACE``)."""
     estimate = BYTES_PER_PARTICLE * float(vertex_count) + BYTES_PER_FACE * float(face_count)
-    check_memory(key, estimate, f"a mesh of {float(vertex_count):,.0f} vertices")
+    check_memory(key, estimate, f"a mesh of {format_count(vertex_count)} vertices")
 
 
 def check_file_size(key: str, size: int, *, factor: float, maximum: int | None = None) -> None:

@@ -52,6 +52,7 @@ from softbody.gas import GasLaw
 from softbody.integrators import Integrator
 from softbody.integrators.implicit import apply_jacobians
 from softbody.sim.control import control_data
+from softbody.sim.state import kernel_array
 
 TOLERATED_GROWTH_RATE = 0.1
 """Growth rate [1/s] of the fastest-growing mode that the step estimate accepts."""
@@ -159,9 +160,15 @@ def spectral_bounds(
     volume_gradient (N, 3) = dV/dx [m^2]; products come from the implicit integrator's
     matrix-free ``apply_jacobians``. Pinned particles (inverse mass 0) drop out."""
     n = model.particle_count
+    # apply_jacobians is also called inside the implicit step, with writable float64
+    # arrays: hand it the same kinds of arrays here (kernel_array), or Numba compiles and
+    # caches a second version of it, and a later process may load the wrong one and crash
+    q = kernel_array(q)
+    body_pnet, body_dpdv = kernel_array(body_pnet), kernel_array(body_dpdv)
+    volume_gradient = kernel_array(volume_gradient)
     scale = np.sqrt(model.particle_inv_mass)[:, None]
     idx = model.spring_indices.reshape(-1, 2)
-    k = model.spring_stiffness
+    k = kernel_array(model.spring_stiffness)
     d = q[idx[:, 1]] - q[idx[:, 0]]
     length = np.linalg.norm(d, axis=1)
     u = np.divide(d, length[:, None], out=np.zeros_like(d), where=length[:, None] > 0)

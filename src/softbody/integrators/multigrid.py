@@ -319,7 +319,10 @@ def _diagonals(mg):
             mg.a_diag[v0 + i] = d
 
 
-@njit(cache=True)
+# inlined: its callers pass constants (a level of 0, a direction), which Numba would
+# compile as separate versions, and a cached kernel with several versions can crash a
+# later process that loads it
+@njit(cache=True, inline="always")
 def _gauss_seidel(mg, lv, forward):
     """One Gauss-Seidel sweep on A_l x_l = b_l (3 right-hand sides), in place."""
     r0, z0, v0 = mg.a_row_offset[lv], mg.a_nz_offset[lv], mg.vec_offset[lv]
@@ -341,7 +344,10 @@ def _gauss_seidel(mg, lv, forward):
         x[v0 + i, 2] = s2 * inv
 
 
-@njit(cache=True)
+# inlined: its callers pass constants (a level of 0, a direction), which Numba would
+# compile as separate versions, and a cached kernel with several versions can crash a
+# later process that loads it
+@njit(cache=True, inline="always")
 def restrict(mg, lv, res):
     """b_{l+1} = P_l^T res for res (n_l, 3)."""
     vc = mg.vec_offset[lv + 1]
@@ -359,7 +365,10 @@ def restrict(mg, lv, res):
             mg.b[vc + col, 2] += p * s2
 
 
-@njit(cache=True)
+# inlined: its callers pass constants (a level of 0, a direction), which Numba would
+# compile as separate versions, and a cached kernel with several versions can crash a
+# later process that loads it
+@njit(cache=True, inline="always")
 def prolong(mg, lv):
     """x_l += P_l x_{l+1}."""
     v0, vc = mg.vec_offset[lv], mg.vec_offset[lv + 1]

@@ -17,6 +17,7 @@ from softbody.mesh.topology import bending_pairs, unique_edges, vertex_areas
 from softbody.mesh.tri_mesh import TriMesh
 from softbody.mesh.validate import validate_mesh
 from softbody.sim.model import Model
+from softbody.sim.state import kernel_input
 from softbody.volume import VolumeMethod, eval_body_volume
 
 
@@ -522,14 +523,16 @@ class ModelBuilder:
 
         # rest volume by each body's own method, at the initial positions
         rest_volume = np.zeros(bcount)
+        # the model's arrays as the Model will hold them (read-only), so that this call
+        # and the simulator's share one compiled version of the volume kernels
         eval_body_volume(
             q,
-            tri,
-            body_particle_range,
-            body_tri_range,
-            method,
-            body_mc_range,
-            mc_samples,
+            kernel_input(tri, np.int64),
+            kernel_input(body_particle_range, np.int64),
+            kernel_input(body_tri_range, np.int64),
+            kernel_input(method, np.int64),
+            kernel_input(body_mc_range, np.int64),
+            kernel_input(mc_samples),
             np.zeros((bcount, 3)),
             np.zeros((bcount, 3)),
             np.zeros((len(q), 3)),

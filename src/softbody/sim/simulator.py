@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import operator
 import warnings
 import weakref
 
@@ -26,6 +27,28 @@ MAX_AUTO_DT = 1.0 / 60.0
 AUTO_RECHECK = 0.25
 #: Projective dynamics: factored matrices kept, one per step size.
 PROJECTIVE_FACTORS = 4
+#: Most steps one :meth:`Simulator.run` or :meth:`Simulator.advance` call takes. Counts
+#: stay 64-bit integers in the compiled loop (a Python int past 2**63 would compile a
+#: second, unsigned version of it), and a call that long is a mistake: 1e12 steps of the
+#: smallest model take weeks.
+MAX_STEPS = 10**12
+
+
+def step_count(steps) -> int:
+    """``steps`` as a Python int in [0, ``MAX_STEPS``]; a ``ValueError`` otherwise (a
+    bool, a fraction, NaN, infinity, a negative or a too large count)."""
+    if isinstance(steps, bool | np.bool_):
+        raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
+    try:
+        n = operator.index(steps)
+    except TypeError:
+        if isinstance(steps, float | np.floating) and float(steps).is_integer():
+            n = int(steps)
+        else:
+            raise ValueError(f"steps must be a non-negative integer, got {steps!r}") from None
+    if not 0 <= n <= MAX_STEPS:
+        raise ValueError(f"steps must lie in [0, {MAX_STEPS:.0e}], got {steps!r}")
+    return n
 
 
 class Simulator:
@@ -230,6 +253,7 @@ class Simulator:
             raise ValueError(f"duration must be finite and >= 0 seconds, got {duration!r}")
         if duration == 0:
             return state
+        state.conform(self.model)
         limit = self.dt
         if self.auto_dt:
             # re-estimate from the current shape and gas now and then (it costs Lanczos
@@ -244,7 +268,13 @@ class Simulator:
                 )
                 self._auto_time = state.time
             limit = self._auto_limit
-        substeps = max(1, int(np.ceil(duration / limit - 1e-9)))
+        substeps = max(1, np.ceil(duration / limit - 1e-9))
+        if substeps > MAX_STEPS:
+            raise ValueError(
+                f"advancing {duration:.6g} s in steps of at most {limit:.3g} s takes "
+                f"{substeps:.3g} steps, over the limit of {MAX_STEPS:.0e} per call"
+            )
+        substeps = int(substeps)
         saved, self.dt = self.dt, duration / substeps
         try:
             self.run(state, substeps, control)
@@ -263,21 +293,12 @@ class Simulator:
         One compiled call does all the steps, so this is the fast path for long runs.
         """
         model = self.model
-        if int(steps) != steps or steps < 0:
-            raise ValueError(f"steps must be a non-negative integer, got {steps!r}")
-        steps = int(steps)
-        if state.particle_q.shape != (model.particle_count, 3):
-            raise ValueError(
-                f"state has {state.particle_q.shape[0]} particles, the model {model.particle_count}"
-            )
+        steps = step_count(steps)
+        state.conform(model)
         if steps == 0:
             return state
         data = self._neutral if control is None else control.write(model, self._control)
         lo, hi = self.volume_limits
-        if state.collider_q.shape != (model.collider_count, 3):
-            raise ValueError(
-                f"state has {len(state.collider_q)} colliders, the model {model.collider_count}"
-            )
         state.collider_impulse[:] = 0.0
         self._work.cg_stats[:] = 0
         # the system matrix's step: dt for backward Euler, 2/3 dt for BDF2

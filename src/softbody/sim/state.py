@@ -7,6 +7,29 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def kernel_array(a) -> np.ndarray:
+    """``a`` as the compiled kernels take every state array: float64, C-contiguous,
+    aligned and writable (a copy only when ``a`` is not already all of these).
+
+    A kernel compiled once for writable float64 arrays and called again with a read-only
+    or float32 one compiles a second version of itself; Numba's on-disk cache then holds
+    two and, in a later process, may load the wrong one and crash. Every array that
+    crosses into a kernel goes through here (or :meth:`State.conform`) so each kernel
+    only ever sees one set of argument types.
+    """
+    return np.require(a, dtype=np.float64, requirements=["C", "A", "W"])
+
+
+def kernel_input(a, dtype=np.float64) -> np.ndarray:
+    """``a`` as the compiled kernels take a model's arrays: C-contiguous, aligned and
+    read-only (a read-only view; a copy only when the layout or ``dtype`` differs), for
+    a call from Python that passes arrays the compiled loop takes from a ``Model``
+    (:func:`kernel_array` says why the kinds must match)."""
+    view = np.require(a, dtype=dtype, requirements=["C", "A"]).view()
+    view.flags.writeable = False
+    return view
+
+
 @dataclass(eq=False)
 class State:
     """Positions and velocities of all particles at one instant.
@@ -39,11 +62,11 @@ class State:
             self.collider_rotation = np.zeros((len(self.collider_q), 3, 3)) + np.eye(3)
         if self.collider_impulse is None:
             self.collider_impulse = np.zeros((len(self.collider_q), 3))
-        self.collider_q = np.ascontiguousarray(self.collider_q, dtype=np.float64)
-        self.collider_rotation = np.ascontiguousarray(self.collider_rotation, dtype=np.float64)
-        self.collider_impulse = np.ascontiguousarray(self.collider_impulse, dtype=np.float64)
-        self.particle_q = np.ascontiguousarray(self.particle_q, dtype=np.float64)
-        self.particle_qd = np.ascontiguousarray(self.particle_qd, dtype=np.float64)
+        self.collider_q = kernel_array(self.collider_q)
+        self.collider_rotation = kernel_array(self.collider_rotation)
+        self.collider_impulse = kernel_array(self.collider_impulse)
+        self.particle_q = kernel_array(self.particle_q)
+        self.particle_qd = kernel_array(self.particle_qd)
         if self.particle_q.ndim != 2 or self.particle_q.shape[1] != 3:
             raise ValueError(f"particle_q must have shape (N, 3), got {self.particle_q.shape}")
         if self.particle_qd.shape != self.particle_q.shape:
@@ -51,6 +74,30 @@ class State:
                 f"particle_qd shape {self.particle_qd.shape} differs from particle_q "
                 f"shape {self.particle_q.shape}"
             )
+
+    def conform(self, model) -> None:
+        """Check this state's array shapes against ``model`` and make every array
+        float64, C-contiguous and writable (:func:`kernel_array`), replacing an attribute
+        a user set to some other kind of array. Raises ``ValueError`` naming the array."""
+        expected = {
+            "particle_q": (model.particle_count, 3),
+            "particle_qd": (model.particle_count, 3),
+            "collider_q": (model.collider_count, 3),
+            "collider_rotation": (model.collider_count, 3, 3),
+            "collider_impulse": (model.collider_count, 3),
+        }
+        for name, shape in expected.items():
+            value = getattr(self, name)
+            try:
+                array = kernel_array(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"state.{name} must be an array of numbers") from None
+            if array.shape != shape:
+                raise ValueError(
+                    f"state.{name} has shape {array.shape}, the model needs {shape}"
+                )
+            if array is not value:
+                setattr(self, name, array)
 
     def copy(self) -> State:
         """An independent copy."""
