@@ -26,6 +26,9 @@ BYTES_PER_PARTICLE = 3072
 #: Bytes per face a mesh takes while it is built and validated (faces, edges, half-edge
 #: sorts, adjacency), beyond the per-particle figure.
 BYTES_PER_FACE = 512
+#: Monte Carlo volume sample lines [bytes each]: two float64 in the builder's list, the
+#: Model's concatenated copy and the transient one while concatenating (3 x 16 bytes).
+BYTES_PER_MC_SAMPLE = 48
 #: Reading a mesh file: trimesh's parse holds several copies of the file's data; this
 #: many bytes of memory per byte of file (text OBJ and PLY measured near 4; rounded up).
 BYTES_PER_FILE_BYTE = 8
