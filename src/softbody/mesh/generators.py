@@ -189,7 +189,8 @@ def box(
     mesh = TriMesh(np.vstack(verts) * ext + _center(center), np.vstack(grid_faces))
     from softbody.mesh.validate import inspect_mesh
 
-    return inspect_mesh(mesh).mesh  # weld the shared edges of the six sides
+    # weld the shared edges of the six sides
+    return inspect_mesh(mesh, self_intersections=False).mesh
 
 
 def capsule(
