@@ -87,12 +87,12 @@ def icosphere(subdivisions: int, radius: float = 1.0, center: ArrayLike = (0, 0,
     center : (3,) array of float
         Center [m].
     """
-    import trimesh.creation
-
     s = _count("subdivisions", subdivisions, 0)
     r = _positive("radius", radius)
     split = _power(4.0, s)  # each subdivision splits every triangle in four
     _guard_size(f"icosphere(subdivisions={_arg(s)})", 10.0 * split + 2.0, 20.0 * split)
+    import trimesh.creation  # after the guard: importing it is 15 MB
+
     m = trimesh.creation.icosphere(subdivisions=s, radius=1.0)
     v = np.asarray(m.vertices, dtype=np.float64)
     v /= np.linalg.norm(v, axis=1, keepdims=True)  # exactly on the sphere
@@ -204,8 +204,6 @@ def capsule(
 
     ``rings`` latitude bands per hemisphere and ``segments`` around the axis.
     """
-    import trimesh.creation
-
     r = _positive("radius", radius)
     h = _positive("length", length)
     n_r = _count("rings", rings, 2)
@@ -214,6 +212,8 @@ def capsule(
     _guard_size(
         f"capsule(rings={_arg(n_r)}, segments={_arg(n_s)})", vertex_count, 2.0 * vertex_count - 4.0
     )
+    import trimesh.creation
+
     m = trimesh.creation.capsule(height=h, radius=r, count=[n_s, 2 * n_r])
     return TriMesh(np.asarray(m.vertices) @ _Z_TO_Y.T + _center(center), m.faces)
 
@@ -222,12 +222,12 @@ def cylinder(
     radius: float = 0.5, height: float = 1.0, segments: int = 32, center: ArrayLike = (0, 0, 0)
 ) -> TriMesh:
     """Closed cylinder along y with flat caps: ``segments`` sides, ``radius`` and ``height`` [m]."""
-    import trimesh.creation
-
     r = _positive("radius", radius)
     h = _positive("height", height)
     n_s = _count("segments", segments, 3)
     _guard_size(f"cylinder(segments={_arg(n_s)})", 2.0 * _f(n_s) + 2.0, 4.0 * _f(n_s))
+    import trimesh.creation
+
     m = trimesh.creation.cylinder(radius=r, height=h, sections=n_s)
     return TriMesh(np.asarray(m.vertices) @ _Z_TO_Y.T + _center(center), m.faces)
 

@@ -96,9 +96,13 @@ def triangles_intersect(p1: np.ndarray, p2: np.ndarray, tolerance: float = 0.0) 
         axes, usable = _cross_axes(a, b)
         s1 = np.einsum("pkd,pvd->pkv", axes, a)
         s2 = np.einsum("pkd,pvd->pkv", axes, b)
-        apart = (s1.max(axis=2) <= s2.min(axis=2) + tolerance) | (
-            s2.max(axis=2) <= s1.min(axis=2) + tolerance
-        )
+        lo1, hi1, lo2, hi2 = s1.min(axis=2), s1.max(axis=2), s2.min(axis=2), s2.max(axis=2)
+        # intervals meeting only at an end (within tolerance) touch: apart
+        apart = (hi1 <= lo2 + tolerance) | (hi2 <= lo1 + tolerance)
+        # but two flat projections (the common normal of coplanar triangles, or of a
+        # segment in a triangle's plane) are apart only when the planes are
+        flat = (hi1 - lo1 <= tolerance) & (hi2 - lo2 <= tolerance)
+        apart = np.where(flat, (hi1 < lo2 - tolerance) | (hi2 < lo1 - tolerance), apart)
         out[begin : begin + len(a)] = ~np.any(apart & usable, axis=1)
     return out
 

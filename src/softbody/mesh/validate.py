@@ -76,7 +76,6 @@ class MeshReport:
         """How many pairs of triangles cross each other (None: not searched)."""
         return None if self.intersecting_pairs is None else len(self.intersecting_pairs)
 
-
     @property
     def warnings(self) -> list[str]:
         """Facts a user should know that do not stop the mesh holding gas."""
