@@ -137,14 +137,18 @@ def _info(args) -> int:
     from softbody.mesh import inspect_mesh, read_mesh
 
     mesh = read_mesh(args.mesh)
-    report = inspect_mesh(mesh)
+    report = inspect_mesh(mesh, self_intersections=True)  # always here, whatever the size
     print(
         f"{args.mesh}: {report.input_vertex_count} vertices, {report.input_face_count} "
         f"triangles as stored; {report.mesh.vertex_count} vertices after welding"
     )
     print(f"  volume {abs(report.signed_volume):.6g} m^3, area {report.mesh.area:.6g} m^2")
+    if not report.self_intersection_count:
+        print("  self-intersections: none")
     for line in report.repairs:
         print(f"  repair: {line}")
+    for line in report.warnings:
+        print(f"  warning: {line}")
     if report.problems:
         for line in report.problems:
             print(f"  problem: {line}")

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
+from softbody import limits
 from softbody.mesh.tri_mesh import TriMesh
 
 # trimesh builds capsules and cylinders along z; turn them to stand along y (our "up")
@@ -19,9 +22,46 @@ def _positive(name: str, value: float) -> float:
 
 
 def _count(name: str, value: int, minimum: int) -> int:
-    if int(value) != value or value < minimum:
+    try:  # int(inf) raises OverflowError, int(nan) and int("x") ValueError
+        whole = int(value)
+        ok = whole == value and whole >= minimum
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
+    return whole
+
+
+def _f(n: int) -> float:
+    """A count as a float, inf when too large for one (a huge Python int)."""
+    return float(n) if n < 1e300 else math.inf
+
+
+def _arg(n: int) -> str:
+    """A count for a message: digits, or a power of ten when it has too many."""
+    return str(n) if n < 10**15 else f"about 10^{math.log10(n):.0f}"
+
+
+def _power(base: float, exponent: int) -> float:
+    """``base ** exponent`` as a float, inf where it overflows (never a huge Python int)."""
+    try:
+        return float(base) ** exponent
+    except OverflowError:
+        return math.inf
+
+
+def _guard_size(call: str, vertices: float, faces: float) -> None:
+    """Refuse, before allocating, a mesh of ``vertices`` vertices and ``faces`` triangles
+    that would not fit in memory (:func:`softbody.limits.check_mesh_size`); ``call`` names
+    the generator and the arguments that set the size, e.g. ``icosphere(subdivisions=12)``."""
+    vertices, faces = float(vertices), float(faces)
+    if vertices < 1e15:
+        limits.check_mesh_size(call, vertices, faces)
+        return
+    # astronomically many: say so in powers of ten rather than with hundreds of digits
+    estimate = limits.BYTES_PER_PARTICLE * vertices + limits.BYTES_PER_FACE * faces
+    size = f"about 10^{math.log10(vertices):.0f}" if math.isfinite(vertices) else "over 10^300"
+    limits.check_memory(call, estimate, f"a mesh of {size} vertices")
 
 
 def _center(center: ArrayLike) -> np.ndarray:
@@ -47,10 +87,12 @@ def icosphere(subdivisions: int, radius: float = 1.0, center: ArrayLike = (0, 0,
     center : (3,) array of float
         Center [m].
     """
-    import trimesh.creation
-
     s = _count("subdivisions", subdivisions, 0)
     r = _positive("radius", radius)
+    split = _power(4.0, s)  # each subdivision splits every triangle in four
+    _guard_size(f"icosphere(subdivisions={_arg(s)})", 10.0 * split + 2.0, 20.0 * split)
+    import trimesh.creation  # after the guard: importing it is 15 MB
+
     m = trimesh.creation.icosphere(subdivisions=s, radius=1.0)
     v = np.asarray(m.vertices, dtype=np.float64)
     v /= np.linalg.norm(v, axis=1, keepdims=True)  # exactly on the sphere
@@ -76,6 +118,11 @@ def uv_sphere(
     n_r = _count("rings", rings, 2)
     n_s = _count("segments", segments, 3)
     r = _positive("radius", radius)
+    _guard_size(
+        f"uv_sphere(rings={_arg(n_r)}, segments={_arg(n_s)})",
+        _f(n_r - 1) * _f(n_s) + 2.0,
+        2.0 * _f(n_r - 1) * _f(n_s),
+    )
     theta = np.linspace(0.0, np.pi, n_r + 1)[1:-1]  # polar angle of the inner rings
     phi = np.linspace(0.0, 2.0 * np.pi, n_s, endpoint=False)
     st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
@@ -114,7 +161,11 @@ def box(
     ext = np.asarray(extents, dtype=np.float64)
     if ext.shape != (3,) or not np.all(np.isfinite(ext)) or np.any(ext <= 0):
         raise ValueError(f"extents must be 3 finite numbers > 0, got {extents!r}")
-    n = 2 ** _count("subdivisions", subdivisions, 0)
+    s = _count("subdivisions", subdivisions, 0)
+    side = _power(2.0, s)  # squares per box edge
+    # six grids of (n + 1)^2 vertices each before the shared edges are welded
+    _guard_size(f"box(subdivisions={_arg(s)})", 6.0 * (side + 1) * (side + 1), 12.0 * side * side)
+    n = 2**s
     t = np.linspace(-0.5, 0.5, n + 1)
     u, w = np.meshgrid(t, t, indexing="ij")
     u, w = u.reshape(-1), w.reshape(-1)
@@ -138,7 +189,8 @@ def box(
     mesh = TriMesh(np.vstack(verts) * ext + _center(center), np.vstack(grid_faces))
     from softbody.mesh.validate import inspect_mesh
 
-    return inspect_mesh(mesh).mesh  # weld the shared edges of the six sides
+    # weld the shared edges of the six sides
+    return inspect_mesh(mesh, self_intersections=False).mesh
 
 
 def capsule(
@@ -152,12 +204,16 @@ def capsule(
 
     ``rings`` latitude bands per hemisphere and ``segments`` around the axis.
     """
-    import trimesh.creation
-
     r = _positive("radius", radius)
     h = _positive("length", length)
     n_r = _count("rings", rings, 2)
     n_s = _count("segments", segments, 3)
+    vertex_count = 2.0 * _f(n_r) * _f(n_s) + 2.0  # trimesh's capsule with count=[n_s, 2 n_r]
+    _guard_size(
+        f"capsule(rings={_arg(n_r)}, segments={_arg(n_s)})", vertex_count, 2.0 * vertex_count - 4.0
+    )
+    import trimesh.creation
+
     m = trimesh.creation.capsule(height=h, radius=r, count=[n_s, 2 * n_r])
     return TriMesh(np.asarray(m.vertices) @ _Z_TO_Y.T + _center(center), m.faces)
 
@@ -166,11 +222,12 @@ def cylinder(
     radius: float = 0.5, height: float = 1.0, segments: int = 32, center: ArrayLike = (0, 0, 0)
 ) -> TriMesh:
     """Closed cylinder along y with flat caps: ``segments`` sides, ``radius`` and ``height`` [m]."""
-    import trimesh.creation
-
     r = _positive("radius", radius)
     h = _positive("height", height)
     n_s = _count("segments", segments, 3)
+    _guard_size(f"cylinder(segments={_arg(n_s)})", 2.0 * _f(n_s) + 2.0, 4.0 * _f(n_s))
+    import trimesh.creation
+
     m = trimesh.creation.cylinder(radius=r, height=h, sections=n_s)
     return TriMesh(np.asarray(m.vertices) @ _Z_TO_Y.T + _center(center), m.faces)
 
@@ -183,7 +240,15 @@ def rectangle(
     sx, sy = (float(v) for v in size)
     _positive("width", sx)
     _positive("height", sy)
-    nx, ny = (_count("resolution", int(v), 1) for v in resolution)
+    res = tuple(resolution) if np.ndim(resolution) == 1 else ()
+    if len(res) != 2:
+        raise ValueError(f"resolution must be two integers (nx, ny), got {resolution!r}")
+    nx, ny = (_count("resolution", v, 1) for v in res)
+    _guard_size(
+        f"rectangle(resolution=({_arg(nx)}, {_arg(ny)}))",
+        (_f(nx) + 1) * (_f(ny) + 1),
+        2.0 * _f(nx) * _f(ny),
+    )
     x, y = np.meshgrid(
         np.linspace(-sx / 2, sx / 2, nx + 1), np.linspace(-sy / 2, sy / 2, ny + 1), indexing="ij"
     )

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from softbody import limits
 from softbody.errors import MeshError
 from softbody.mesh.tri_mesh import TriMesh
 from softbody.mesh.validate import validate_mesh
@@ -21,6 +22,13 @@ def read_mesh(path: str | os.PathLike) -> TriMesh:
 
     Multi-object files (a GLB scene, an OBJ with several groups) are merged into one mesh
     with their transforms applied. Polygons are triangulated by trimesh.
+
+    A file too large to parse within :func:`softbody.limits.memory_limit` is refused before
+    it is read (``limits.BYTES_PER_FILE_BYTE`` bytes of memory per byte of file), and a
+    parsed mesh too large to build and simulate is refused by its vertex and face counts,
+    both with a :class:`~softbody.errors.SizeLimitError`. Every other problem (empty,
+    unreadable, malformed, NaN coordinates, bad indices) is a :class:`MeshError` whose
+    message starts with the file's path.
     """
     import trimesh
 
@@ -32,13 +40,30 @@ def read_mesh(path: str | os.PathLike) -> TriMesh:
             f"{p}: unsupported mesh format {p.suffix!r}; use one of {', '.join(MESH_SUFFIXES)}"
         )
     try:
+        size = p.stat().st_size
+    except OSError as exc:
+        raise MeshError(f"{p}: could not read mesh ({exc.strerror or exc})") from exc
+    if size == 0:
+        raise MeshError(f"{p}: the file is empty")
+    limits.check_file_size(str(p), size, factor=limits.BYTES_PER_FILE_BYTE)
+    try:
         loaded = trimesh.load(str(p), force="mesh", process=False)
+    except MemoryError:
+        raise MeshError(
+            f"{p}: ran out of memory reading a {limits.format_bytes(size)} file"
+        ) from None
     except Exception as exc:  # trimesh raises many types for bad files
-        raise MeshError(f"{p}: could not read mesh ({exc})") from exc
+        reason = str(exc) or type(exc).__name__
+        raise MeshError(f"{p}: could not read mesh ({reason})") from exc
     faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
     if faces.size == 0:
         raise MeshError(f"{p}: file holds no triangles")
-    return TriMesh(np.asarray(loaded.vertices, dtype=np.float64), faces)
+    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
+    limits.check_mesh_size(str(p), len(vertices), len(faces))
+    try:
+        return TriMesh(vertices, faces)
+    except MeshError as exc:  # NaN coordinates, indices out of range: name the file
+        raise MeshError(f"{p}: {exc}") from None
 
 
 def load_mesh(path: str | os.PathLike, *, validate: bool = True) -> TriMesh:

@@ -10,6 +10,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from softbody import limits
 from softbody.collision.colliders import Collider, collider_arrays
 from softbody.errors import MeshError
 from softbody.gas import Gas, GasLaw
@@ -38,6 +39,18 @@ def _vec3(name: str, value) -> np.ndarray:
     if v.shape != (3,) or not np.all(np.isfinite(v)):
         raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
     return v
+
+
+def _sample_count(value) -> int:
+    """``monte_carlo_samples`` as a whole number >= 1 (refusing 2.5, inf, NaN and text)."""
+    try:  # int(inf) raises OverflowError, int(nan) ValueError
+        n = int(value)
+        ok = n == value and n >= 1
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise ValueError(f"monte_carlo_samples must be an integer >= 1, got {value!r}")
+    return n
 
 
 @dataclass
@@ -338,6 +351,23 @@ class ModelBuilder:
         else:
             raise TypeError(f"mesh must be a TriMesh, got {type(mesh).__name__}")
         body = len(self._bodies)
+        # the whole model so far plus this body, before validating or copying anything
+        particles = self._particle_count + source.vertex_count
+        faces = sum(len(b.faces) for b in self._bodies) + source.face_count
+        limits.check_memory(
+            f"body {body} mesh",
+            limits.BYTES_PER_PARTICLE * particles + limits.BYTES_PER_FACE * faces,
+            f"a model of {particles:,} particles ({source.vertex_count:,} from this mesh)",
+        )
+        method = VolumeMethod.parse(volume_method)
+        samples_n = 0
+        if method == VolumeMethod.MONTE_CARLO:
+            samples_n = _sample_count(monte_carlo_samples)
+            limits.check_memory(
+                f"body {body} monte_carlo_samples={samples_n}",
+                limits.BYTES_PER_MC_SAMPLE * float(samples_n),
+                f"{samples_n:,} Monte Carlo sample lines",
+            )
         mesh = validate_mesh(source, name=f"body {body} mesh", closed=closed)
         if mesh.vertex_count != source.vertex_count and pinned is not None:
             warnings.warn(
@@ -350,7 +380,6 @@ class ModelBuilder:
         c = _number("damping", damping)
         kb = _number("bend_stiffness", bend_stiffness)
         cb = _number("bend_damping", bend_damping)
-        method = VolumeMethod.parse(volume_method)
         shape = VolumeMethod.parse(contact_shape)
         if shape not in (
             VolumeMethod.BOUNDING_BOX,
@@ -381,9 +410,6 @@ class ModelBuilder:
                 raise ValueError(f"pinned vertex indices must lie in [0, {v - 1}]")
             pin_mask[p] = True
         vel = np.broadcast_to(_vec3("velocity", velocity), (v, 3)).copy()
-        samples_n = int(monte_carlo_samples)
-        if method == VolumeMethod.MONTE_CARLO and samples_n < 1:
-            raise ValueError(f"monte_carlo_samples must be >= 1, got {monte_carlo_samples!r}")
         samples = (
             np.random.default_rng(seed).random((samples_n, 2))
             if method == VolumeMethod.MONTE_CARLO
