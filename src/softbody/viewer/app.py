@@ -497,8 +497,8 @@ class Viewer:
 
     def _read_slider(self, handle) -> float:
         """The slider's value, checked: a value that is not a finite number is refused
-        (the slider goes back to its last good value), one outside the slider's range is
-        clamped into it; both raise _BadInput after correcting the slider."""
+        (the slider goes back to its last good value; raises _BadInput), one outside the
+        slider's range is clamped into it (and pauses with a message)."""
         low, high, label = self._limits[id(handle)]
         raw = handle.value
         try:
@@ -511,9 +511,12 @@ class Viewer:
             raise _BadInput(f"{label} = {raw!r} is not a finite number; kept {good:g}")
         if not low <= value <= high:
             clamped = min(max(value, low), high)
-            self._good[id(handle)] = clamped
             self._write_back(handle, clamped)
-            raise _BadInput(f"{label} = {value:g} is outside [{low:g}, {high:g}]; set {clamped:g}")
+            self._pause(
+                f"paused: {label} = {value:g} is outside [{low:g}, {high:g}]; set to "
+                f"{clamped:g}. Press Play to go on, or Reset."
+            )
+            value = clamped
         self._good[id(handle)] = value
         return value
 
