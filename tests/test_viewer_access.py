@@ -47,7 +47,7 @@ def viewer():
 
 def token_of(viewer) -> str:
     """The token as the user gets it: from the printed URL."""
-    return viewer.url.split("?token=", 1)[1]
+    return viewer.url.partition("?token=")[2]
 
 
 def get(port: int, path: str, headers: dict | None = None) -> http.client.HTTPResponse:
@@ -63,7 +63,7 @@ def ws(viewer, query: str = "", origin: str | None = "own", cookie: str | None =
     """Open a websocket to the viewer as viser's page does (its subprotocol)."""
     import viser
 
-    port = viewer.port
+    port = viewer.server.get_port()
     if origin == "own":
         origin = f"http://127.0.0.1:{port}"
     return connect(
@@ -99,7 +99,7 @@ def test_url_carries_a_random_token(viewer):
     viewers never share one)."""
     from softbody.viewer.guard import Guard
 
-    assert viewer.url.startswith(f"http://127.0.0.1:{viewer.port}/?token=")
+    assert viewer.url.startswith(f"http://127.0.0.1:{viewer.server.get_port()}/?token=")
     assert len(token_of(viewer)) >= 32
     assert Guard(loopback=True).token != Guard(loopback=True).token
 
@@ -108,7 +108,7 @@ def test_page_needs_the_token(viewer):
     """Without the token, or with a wrong one, the page is refused (403, a short plain
     text reason); with it, the page is served and an HttpOnly, SameSite=Strict cookie
     named after the port is set; that cookie alone then serves the page."""
-    port = viewer.port
+    port = viewer.server.get_port()
     for path in ("/", "/index.html", "/?token=wrong", "/?token="):
         response = get(port, path)
         assert response.status == 403, path
@@ -127,7 +127,7 @@ def test_host_header_must_name_this_server(viewer):
     """DNS rebinding: a page on evil.example whose name resolves to 127.0.0.1 sends
     Host: evil.example. Bound to loopback, only loopback names with this port pass,
     even with the right token."""
-    port, token = viewer.port, token_of(viewer)
+    port, token = viewer.server.get_port(), token_of(viewer)
     for host in (f"evil.example:{port}", "127.0.0.1", f"127.0.0.1:{port + 1}", "x:y:z"):
         assert get(port, f"/?token={token}", {"Host": host}).status == 403, host
     for host in (f"localhost:{port}", f"127.0.0.2:{port}", f"[::1]:{port}"):
@@ -144,8 +144,9 @@ def refused(viewer, **kw) -> int:
 def test_websocket_needs_token_and_own_origin(viewer):
     """Any web page can open a websocket to localhost; the handshake is refused without
     the token (cookie or ?token=), with a wrong one, from another Origin (even with the
-    token), without an Origin, and with a foreign Host."""
-    port, token = viewer.port, token_of(viewer)
+    token), without an Origin, and with a foreign Host; with the token and the page's
+    own Origin it opens."""
+    port, token = viewer.server.get_port(), token_of(viewer)
     assert refused(viewer) == 403
     assert refused(viewer, query="?token=wrong") == 403
     assert refused(viewer, query=f"?token={token}", origin="http://evil.example") == 403
@@ -156,15 +157,11 @@ def test_websocket_needs_token_and_own_origin(viewer):
     assert upgrade(port, f"/?token={token}", rebinding) == 403
     own = {"Host": f"127.0.0.1:{port}", "Origin": f"http://127.0.0.1:{port}"}
     assert upgrade(port, f"/?token={token}", own) == 101  # the same request, own host
-
-
-def test_websocket_with_token_and_origin_works(viewer):
-    """With the token (on the URL, or as the page's cookie) and the page's own Origin,
-    the websocket opens and viser's stream of scene messages arrives."""
-    token = token_of(viewer)
+    # with the token (on the URL, or as the page's cookie) and the page's own Origin,
+    # the websocket opens and viser's stream of scene messages arrives
     with ws(viewer, query=f"?token={token}") as conn:
         assert len(conn.recv(timeout=10)) > 16
-    with ws(viewer, cookie=f"softbody-viewer-token-{viewer.port}={token}") as conn:
+    with ws(viewer, cookie=f"softbody-viewer-token-{port}={token}") as conn:
         assert len(conn.recv(timeout=10)) > 16
 
 
@@ -252,7 +249,7 @@ def test_cli_warns_when_reachable_from_the_network():
             if not line:
                 break
             lines.append(line)
-            if "?token=" in line:
+            if "in a browser" in line:  # the URL line
                 break
     finally:
         proc.send_signal(signal.SIGINT)

@@ -61,9 +61,9 @@ class Client:
         import viser
         from websockets.sync.client import connect
 
-        port = viewer.port
+        port = viewer.server.get_port()
         self.conn = connect(
-            f"ws://127.0.0.1:{port}/?token={viewer.url.split('?token=')[1]}",
+            f"ws://127.0.0.1:{port}/?token={viewer.url.partition('?token=')[2]}",
             origin=f"http://127.0.0.1:{port}",
             subprotocols=[f"viser-v{viser.__version__}"],
             open_timeout=10,

@@ -749,7 +749,14 @@ class Viewer:
     # -- loop ------------------------------------------------------------------------------
     def _advance(self, steps: int) -> None:
         """Run ``steps`` steps (lock held); a blow-up pauses with its message."""
-        if self.grabbed is not None and self._grab_target is not None:
+        if self.grabbed is not None:
+            try:
+                # the gizmo's position as it is now (set by a page or by a script)
+                self._grab_target = self._point(self.grab_gizmo.position, "Grab")
+            except _BadInput as exc:
+                self.grabbed, self.control.grab_particle = None, -1
+                self._pause(f"paused: {exc}; vertex released. Press Play to go on, or Reset.")
+                return
             i = self.grabbed
             m = float(self.model.particle_mass[i])
             omega = 0.3 / self.dt  # stiff, yet well inside every integrator's stable range
@@ -906,7 +913,10 @@ def show(
 ) -> Viewer:
     """Open a browser viewer on ``model`` (from ``state``, stepped like ``simulator``).
 
-    Prints nothing; the page is at ``viewer.url``. With ``block=True`` it runs until
+    Prints nothing; the page is at ``viewer.url`` (with its access token). Raises
+    ValueError for a port outside 0..65535 or a host that names no address, and
+    RuntimeError if the server does not start (within 30 s) or its access checks
+    cannot be installed. With ``block=True`` it runs until
     Ctrl-C; with ``block=False`` it returns the running :class:`Viewer` (call ``stop()``).
     """
     state = model.state() if state is None else state
