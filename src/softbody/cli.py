@@ -99,35 +99,48 @@ def _view(args) -> int:
     from softbody.errors import StabilityWarning
     from softbody.scenes import load_scene
     from softbody.sim.simulator import Simulator
-    from softbody.viewer.app import show
 
     try:
         import viser  # noqa: F401
     except ImportError:
         raise RuntimeError("the viewer needs viser: pip install -e '.[viewer]'") from None
+    from softbody.viewer.app import show
+
     scene = load_scene(args.scene, list(args.set or []))
     print(f"{scene.name}: preparing (the first run compiles the kernels, about 40 s)", flush=True)
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", StabilityWarning)
-        sim = Simulator(
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", StabilityWarning)
+            sim = Simulator(
+                scene.model,
+                integrator=args.integrator or scene.integrator,
+                dt=args.dt or scene.dt,
+                implicit_tolerance=scene.implicit_tolerance,
+            )
+        cam = scene.render.camera
+        viewer = show(
             scene.model,
-            integrator=args.integrator or scene.integrator,
-            dt=args.dt or scene.dt,
-            implicit_tolerance=scene.implicit_tolerance,
+            scene.model.state(),
+            sim,
+            host=args.host,
+            port=args.port,
+            block=False,
+            body_names=scene.body_names,
+            body_colors=scene.render.body_colors,
+            camera=(cam.eye, cam.target),
         )
-    cam = scene.render.camera
-    viewer = show(
-        scene.model,
-        scene.model.state(),
-        sim,
-        host=args.host,
-        port=args.port,
-        block=False,
-        body_names=scene.body_names,
-        body_colors=scene.render.body_colors,
-        camera=(cam.eye, cam.target),
-    )
+    except KeyboardInterrupt:
+        print("softbody: interrupted", file=sys.stderr)
+        return 130
+    if viewer.exposed:
+        print(
+            f"softbody: warning: the viewer listens on {args.host}, so it is reachable from "
+            "the network; anyone with the token in the URL below can drive it",
+            file=sys.stderr,
+            flush=True,
+        )
+    # the token in the URL is the key to the viewer: the page sets it as a cookie
     print(f"{scene.name}: open {viewer.url} in a browser (Ctrl-C to stop)", flush=True)
     viewer.wait()
     return 0
@@ -219,8 +232,19 @@ def build_parser() -> argparse.ArgumentParser:
 
     view = sub.add_parser("view", help="simulate a scene live in the browser")
     view.add_argument("scene", help="built-in scene name or .toml file")
-    view.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
-    view.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    view.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address to bind (default 127.0.0.1; any other is reachable from the network)",
+    )
+    from softbody.viewer import port_number
+
+    view.add_argument(
+        "--port",
+        type=port_number,
+        default=8080,
+        help="port (default 8080; the next free one if taken, 0 for any)",
+    )
     view.add_argument("--dt", type=_dt, help='time step in seconds, or "auto"')
     view.add_argument("--integrator", choices=INTEGRATORS)
     view.add_argument(

@@ -11,7 +11,12 @@ are changed by building a new Model with ``dataclasses.replace``; gas goes throu
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
+import math
+import socket
+import sys
 import threading
 import time
 import warnings
@@ -28,6 +33,7 @@ from softbody.render.frame import BOX_CORNERS, BOX_EDGES, PALETTE, bounding_segm
 from softbody.sim.model import Model
 from softbody.sim.simulator import Simulator
 from softbody.sim.state import State
+from softbody.viewer.guard import Guard, is_loopback, start_guarded
 from softbody.volume import VolumeMethod
 
 VOLUME_METHODS = [m.name.lower() for m in VolumeMethod]
@@ -37,6 +43,39 @@ HISTORY_SECONDS = 10.0
 UPDATE_RATE = 30.0
 #: Readout and plot refreshes per second.
 READOUT_RATE = 4.0
+
+
+def _check_address(host: str, port: int) -> None:
+    """Refuse a port outside 0..65535 or a host that names no address, before viser
+    tries (its server thread dies on the first and retries 1000 ports on the second)."""
+    if isinstance(port, bool) or not isinstance(port, int | np.integer):
+        raise ValueError(f"viewer port must be an integer, got {port!r}")
+    if not 0 <= port <= 65535:
+        raise ValueError(f"viewer port must be in 0..65535, got {port}")
+    try:
+        socket.getaddrinfo(host.strip("[]"), port, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError) as exc:
+        raise ValueError(f"viewer host {host!r} is not an address to bind: {exc}") from None
+
+
+def _start_server(host: str, port: int, guard: Guard):
+    """A viser server on ``host``:``port`` behind ``guard``, without viser's own banner
+    (its URL lacks the token) and without its share-URL tunnel (a client could ask it to
+    open the viewer to the internet through an outside relay)."""
+    import viser
+    from viser import _messages
+
+    def build():
+        with contextlib.redirect_stdout(io.StringIO()):
+            return viser.ViserServer(host=host, port=int(port), verbose=False)
+
+    server = start_guarded(build, guard)
+    infra = server._websock_server
+    for message in (_messages.ShareUrlRequest, _messages.ShareUrlDisconnect):
+        if message in infra._incoming_handlers:
+            infra.unregister_handler(message)
+    server.gui.configure_theme(show_share_button=False)
+    return server
 
 
 def _with_user_ball(model: Model, state: State) -> tuple[Model, State, int]:
@@ -101,6 +140,10 @@ def _quaternion(rot: np.ndarray) -> np.ndarray:
     return q
 
 
+class _BadInput(ValueError):
+    """A value a client sent that the server refused or clamped."""
+
+
 class Viewer:
     """A running viewer. Create with :func:`softbody.viewer.show`."""
 
@@ -116,8 +159,7 @@ class Viewer:
         body_colors: tuple[str, ...] | None = None,
         camera: tuple | None = None,
     ):
-        import viser
-
+        _check_address(host, port)
         model, state, self.ball = _with_user_ball(model, state)
         self.model = model
         self.initial_model = model
@@ -141,6 +183,15 @@ class Viewer:
         self.updates_per_second = 0.0
         self.realtime_factor = 0.0
         self.grabbed: int | None = None
+        #: a blow-up or an unexpected error in a step: only Reset goes on from here
+        self.needs_reset = False
+        self._grab_target: np.ndarray | None = None
+        self._logged = ""
+        #: (low, high, label) of each slider, kept here: a client may rewrite a slider's
+        #: min and max on the page, so those are never trusted
+        self._limits: dict[int, tuple[float, float, str]] = {}
+        #: the last accepted value of each control, by id of its handle
+        self._good: dict[int, object] = {}
         self._stop = threading.Event()
         self._history: deque = deque()
         self._restoring = False
@@ -153,21 +204,44 @@ class Viewer:
         # compile (or load) the kernels now, so the page never shows a frozen scene
         self.sim.run(self.state.copy(), 1, self.control)
 
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.host = host
-        self.server.scene.set_up_direction("+y")
-        self._camera = camera
-        self.server.on_client_connect(self._on_connect)
-        self._build_scene()
-        self._build_gui()
+        self.guard = Guard(loopback=is_loopback(host))
+        self.server = _start_server(host, port, self.guard)
+        try:
+            self.server.scene.set_up_direction("+y")
+            self._camera = camera
+            self.server.on_client_connect(self._guarded(self._on_connect, "connect"))
+            self._workspace = self._workspace_box()
+            self._build_scene()
+            self._build_gui()
+        except BaseException:
+            self.server.stop()
+            raise
         self._thread = threading.Thread(target=self._loop, name="softbody-viewer", daemon=True)
         self._thread.start()
 
     # -- public ----------------------------------------------------------------------------
     @property
+    def port(self) -> int:
+        """The port the server is bound to (viser moves on to the next one if taken)."""
+        return int(self.server.get_port())
+
+    @property
     def url(self) -> str:
-        """Address of the page."""
-        return f"http://{self.host}:{self.server.get_port()}"
+        """Address of the page, with the access token (``http://HOST:PORT/?token=...``).
+
+        A wildcard bind (0.0.0.0, ::) is shown as the loopback address of its family.
+        """
+        host = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}.get(self.host, self.host)
+        if ":" in host and not host.startswith("["):
+            host = f"[{host}]"
+        return f"http://{host}:{self.port}/?token={self.guard.token}"
+
+    @property
+    def exposed(self) -> bool:
+        """True if the server is bound to a non-loopback address (reachable from the
+        network; the token still protects it)."""
+        return not self.guard.loopback
 
     def stop(self) -> None:
         """Stop the simulation thread and the server."""
@@ -267,12 +341,13 @@ class Viewer:
             disable_rotations=True,
             position=tuple(state.collider_q[self.ball]),
         )
-        self.ball_gizmo.on_update(self._on_ball_moved)
+        self.ball_gizmo.on_update(self._guarded(self._on_ball_moved, "Ball"))
         self.grab_gizmo = scene.add_transform_controls(
             "/grab_gizmo", scale=0.15, disable_rotations=True, visible=False
         )
+        self.grab_gizmo.on_update(self._guarded(self._on_grab_moved, "Grab"))
         for b, mesh in enumerate(self.meshes):
-            mesh.on_click(lambda event, b=b: self._on_mesh_click(b, event))
+            mesh.on_click(self._guarded(lambda event, b=b: self._on_mesh_click(b, event), "Click"))
         self._overlays: dict = {}
 
     def _box_lines(self, c: int) -> np.ndarray:
@@ -283,35 +358,41 @@ class Viewer:
         return corners[BOX_EDGES].astype(np.float32)
 
     # -- gui -------------------------------------------------------------------------------
+    def _slider(self, label: str, low: float, high: float, step: float, value: float):
+        """A slider whose values the server accepts only within [low, high]."""
+        handle = self.server.gui.add_slider(
+            label, min=low, max=high, step=step, initial_value=value
+        )
+        self._limits[id(handle)] = (float(low), float(high), label)
+        self._good[id(handle)] = float(value)
+        return handle
+
     def _build_gui(self) -> None:
         gui = self.server.gui
         model = self.model
+        on = self._guarded
         with gui.add_folder("Simulation"):
             self.pause_button = gui.add_button("Pause")
-            self.pause_button.on_click(lambda _: self._toggle_pause())
+            self.pause_button.on_click(on(lambda _: self._toggle_pause(), "Pause"))
             self.step_button = gui.add_button("Step")
-            self.step_button.on_click(lambda _: self._step_once())
+            self.step_button.on_click(on(lambda _: self._step_once(), "Step"))
             self.reset_button = gui.add_button("Reset")
-            self.reset_button.on_click(lambda _: self._reset())
-            self.scale_slider = gui.add_slider(
-                "Time scale", min=0.05, max=2.0, step=0.05, initial_value=1.0
-            )
-            self.scale_slider.on_update(
-                lambda _: setattr(self, "time_scale", float(self.scale_slider.value))
-            )
+            self.reset_button.on_click(on(lambda _: self._reset(), "Reset"))
+            self.scale_slider = self._slider("Time scale", 0.05, 2.0, 0.05, 1.0)
+            self.scale_slider.on_update(on(lambda _: self._scale_changed(), "Time scale"))
             self.integrator_menu = gui.add_dropdown(
                 "Integrator", INTEGRATORS, initial_value=self.integrator
             )
-            self.integrator_menu.on_update(lambda _: self._rebuild())
+            self.integrator_menu.on_update(on(lambda _: self._rebuild(), "Integrator"))
             self.volume_menu = gui.add_dropdown(
                 "Volume method", VOLUME_METHODS, initial_value=self._volume_method[0]
             )
-            self.volume_menu.on_update(lambda _: self._rebuild())
+            self.volume_menu.on_update(on(lambda _: self._rebuild(), "Volume method"))
             g = float(model.gravity[1])
-            self.gravity_slider = gui.add_slider(
-                "Gravity y [m/s^2]", min=-20.0, max=5.0, step=0.1, initial_value=round(g, 2)
+            self.gravity_slider = self._slider(
+                "Gravity y [m/s^2]", min(-20.0, g), max(5.0, g), 0.1, round(g, 2)
             )
-            self.gravity_slider.on_update(lambda _: self._rebuild())
+            self.gravity_slider.on_update(on(lambda _: self._rebuild(), "Gravity"))
         self.gas_sliders, self.stiffness_sliders, self.damping_sliders = [], [], []
         with gui.add_folder("Bodies"):
             for b in range(model.body_count):
@@ -320,35 +401,22 @@ class Viewer:
                 value = float(model.body_gas_value[b])
                 label = "pressure [Pa]" if law == GasLaw.FIXED_PRESSURE else "nRT [J]"
                 top = max(4.0 * value, 1.0)
-                slider = gui.add_slider(
-                    f"{name}: {label}", min=0.0, max=top, step=top / 400, initial_value=value
-                )
-                slider.on_update(lambda _, b=b: self._gas_changed(b))
+                slider = self._slider(f"{name}: {label}", 0.0, top, top / 400, value)
+                slider.on_update(on(lambda _, b=b: self._gas_changed(b), f"{name}: {label}"))
                 self.gas_sliders.append(slider)
                 springs = model.spring_body == b
                 k = float(model.spring_stiffness[springs].max()) if springs.any() else 0.0
                 c = float(model.spring_damping[springs].max()) if springs.any() else 0.0
-                ks = gui.add_slider(
-                    f"{name}: stiffness [N/m]",
-                    min=0.0,
-                    max=max(4 * k, 1.0),
-                    step=max(4 * k, 1.0) / 400,
-                    initial_value=k,
-                )
-                cs = gui.add_slider(
-                    f"{name}: damping [N s/m]",
-                    min=0.0,
-                    max=max(4 * c, 0.1),
-                    step=max(4 * c, 0.1) / 400,
-                    initial_value=c,
-                )
-                ks.on_update(lambda _: self._rebuild())
-                cs.on_update(lambda _: self._rebuild())
+                ktop, ctop = max(4 * k, 1.0), max(4 * c, 0.1)
+                ks = self._slider(f"{name}: stiffness [N/m]", 0.0, ktop, ktop / 400, k)
+                cs = self._slider(f"{name}: damping [N s/m]", 0.0, ctop, ctop / 400, c)
+                ks.on_update(on(lambda _: self._rebuild(), f"{name}: stiffness"))
+                cs.on_update(on(lambda _: self._rebuild(), f"{name}: damping"))
                 self.stiffness_sliders.append(ks)
                 self.damping_sliders.append(cs)
         with gui.add_folder("Display"):
             self.wireframe_box = gui.add_checkbox("Wireframe", False)
-            self.wireframe_box.on_update(lambda _: self._set_wireframe())
+            self.wireframe_box.on_update(on(lambda _: self._set_wireframe(), "Wireframe"))
             self.velocity_box = gui.add_checkbox("Velocity vectors", False)
             self.bounding_box = gui.add_checkbox("Bounding objects", False)
         with gui.add_folder("Interaction"):
@@ -357,8 +425,10 @@ class Viewer:
                 "grab the nearest vertex, then drag the small arrows."
             )
             self.release_button = gui.add_button("Release vertex")
-            self.release_button.on_click(lambda _: self._release())
+            self.release_button.on_click(on(lambda _: self._release(), "Release"))
         self._initial_values = [handle.value for handle in self._controls()]
+        for handle, value in zip(self._controls(), self._initial_values, strict=True):
+            self._good[id(handle)] = value
         with gui.add_folder("Readouts"):
             self.readout = gui.add_markdown("starting...")
             self.plot = gui.add_uplot(
@@ -389,21 +459,119 @@ class Viewer:
 
         return uplot.Scale(time=False, auto=True) if time_axis else uplot.Scale(auto=True)
 
+    # -- input checks ----------------------------------------------------------------------
+    def _guarded(self, callback, what: str):
+        """``callback`` for viser: a rejected value or any error pauses the run with a
+        message on the page and the console instead of a traceback in viser's threads."""
+
+        def run(*args):
+            try:
+                return callback(*args)
+            except _BadInput as exc:
+                self._pause(f"paused: {exc}. Press Play to go on, or Reset.")
+            except Exception as exc:
+                self._pause(f"paused: {what} failed: {type(exc).__name__}: {exc}. Press Reset.")
+                with self.lock:
+                    self.needs_reset = True
+
+        return run
+
+    def _pause(self, message: str) -> None:
+        """Pause with ``message`` on the page, and print it once on the server's console."""
+        with self.lock:
+            self.message = message
+            if self.running:
+                self._toggle_pause()
+        if message != self._logged:
+            self._logged = message
+            print(f"softbody view: {message}", file=sys.stderr, flush=True)
+
+    def _write_back(self, handle, value) -> None:
+        """Show ``value`` in ``handle`` without running its callbacks again."""
+        with self.lock:
+            self._restoring = True
+            try:
+                handle.value = value
+            finally:
+                self._restoring = False
+
+    def _read_slider(self, handle) -> float:
+        """The slider's value, checked: a value that is not a finite number is refused
+        (the slider goes back to its last good value; raises _BadInput), one outside the
+        slider's range is clamped into it (and pauses with a message)."""
+        low, high, label = self._limits[id(handle)]
+        raw = handle.value
+        try:
+            value = float(raw)
+        except (TypeError, ValueError, OverflowError):
+            value = math.nan
+        good = self._good.get(id(handle))
+        if not math.isfinite(value):
+            self._write_back(handle, good)
+            raise _BadInput(f"{label} = {raw!r} is not a finite number; kept {good:g}")
+        if not low <= value <= high:
+            clamped = min(max(value, low), high)
+            self._write_back(handle, clamped)
+            self._pause(
+                f"paused: {label} = {value:g} is outside [{low:g}, {high:g}]; set to "
+                f"{clamped:g}. Press Play to go on, or Reset."
+            )
+            value = clamped
+        self._good[id(handle)] = value
+        return value
+
+    def _read_choice(self, handle, options: list[str], label: str) -> str:
+        """The dropdown's value if it is one of ``options``, else _BadInput (and the
+        dropdown goes back to its last good value)."""
+        value = handle.value
+        if isinstance(value, str) and value in options:
+            self._good[id(handle)] = value
+            return value
+        good = self._good[id(handle)]
+        self._write_back(handle, good)
+        raise _BadInput(f"{label} = {value!r} is not one of {', '.join(options)}; kept {good}")
+
+    def _workspace_box(self) -> tuple[np.ndarray, np.ndarray]:
+        """Where the ball and a grabbed vertex may be driven: the bodies' and colliders'
+        box, grown by twice its size each way."""
+        points = np.vstack([self.state.particle_q, self.state.collider_q])
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        size = max(float(np.linalg.norm(hi - lo)), 1.0)
+        return lo - 2.0 * size, hi + 2.0 * size
+
+    def _point(self, value, label: str) -> np.ndarray:
+        """``value`` as a finite (3,) point inside the workspace (clamped into it)."""
+        try:
+            point = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            point = np.full(1, np.nan)
+        if point.shape != (3,) or not np.all(np.isfinite(point)):
+            raise _BadInput(f"{label} position {value!r} is not three finite numbers")
+        return np.clip(point, *self._workspace)
+
     # -- callbacks -------------------------------------------------------------------------
     def _toggle_pause(self) -> None:
-        self.running = not self.running
+        with self.lock:
+            if not self.running and self.needs_reset:
+                # a blown-up or failed run cannot go on: keep its message, wait for Reset
+                return
+            self.running = not self.running
+            if self.running and self.message.startswith("paused"):
+                self.message = ""
         self.pause_button.label = "Pause" if self.running else "Play"
 
     def _step_once(self) -> None:
         with self.lock:
             if self.running:
                 self._toggle_pause()
-            self._advance(1)
+            if not self.needs_reset:
+                self._advance(1)
         self._push(force_readout=True)
 
     def _controls(self) -> list:
         """Every parameter control whose change rebuilds or re-drives the simulation."""
         return [
+            self.scale_slider,
             self.integrator_menu,
             self.volume_menu,
             self.gravity_slider,
@@ -413,14 +581,17 @@ class Viewer:
         ]
 
     def _reset(self) -> None:
-        """Back to the starting state and parameters (also after a blow-up)."""
+        """Back to the starting state and parameters (also after a blow-up, an error or
+        a refused value)."""
         with self.lock:
             self._restoring = True
             try:
                 for handle, value in zip(self._controls(), self._initial_values, strict=True):
                     handle.value = value
+                    self._good[id(handle)] = value
             finally:
                 self._restoring = False
+            self.time_scale = float(self.scale_slider.value)
             self.model = self.initial_model
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", StabilityWarning)
@@ -431,18 +602,27 @@ class Viewer:
             self.control = self.model.control()
             self._history.clear()
             self.message = ""
+            self._logged = ""
+            self.needs_reset = False
             self.grabbed = None
+            self._grab_target = None
             self.grab_gizmo.visible = False
             self.ball_gizmo.position = tuple(self.state.collider_q[self.ball])
             if not self.running:
                 self._toggle_pause()
         self._push(force_readout=True)
 
-    def _gas_changed(self, b: int) -> None:
-        if self._restoring:
-            return
-        value = float(self.gas_sliders[b].value)
+    def _scale_changed(self) -> None:
         with self.lock:
+            if self._restoring:
+                return
+            self.time_scale = self._read_slider(self.scale_slider)
+
+    def _gas_changed(self, b: int) -> None:
+        with self.lock:
+            if self._restoring:
+                return
+            value = self._read_slider(self.gas_sliders[b])
             if self.model.body_gas_law[b] == GasLaw.FIXED_PRESSURE:
                 self.control.body_gas_pressure[b] = value
             else:
@@ -450,25 +630,28 @@ class Viewer:
 
     def _rebuild(self) -> None:
         """A new Model for changed stiffness, damping, gravity or volume method."""
-        if self._restoring:
-            return
         with self.lock:
+            if self._restoring:
+                return
             base = self.initial_model
+            # every value is read through the checks, not only the one that changed: a
+            # client can set a control's value without triggering its callback
+            stiffness = [self._read_slider(h) for h in self.stiffness_sliders]
+            damping = [self._read_slider(h) for h in self.damping_sliders]
+            gravity_y = self._read_slider(self.gravity_slider)
+            integrator = self._read_choice(self.integrator_menu, INTEGRATORS, "Integrator")
+            method_name = self._read_choice(self.volume_menu, VOLUME_METHODS, "Volume method")
             k = base.spring_stiffness.copy()
             c = base.spring_damping.copy()
             for b in range(base.body_count):
                 mask = base.spring_body == b
                 if mask.any():
                     k0, c0 = base.spring_stiffness[mask].max(), base.spring_damping[mask].max()
-                    k[mask] *= (self.stiffness_sliders[b].value / k0) if k0 > 0 else 0.0
-                    c[mask] = (
-                        c[mask] * self.damping_sliders[b].value / c0
-                        if c0 > 0
-                        else self.damping_sliders[b].value
-                    )
+                    k[mask] *= (stiffness[b] / k0) if k0 > 0 else 0.0
+                    c[mask] = c[mask] * damping[b] / c0 if c0 > 0 else damping[b]
             gravity = base.gravity.copy()
-            gravity[1] = float(self.gravity_slider.value)
-            method = VolumeMethod.parse(self.volume_menu.value)
+            gravity[1] = gravity_y
+            method = VolumeMethod.parse(method_name)
             methods = np.where(base.body_closed == 1, int(method), 0).astype(np.int64)
             samples, mc_range = base.mc_samples, base.body_mc_range
             if method == VolumeMethod.MONTE_CARLO:
@@ -497,13 +680,11 @@ class Viewer:
             )
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always", StabilityWarning)
-                self.sim = Simulator(
-                    model,
-                    integrator=self.integrator_menu.value,
-                    dt=self.dt,
-                    **self.sim_options,
-                )
-            self.message = str(caught[0].message) if caught else ""
+                self.sim = Simulator(model, integrator=integrator, dt=self.dt, **self.sim_options)
+            if caught:
+                self.message = str(caught[0].message)
+            elif not self.message.startswith("paused"):
+                self.message = ""
             self.model = model
             control = model.control()
             control.body_gas_nrt[:] = self.control.body_gas_nrt
@@ -516,36 +697,52 @@ class Viewer:
             mesh.wireframe = bool(self.wireframe_box.value)
 
     def _on_ball_moved(self, _) -> None:
+        point = self._point(self.ball_gizmo.position, "Ball")
         with self.lock:
             target = np.full((self.model.collider_count, 3), np.nan)
-            target[self.ball] = np.asarray(self.ball_gizmo.position, dtype=np.float64)
+            target[self.ball] = point
             self.control.collider_target = target
+
+    def _on_grab_moved(self, _) -> None:
+        point = self._point(self.grab_gizmo.position, "Grab")
+        with self.lock:
+            self._grab_target = point
 
     def _on_mesh_click(self, b: int, event) -> None:
         """Grab the vertex of body b nearest the click ray."""
-        origin = np.asarray(event.ray_origin, dtype=np.float64)
-        direction = np.asarray(event.ray_direction, dtype=np.float64)
-        direction /= np.linalg.norm(direction)
-        p0, p1 = self.model.body_particle_range[b]
-        x = self.state.particle_q[p0:p1] - origin
-        along = x @ direction
-        dist = np.linalg.norm(x - along[:, None] * direction, axis=1)
-        dist[along < 0] = np.inf
-        # the ray also passes near vertices on the far side: of those near the ray (within
-        # half an edge of the nearest), take the one nearest the camera
-        t0, t1 = self.model.body_tri_range[b]
-        tri = self.model.tri_indices[t0:t1] - p0
-        edge = float(np.median(np.linalg.norm(x[tri[:, 1]] - x[tri[:, 0]], axis=1)))
-        near = dist <= dist.min() + 0.5 * edge
-        i = int(p0 + np.flatnonzero(near)[np.argmin(along[near])])
+        origin = self._point(event.ray_origin, "Click ray origin")
+        try:
+            direction = np.asarray(event.ray_direction, dtype=np.float64)
+        except (TypeError, ValueError, OverflowError):
+            direction = np.full(1, np.nan)
+        length = np.linalg.norm(direction) if direction.shape == (3,) else np.nan
+        if not (np.isfinite(length) and length > 1e-12 and np.all(np.isfinite(direction))):
+            raise _BadInput(f"click ray direction {event.ray_direction!r} is not a direction")
+        direction = direction / length
         with self.lock:
+            p0, p1 = self.model.body_particle_range[b]
+            x = self.state.particle_q[p0:p1] - origin
+            along = x @ direction
+            dist = np.linalg.norm(x - along[:, None] * direction, axis=1)
+            dist[along < 0] = np.inf
+            if not np.any(np.isfinite(dist)):
+                return  # the body is behind the camera, or blown up: nothing to grab
+            # the ray also passes near vertices on the far side: of those near the ray
+            # (within half an edge of the nearest), take the one nearest the camera
+            t0, t1 = self.model.body_tri_range[b]
+            tri = self.model.tri_indices[t0:t1] - p0
+            edge = float(np.median(np.linalg.norm(x[tri[:, 1]] - x[tri[:, 0]], axis=1)))
+            near = dist <= dist.min() + 0.5 * edge
+            i = int(p0 + np.flatnonzero(near)[np.argmin(along[near])])
             self.grabbed = i
-        self.grab_gizmo.position = tuple(self.state.particle_q[i])
+            self._grab_target = self.state.particle_q[i].copy()
+        self.grab_gizmo.position = tuple(self._grab_target)
         self.grab_gizmo.visible = True
 
     def _release(self) -> None:
         with self.lock:
             self.grabbed = None
+            self._grab_target = None
             self.control.grab_particle = -1
         self.grab_gizmo.visible = False
 
@@ -553,48 +750,62 @@ class Viewer:
     def _advance(self, steps: int) -> None:
         """Run ``steps`` steps (lock held); a blow-up pauses with its message."""
         if self.grabbed is not None:
+            try:
+                # the gizmo's position as it is now (set by a page or by a script)
+                self._grab_target = self._point(self.grab_gizmo.position, "Grab")
+            except _BadInput as exc:
+                self.grabbed, self.control.grab_particle = None, -1
+                self._pause(f"paused: {exc}; vertex released. Press Play to go on, or Reset.")
+                return
             i = self.grabbed
             m = float(self.model.particle_mass[i])
             omega = 0.3 / self.dt  # stiff, yet well inside every integrator's stable range
             self.control.grab_particle = i
-            self.control.grab_target = np.asarray(self.grab_gizmo.position, dtype=np.float64)
+            self.control.grab_target = self._grab_target.copy()
             self.control.grab_stiffness = m * omega**2
             self.control.grab_damping = 2.0 * m * omega  # critically damped
         try:
             self.sim.run(self.state, steps, self.control)
         except SimulationError as exc:
-            self.message = f"paused: {exc}. Press Reset."
-            if self.running:
-                self._toggle_pause()
+            self.needs_reset = True
+            self._pause(f"paused: {exc}. Press Reset.")
         if self.control.collider_target is not None:
             # the ball stays where it was driven to
             self.control.collider_target = None
 
     def _loop(self) -> None:
+        """The simulation thread. It never dies of an error: an exception in a step or an
+        update pauses the run with its message (Reset goes on); only stop() ends it."""
         last = time.perf_counter()
         carry = 0.0
         step_cost = 1e-5
         updates = deque(maxlen=60)
         while not self._stop.is_set():
             now = time.perf_counter()
-            wall = min(now - last, 0.25)
-            last = now
-            with self.lock:
-                if self.running and not self.message.startswith("paused"):
-                    want = wall * self.time_scale / self.dt + carry
-                    cap = max(1, int(0.05 / step_cost))  # keep >= 20 updates per second
-                    steps = min(int(want), cap)
-                    carry = min(want - steps, 1.0)
-                    if steps:
-                        t0 = time.perf_counter()
-                        t_sim = self.state.time
-                        self._advance(steps)
-                        spent = time.perf_counter() - t0
-                        step_cost = 0.8 * step_cost + 0.2 * spent / steps
-                        self.realtime_factor = (self.state.time - t_sim) / max(wall, 1e-6)
-                else:
-                    self.realtime_factor = 0.0
-            self._push()
+            try:
+                wall = min(now - last, 0.25)
+                last = now
+                with self.lock:
+                    if self.running and not self.needs_reset:
+                        want = wall * self.time_scale / self.dt + carry
+                        cap = max(1, int(0.05 / step_cost))  # keep >= 20 updates per second
+                        steps = min(int(want), cap)
+                        carry = min(want - steps, 1.0)
+                        if steps:
+                            t0 = time.perf_counter()
+                            t_sim = self.state.time
+                            self._advance(steps)
+                            spent = time.perf_counter() - t0
+                            step_cost = 0.8 * step_cost + 0.2 * spent / steps
+                            self.realtime_factor = (self.state.time - t_sim) / max(wall, 1e-6)
+                    else:
+                        self.realtime_factor = 0.0
+                self._push()
+            except Exception as exc:
+                carry = 0.0
+                with self.lock:
+                    self.needs_reset = True
+                self._pause(f"paused: {type(exc).__name__}: {exc}. Press Reset.")
             updates.append(time.perf_counter())
             if len(updates) > 1:
                 self.updates_per_second = (len(updates) - 1) / max(updates[-1] - updates[0], 1e-6)
@@ -702,7 +913,10 @@ def show(
 ) -> Viewer:
     """Open a browser viewer on ``model`` (from ``state``, stepped like ``simulator``).
 
-    Prints nothing; the page is at ``viewer.url``. With ``block=True`` it runs until
+    Prints nothing; the page is at ``viewer.url`` (with its access token). Raises
+    ValueError for a port outside 0..65535 or a host that names no address, and
+    RuntimeError if the server does not start (within 30 s) or its access checks
+    cannot be installed. With ``block=True`` it runs until
     Ctrl-C; with ``block=False`` it returns the running :class:`Viewer` (call ``stop()``).
     """
     state = model.state() if state is None else state
