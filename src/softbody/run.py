@@ -166,9 +166,10 @@ def plan_frames(
         )
     if frames * per_frame > max_steps:
         raise ValueError(
-            f"the run would take {frames * per_frame:,.0f} steps ({frames:,.0f} frames of "
-            f"{per_frame:,.0f} steps of {step}), over the limit of {max_steps:,}: raise dt or "
-            "render.fps, or shorten the duration (or raise the limit with --max-steps)"
+            f"the run would take {frames * per_frame:,.0f} steps ({frames:,.0f} "
+            f"frame{'s' if frames != 1 else ''} of {per_frame:,.0f} steps of {step}), over the "
+            f"limit of {max_steps:,}: raise dt or render.fps, or shorten the duration (or raise "
+            "the limit with --max-steps)"
         )
     return FramePlan(int(frames), float(frame_dt), int(per_frame))
 
