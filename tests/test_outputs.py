@@ -244,10 +244,11 @@ def test_step_guards_refuse_endless_runs(tmp_path):
 
 
 def test_blow_up_leaves_no_ffmpeg_running(tmp_path, capfd):
-    """Issue 19 items 6 and 10: a run that blows up in the middle left ffmpeg running
-    (waiting on its pipe, later printing its own errors about the removed temporary
-    folder). Now the failed run kills and reaps ffmpeg before it returns, ffmpeg printed
-    nothing, and nothing is written. (The box spins at 3000 rad/s: the walls throw the
+    """Issue 19 items 6 and 10: a run that blows up in the middle left ffmpeg running,
+    waiting on its pipe for as long as the error's traceback was kept (an interactive
+    session keeps the last one), and its messages went to the terminal. Now the failed
+    run kills and reaps ffmpeg before it returns, ffmpeg printed nothing, and nothing
+    is written. (The box spins at 3000 rad/s: the walls throw the
     balls to NaN within 50 steps.)"""
     import softbody as sb
     from softbody.run import Outputs, run_scene
@@ -257,8 +258,11 @@ def test_blow_up_leaves_no_ffmpeg_running(tmp_path, capfd):
         "bouncing-balls", ["colliders.0.motion.angular_velocity=[0.0, 0.0, 3e3]"]
     )
     out = tmp_path / "out"
-    with pytest.raises(sb.SimulationError, match="blew up at step"):
+    with pytest.raises(sb.SimulationError, match="blew up at step") as info:
         run_scene(scene, out, integrator="midpoint", duration=0.5, outputs=Outputs(gif=False))
+    # the traceback is still held (as an interactive session's last error is): ffmpeg
+    # must be gone all the same, not just when the writer happens to be collected
+    assert info.traceback
     assert not any("ffmpeg" in name for name in _children(os.getpid()).values())
     # stderr holds the progress lines only (ffmpeg's inherited stderr held its messages)
     err = capfd.readouterr().err.splitlines()
@@ -293,3 +297,24 @@ def test_run_scene_refuses_a_users_file(tmp_path):
         )
     assert snapshot(out) == {"hanging-ball-plots.png": b"mine"}
     assert os.listdir(out) == ["hanging-ball-plots.png"]
+
+
+def test_two_runs_never_write_one_folder_at_once(tmp_path):
+    """Two runs into one folder would each remove or replace the other's files half way
+    (issue 19 item 6: one run's outputs per folder): while one run holds the folder, a
+    second stops with one line and writes nothing."""
+    import fcntl
+
+    out = tmp_path / "out"
+    out.mkdir()
+    fd = os.open(out, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # what a run in progress holds
+        result = softbody(
+            "run", "hanging-ball", "--out", str(out), "--duration", "0.01", "--no-video",
+            cwd=tmp_path,
+        )  # fmt: skip
+    finally:
+        os.close(fd)
+    one_error_line(result, "another softbody run is writing to this folder")
+    assert list(out.iterdir()) == []

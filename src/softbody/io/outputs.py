@@ -184,6 +184,8 @@ def folder_lock(out: Path) -> Iterator[None]:
                 f"{out}: another softbody run is writing to this folder; wait for it or "
                 "choose another --out"
             ) from None
+        except OSError:
+            pass  # a file system without locks (some network mounts): go on unlocked
         yield
     finally:
         os.close(fd)  # releases the lock
