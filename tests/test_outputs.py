@@ -318,3 +318,23 @@ def test_two_runs_never_write_one_folder_at_once(tmp_path):
         os.close(fd)
     one_error_line(result, "another softbody run is writing to this folder")
     assert list(out.iterdir()) == []
+
+
+def test_failed_ffmpeg_is_one_line(tmp_path):
+    """Issue 19 item 10: when ffmpeg fails (here: its output folder does not exist, as
+    after a full disk or a removed folder), imageio's error carried ffmpeg's command
+    line and output over many lines. softbody's writer raises one line with ffmpeg's
+    own reason, and leaves no ffmpeg running."""
+    import numpy as np
+
+    from softbody.render.video import VideoWriter
+
+    writer = VideoWriter(tmp_path / "missing" / "x.mp4", 30.0, gif=False)
+    with pytest.raises(RuntimeError) as info:
+        for _ in range(100):  # ffmpeg reads a few frames before it opens its output
+            writer.append(np.zeros((48, 64, 3), np.uint8))
+        writer.close()
+    message = str(info.value)
+    assert "\n" not in message and "No such file or directory" in message, message
+    assert message.startswith("x.mp4: ffmpeg")
+    assert not any("ffmpeg" in name for name in _children(os.getpid()).values())
