@@ -59,6 +59,7 @@ def test_run_writes_every_output(run_dir):
             "bounding-volumes-summary.json",
             "bounding-volumes.usdc",
             "meshes",
+            "softbody-run.json",
         ]
     )
     assert not any(p.name.startswith(".") for p in run_dir.iterdir())  # no temp left

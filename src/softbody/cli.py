@@ -6,15 +6,27 @@
     softbody info MESH
 
 User mistakes (unknown scene or key, invalid mesh, unstable settings, a run that blows
-up) print one line to stderr and exit with status 2; nothing is written unless the run
-succeeds.
+up, a run too long or too large for this machine, an output folder holding files
+softbody did not write) print one line ``softbody: error: ...`` to stderr and exit with
+status 2; nothing is written unless the run succeeds. Running out of memory is one line
+too (status 2). Ctrl-C and SIGTERM stop a command with one line, remove its temporary
+files and child processes, and exit with 130 and 143 (128 + the signal number). An
+unexpected exception is a bug: one line naming it, status 1; set the environment
+variable ``SOFTBODY_DEBUG=1`` to see the traceback as well.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
 from pathlib import Path
+
+#: defaults of ``--max-steps`` and ``--max-frames`` (softbody.run's, without importing
+#: the simulator to build the parser)
+MAX_STEPS = 100_000_000
+MAX_FRAMES = 100_000
 
 INTEGRATORS = [
     "euler",
@@ -80,6 +92,8 @@ def _run(args) -> int:
         strict_stability=True,
         progress_stream=sys.stdout,
         threads=args.threads,
+        max_steps=args.max_steps,
+        max_frames=args.max_frames,
     )
     t = summary["timings_s"]
     print(
@@ -185,6 +199,17 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _count(text: str) -> int:
+    """A whole number >= 1 (``1e9`` and ``1_000_000`` are accepted)."""
+    try:
+        value = float(text.replace("_", ""))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (value >= 1 and value < 2**63 and value == int(value)):
+        raise argparse.ArgumentTypeError(f"must be a whole number from 1 to 2**63 - 1, got {text}")
+    return int(value)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="softbody", description="Pressure soft bodies (Matyka & Ollila)."
@@ -228,6 +253,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--no-video", action="store_true", help="skip the MP4")
     run.add_argument("--no-gif", action="store_true", help="skip the GIF")
+    run.add_argument(
+        "--max-steps",
+        type=_count,
+        default=MAX_STEPS,
+        help=f"refuse a run of more simulation steps (default {MAX_STEPS:,})",
+    )
+    run.add_argument(
+        "--max-frames",
+        type=_count,
+        default=MAX_FRAMES,
+        help=f"refuse a run of more rendered frames (default {MAX_FRAMES:,})",
+    )
     run.set_defaults(func=_run)
 
     view = sub.add_parser("view", help="simulate a scene live in the browser")
@@ -258,6 +295,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread so that ``finally`` blocks clean up (a
+    KeyboardInterrupt, so that no ``except Exception`` swallows it)."""
+
+    signum = signal.SIGTERM
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise _Terminated()
+
+
+def _one_line(exc: BaseException) -> str:
+    """An exception's message on one line: an OSError as ``file: reason``; several lines
+    joined with ``; ``."""
+    if isinstance(exc, OSError) and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    else:
+        text = str(exc) or type(exc).__name__
+    return "; ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``softbody`` console script."""
     import warnings
@@ -265,13 +323,57 @@ def main(argv: list[str] | None = None) -> int:
     from softbody.errors import MeshError, SimulationError, StabilityWarning
 
     args = build_parser().parse_args(argv)
+    debug = os.environ.get("SOFTBODY_DEBUG", "").strip() not in ("", "0")
+    in_main = _in_main_thread()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main else None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # repairs are reported by info
             return args.func(args)
-    except (MeshError, SimulationError, StabilityWarning, ValueError, RuntimeError, OSError) as exc:
-        print(f"softbody: error: {exc}", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        name = signal.Signals(signum).name
+        print(f"softbody: interrupted ({name})", file=sys.stderr)
+        return 128 + int(signum)
+    except MemoryError as exc:
+        _traceback(debug)
+        detail = f" ({_one_line(exc)})" if str(exc) else ""
+        print(
+            f"softbody: error: out of memory while running `softbody {args.command}`{detail}; "
+            "try a smaller mesh, fewer frames or fewer outputs",
+            file=sys.stderr,
+        )
         return 2
+    except (MeshError, SimulationError, StabilityWarning, ValueError, RuntimeError, OSError) as exc:
+        _traceback(debug)
+        print(f"softbody: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except Exception as exc:
+        _traceback(debug)
+        hint = "" if debug else "; set SOFTBODY_DEBUG=1 to see the traceback"
+        print(
+            f"softbody: internal error (a bug; please report it): {type(exc).__name__}: "
+            f"{_one_line(exc)}{hint}",
+            file=sys.stderr,
+        )
+        return 1
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+
+
+def _in_main_thread() -> bool:
+    """Whether this is the main thread (the only one that may set signal handlers)."""
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
+
+
+def _traceback(debug: bool) -> None:
+    if debug:
+        import traceback
+
+        traceback.print_exc()
 
 
 if __name__ == "__main__":

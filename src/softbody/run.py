@@ -1,16 +1,34 @@
 """Run a scene to files: video, plots, summary, and on request mesh sequences and USD.
 
-Everything is written to a temporary folder inside the output folder and moved into
-place only when the whole run has succeeded: a failed run leaves no partial files.
+The output folder holds exactly one run's files, and softbody never overwrites or
+deletes a file it did not write (:mod:`softbody.io.outputs`): everything is written to
+a temporary folder ``.softbody-run-*`` inside the output folder; only when the whole
+run has succeeded are the files moved into place, the previous run's files that this
+run did not write removed, and the manifest ``softbody-run.json`` (what the folder's
+run wrote, with sizes and hashes) replaced. A target that exists and is not listed
+there (a user's file or folder) stops the run with a one-line error, checked before
+simulating and again before moving anything. A failed or interrupted run (an error,
+Ctrl-C, SIGTERM) removes its temporary folder and kills its ffmpeg, and leaves the
+folder as the previous run left it.
+
+File names come from the scene's ``name`` made into a safe file stem
+(:func:`file_stem`): a scene file cannot write outside the output folder.
+
+Runs are bounded before they start: at most ``max_steps`` simulation steps (a tiny dt
+or a tiny ``render.fps`` would otherwise run for hours or days in silence) and
+``max_frames`` rendered frames, and the frames kept in memory (GIF, USD) must fit
+:func:`softbody.limits.memory_limit`.
 """
 
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import sys
 import tempfile
 import time
+import unicodedata
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,10 +45,22 @@ from softbody.diagnostics import (
     energies,
 )
 from softbody.errors import StabilityWarning
+from softbody.io.outputs import check_targets, commit, folder_lock, prepare, read_manifest
+from softbody.limits import check_memory
 from softbody.scenes.loader import Scene
 from softbody.sim.simulator import Simulator
 
 BOUNDING_METHODS = ("exact", "bounding_box", "bounding_sphere", "bounding_ellipsoid")
+#: Most simulation steps a run may take unless asked for more (``--max-steps``): 10^8
+#: steps are minutes to hours (1 to 100 us a step here for the built-in scenes); more is
+#: almost always a dt or a render.fps off by orders of magnitude.
+MAX_STEPS = 100_000_000
+#: Most frames a run may render unless asked for more (``--max-frames``): 10^5 frames
+#: are 55 minutes of video at 30 fps and about half an hour of rendering at 640 x 480;
+#: more is almost always a duration or a render.fps off by orders of magnitude.
+MAX_FRAMES = 100_000
+#: Longest file stem made from a scene's name [bytes of UTF-8] (:func:`file_stem`).
+MAX_STEM_BYTES = 100
 
 
 @dataclass(frozen=True)
@@ -68,6 +98,110 @@ class Progress:
             self._next = min(1.0, np.floor(fraction * 10 + 1) / 10)
 
 
+def file_stem(name: str) -> str:
+    """A scene's ``name`` as a safe, readable file stem.
+
+    Path separators split the name and ``.``/``..`` parts are dropped (``"../../x"`` ->
+    ``"x"``, ``"/tmp/abs"`` -> ``"tmp-abs"``); anything but letters, digits, ``_``,
+    ``-`` and ``.`` (control characters, spaces, quotes) becomes ``_``; no leading dot
+    or dash (no hidden files, no names read as options); at most ``MAX_STEM_BYTES`` of
+    UTF-8, so that ``stem + "-bounding-volumes.png"`` fits a file system's 255 bytes;
+    ``"scene"`` when nothing is left.
+    """
+    parts = [p for p in re.split(r"[/\\]+", str(name)) if p not in ("", ".", "..")]
+    text = re.sub(r"[^\w.\-]+", "_", unicodedata.normalize("NFC", "-".join(parts)))
+    text = text.lstrip("._-")
+    text = text.encode()[:MAX_STEM_BYTES].decode(errors="ignore").rstrip("._-")
+    return text or "scene"
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """How a run is cut into frames: ``frame_count`` frames after the first (t = 0), each
+    ``frame_dt`` [s] of ``steps_per_frame`` steps (estimated from the initial stable
+    step with dt = "auto")."""
+
+    frame_count: int
+    frame_dt: float
+    steps_per_frame: int
+
+    @property
+    def total_steps(self) -> int:
+        return self.frame_count * self.steps_per_frame
+
+
+def plan_frames(
+    duration: float,
+    fps: float,
+    dt: float,
+    *,
+    auto: bool = False,
+    max_steps: int = MAX_STEPS,
+    max_frames: int = MAX_FRAMES,
+) -> FramePlan:
+    """Frames and steps of a run of ``duration`` [s] at ``fps`` [1/s] with steps of ``dt``
+    [s] (the first auto step when ``auto``); :class:`ValueError` when it would take
+    more than ``max_steps`` steps or ``max_frames`` frames (computed in floating point
+    first, so that an absurd request is refused without building huge integers)."""
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"render.fps must be a finite number > 0 frames per second, got {fps!r}")
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt must be finite and > 0 seconds, got {dt!r}")
+    if auto:
+        # each frame is 1 / fps, advanced in substeps re-chosen from the stability estimate
+        frame_dt = 1.0 / fps
+        per_frame = max(1.0, np.ceil(frame_dt / dt - 1e-9))
+    else:
+        per_frame = max(1.0, np.round(1.0 / (fps * dt)))
+        frame_dt = per_frame * dt
+    # a frame is a whole number of steps; the run ends on the first frame at or after
+    # the requested duration
+    frames = max(1.0, np.ceil(duration / frame_dt - 1e-9))
+    step = f"dt = {dt:.3g} s" + (" (auto, from the initial stability estimate)" if auto else "")
+    if frames > max_frames:
+        raise ValueError(
+            f"the run would render {frames:,.0f} frames ({duration:g} s at {1 / frame_dt:.3g} "
+            f"frames per second), over the limit of {max_frames:,}: shorten the duration or "
+            "lower render.fps (or raise the limit with --max-frames)"
+        )
+    if frames * per_frame > max_steps:
+        raise ValueError(
+            f"the run would take {frames * per_frame:,.0f} steps ({frames:,.0f} "
+            f"frame{'s' if frames != 1 else ''} of {per_frame:,.0f} steps of {step}), over the "
+            f"limit of {max_steps:,}: raise dt or render.fps, or shorten the duration (or raise "
+            "the limit with --max-steps)"
+        )
+    return FramePlan(int(frames), float(frame_dt), int(per_frame))
+
+
+def _check_frame_memory(plan: FramePlan, scene: Scene, outputs: Outputs) -> None:
+    """Refuse a run whose kept frames (GIF: every other frame at half size; USD: every
+    frame's float32 positions) would not fit in memory."""
+    frames = plan.frame_count + 1
+    if outputs.gif:
+        settings = scene.render
+        size = ((settings.height + 1) // 2) * ((settings.width + 1) // 2) * 3
+        count = (frames + 1) // 2
+        check_memory("gif", count * size, f"keeping {count:,} GIF frames (--no-gif skips it)")
+    if outputs.usd:
+        size = 12 * scene.model.particle_count
+        check_memory("usd", frames * size, f"keeping {frames:,} frames for the USD cache")
+
+
+def _expected_files(stem: str, plan: FramePlan, outputs: Outputs, bounding: bool) -> list[str]:
+    """The files a run of this plan writes, relative to the output folder."""
+    names = [f"{stem}-last-frame.png", f"{stem}-plots.png", f"{stem}-summary.json"]
+    names += [f"{stem}.mp4"] * outputs.video + [f"{stem}.gif"] * outputs.gif
+    names += [f"{stem}-bounding-volumes.png"] * bounding + [f"{stem}.usdc"] * outputs.usd
+    if outputs.meshes:
+        names += [_mesh_frame(k, outputs.meshes) for k in range(plan.frame_count + 1)]
+    return names
+
+
+def _mesh_frame(frame: int, fmt: str) -> str:
+    return f"meshes/frame_{frame:05d}.{fmt}"
+
+
 def run_scene(
     scene: Scene,
     out: Path,
@@ -79,16 +213,18 @@ def run_scene(
     strict_stability: bool = False,
     progress_stream=None,
     threads: int = 1,
+    max_steps: int = MAX_STEPS,
+    max_frames: int = MAX_FRAMES,
 ) -> dict:
     """Simulate ``scene`` and write its files into ``out``; returns the JSON summary.
 
     ``strict_stability`` turns a dt above the stability estimate into an error (the
     CLI's behaviour) instead of a warning. ``threads``: the simulator's opt-in threads
-    for the force terms (``Simulator``).
+    for the force terms (``Simulator``). ``max_steps``, ``max_frames``: the run is
+    refused (ValueError) before it starts when it would take more (:func:`plan_frames`).
+    ``OutputError`` when ``out`` holds a file or folder softbody did not write where
+    this run's files go (see the module docstring).
     """
-    from softbody.render.frame import FrameRenderer
-    from softbody.render.plots import plot_bounding_volumes, plot_time_series
-
     model = scene.model
     integrator = integrator or scene.integrator
     dt = dt if dt is not None else scene.dt
@@ -96,6 +232,16 @@ def run_scene(
     duration = float(duration if duration is not None else scene.duration)
     if not (np.isfinite(duration) and duration > 0):
         raise ValueError(f"duration must be > 0 seconds, got {duration!r}")
+    for key, value in (("max_steps", max_steps), ("max_frames", max_frames)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+            raise ValueError(f"{key} must be an integer >= 1, got {value!r}")
+    if outputs.meshes not in (None, "obj", "ply"):
+        raise ValueError(f"mesh format must be obj or ply, got {outputs.meshes!r}")
+    settings = scene.render
+    stem = file_stem(scene.name)
+    limits = {"max_steps": max_steps, "max_frames": max_frames}
+    if not auto:  # refuse an endless run at once, before the stability analysis
+        plan_frames(duration, settings.fps, dt, **limits)
     with warnings.catch_warnings():
         if strict_stability:
             warnings.simplefilter("error", StabilityWarning)
@@ -106,36 +252,60 @@ def run_scene(
             threads=threads,
             implicit_tolerance=scene.implicit_tolerance,
         )
-    # compile (first run) or load the kernels now, so that the timings below are the
-    # simulation's and not the compiler's
-    t0 = time.perf_counter()
-    sim.run(model.state(), 1)
-    prepare_seconds = time.perf_counter() - t0
-    settings = scene.render
-    if auto:
-        # each frame is 1 / fps, advanced in substeps re-chosen from the stability estimate
-        steps_per_frame, frame_dt = 0, 1.0 / settings.fps
-    else:
-        steps_per_frame = max(1, round(1.0 / (settings.fps * dt)))
-        frame_dt = steps_per_frame * dt
-    # a frame is a whole number of steps; the run ends on the first frame at or after
-    # the requested duration
-    frame_count = max(1, int(np.ceil(duration / frame_dt - 1e-9)))
-    fps = 1.0 / frame_dt
+    plan = plan_frames(duration, settings.fps, sim.dt, auto=auto, **limits)
+    _check_frame_memory(plan, scene, outputs)
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".softbody-run-", dir=out))
+    prepare(out)
+    with folder_lock(out):
+        # a user's file where ours would go: say so now, not after the simulation
+        expected = _expected_files(stem, plan, outputs, settings.bounding_objects)
+        check_targets(out, expected, read_manifest(out))
+        # compile (first run) or load the kernels now, so that the timings below are the
+        # simulation's and not the compiler's
+        t0 = time.perf_counter()
+        sim.run(model.state(), 1)
+        prepare_seconds = time.perf_counter() - t0
+        tmp = Path(tempfile.mkdtemp(prefix=".softbody-run-", dir=out))
+        try:
+            summary = _simulate_and_write(
+                scene, sim, tmp, stem, plan, outputs, dt, progress_stream, prepare_seconds
+            )
+            summary["files"] = [str(p) for p in commit(tmp, out)]
+            return summary
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _simulate_and_write(
+    scene: Scene,
+    sim: Simulator,
+    tmp: Path,
+    stem: str,
+    plan: FramePlan,
+    outputs: Outputs,
+    dt: float | str,
+    progress_stream,
+    prepare_seconds: float,
+) -> dict:
+    """Simulate the planned frames and write every file into ``tmp``; the summary."""
+    from softbody.render.frame import FrameRenderer
+    from softbody.render.plots import plot_bounding_volumes, plot_time_series
+
+    model = scene.model
+    auto = dt == "auto"
+    settings = scene.render
+    integrator = sim.integrator.name.lower()
+    frame_count, frame_dt, steps_per_frame = plan.frame_count, plan.frame_dt, plan.steps_per_frame
+    fps = 1.0 / frame_dt
+    video = None
     try:
         renderer = FrameRenderer(model, settings, open_bodies=model.body_closed == 0)
-        video = None
         if outputs.video or outputs.gif:
             from softbody.render.video import VideoWriter
 
-            video = VideoWriter(tmp / f"{scene.name}.mp4", fps, gif=outputs.gif)
+            video = VideoWriter(tmp / f"{stem}.mp4", fps, gif=outputs.gif)
         if outputs.meshes:
-            if outputs.meshes not in ("obj", "ply"):
-                raise ValueError(f"mesh format must be obj or ply, got {outputs.meshes!r}")
             (tmp / "meshes").mkdir()
         state = model.state()
         times, vol, pres, kin, total = [], [], [], [], []
@@ -166,7 +336,7 @@ def run_scene(
                 from softbody.io.sequence import write_mesh_frame
 
                 write_mesh_frame(
-                    tmp / "meshes" / f"frame_{frame:05d}.{outputs.meshes}",
+                    tmp / _mesh_frame(frame, outputs.meshes),
                     model,
                     state.particle_q,
                     scene.body_names,
@@ -181,106 +351,96 @@ def run_scene(
         if video is not None:
             video.close()
             if outputs.gif:
-                video.write_gif(tmp / f"{scene.name}.gif")
+                video.write_gif(tmp / f"{stem}.gif")
             if not outputs.video:
-                (tmp / f"{scene.name}.mp4").unlink()
-
-        import imageio.v3 as iio
-
-        iio.imwrite(tmp / f"{scene.name}-last-frame.png", last_frame)
-        times = np.array(times)
-        series = {
-            "volume": np.array(vol),
-            "pressure": np.array(pres),
-            "kinetic": np.array(kin),
-            "total": np.array(total),
-        }
-        plot_time_series(
-            tmp / f"{scene.name}-plots.png",
-            times,
-            series,
-            scene.body_names,
-            f"{scene.name}: {model.particle_count} particles, {integrator}, "
-            f"dt = {'auto' if auto else f'{dt:g} s'}",
-        )
-        if bounding is not None:
-            plot_bounding_volumes(
-                tmp / f"{scene.name}-bounding-volumes.png",
-                times,
-                {m: np.array(v) for m, v in bounding.items()},
-                scene.body_names[0],
-            )
-        if usd_frames is not None:
-            from softbody.io.usd import write_usd
-
-            write_usd(
-                tmp / f"{scene.name}.usdc", model, np.array(usd_frames), fps, scene.body_names
-            )
-
-        area = body_area(model, state)
-        com = body_center_of_mass(model, state)
-        e = energies(model, state)
-        summary = {
-            "scene": scene.name,
-            "description": scene.description,
-            "softbody_version": __version__,
-            "parameters": scene.data,
-            "integrator": sim.integrator.name.lower(),
-            "threads": sim.threads,
-            "implicit_tolerance": sim.implicit_tolerance if sim.integrator.implicit else None,
-            "dt_s": sim.dt if auto else dt,
-            "dt_auto": auto,
-            "stable_dt_estimate_s": sim.stable_dt,
-            "duration_s": float(times[-1]),
-            "steps": state.step_count,
-            "frames": frame_count + 1,
-            "fps": fps,
-            "particle_count": model.particle_count,
-            "tri_count": model.tri_count,
-            "timings_s": {
-                "kernel_compile_or_load": prepare_seconds,
-                "simulation": sim_seconds,
-                "rendering": render_seconds,
-                "simulated_per_wall_second": float(times[-1]) / max(sim_seconds, 1e-12),
-            },
-            "energy_J": {
-                "kinetic": e.kinetic,
-                "gravitational": e.gravitational,
-                "spring": e.spring,
-                "gas": e.gas,
-                "total": e.total,
-                "initial_total": float(series["total"][0]),
-            },
-            "bodies": [
-                {
-                    "name": scene.body_names[b],
-                    "closed": bool(model.body_closed[b]),
-                    "volume_m3": _num(series["volume"][-1, b]),
-                    "rest_volume_m3": _num(model.body_rest_volume[b]),
-                    "pressure_Pa": _num(series["pressure"][-1, b]),
-                    "area_m2": float(area[b]),
-                    "center_of_mass_m": com[b].tolist(),
-                    "kinetic_energy_J": float(e.body_kinetic[b]),
-                }
-                for b in range(model.body_count)
-            ],
-            "colliders": [
-                {"center_m": state.collider_q[c].tolist()} for c in range(model.collider_count)
-            ],
-        }
-        (tmp / f"{scene.name}-summary.json").write_text(json.dumps(summary, indent=2))
-        # the run succeeded: move every file into place
-        written = []
-        for item in sorted(tmp.iterdir()):
-            target = out / item.name
-            if target.is_dir():
-                shutil.rmtree(target)
-            item.replace(target)
-            written.append(target)
-        summary["files"] = [str(p) for p in written]
-        return summary
+                (tmp / f"{stem}.mp4").unlink()
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if video is not None:
+            video.abort()  # a no-op after close(); else kills and reaps ffmpeg
+
+    import imageio.v3 as iio
+
+    iio.imwrite(tmp / f"{stem}-last-frame.png", last_frame)
+    times = np.array(times)
+    series = {
+        "volume": np.array(vol),
+        "pressure": np.array(pres),
+        "kinetic": np.array(kin),
+        "total": np.array(total),
+    }
+    plot_time_series(
+        tmp / f"{stem}-plots.png",
+        times,
+        series,
+        scene.body_names,
+        f"{scene.name}: {model.particle_count} particles, {integrator}, "
+        f"dt = {'auto' if auto else f'{dt:g} s'}",
+    )
+    if bounding is not None:
+        plot_bounding_volumes(
+            tmp / f"{stem}-bounding-volumes.png",
+            times,
+            {m: np.array(v) for m, v in bounding.items()},
+            scene.body_names[0],
+        )
+    if usd_frames is not None:
+        from softbody.io.usd import write_usd
+
+        write_usd(tmp / f"{stem}.usdc", model, np.array(usd_frames), fps, scene.body_names)
+
+    area = body_area(model, state)
+    com = body_center_of_mass(model, state)
+    e = energies(model, state)
+    summary = {
+        "scene": scene.name,
+        "description": scene.description,
+        "softbody_version": __version__,
+        "parameters": scene.data,
+        "integrator": sim.integrator.name.lower(),
+        "threads": sim.threads,
+        "implicit_tolerance": sim.implicit_tolerance if sim.integrator.implicit else None,
+        "dt_s": sim.dt if auto else dt,
+        "dt_auto": auto,
+        "stable_dt_estimate_s": sim.stable_dt,
+        "duration_s": float(times[-1]),
+        "steps": state.step_count,
+        "frames": frame_count + 1,
+        "fps": fps,
+        "particle_count": model.particle_count,
+        "tri_count": model.tri_count,
+        "timings_s": {
+            "kernel_compile_or_load": prepare_seconds,
+            "simulation": sim_seconds,
+            "rendering": render_seconds,
+            "simulated_per_wall_second": float(times[-1]) / max(sim_seconds, 1e-12),
+        },
+        "energy_J": {
+            "kinetic": e.kinetic,
+            "gravitational": e.gravitational,
+            "spring": e.spring,
+            "gas": e.gas,
+            "total": e.total,
+            "initial_total": float(series["total"][0]),
+        },
+        "bodies": [
+            {
+                "name": scene.body_names[b],
+                "closed": bool(model.body_closed[b]),
+                "volume_m3": _num(series["volume"][-1, b]),
+                "rest_volume_m3": _num(model.body_rest_volume[b]),
+                "pressure_Pa": _num(series["pressure"][-1, b]),
+                "area_m2": float(area[b]),
+                "center_of_mass_m": com[b].tolist(),
+                "kinetic_energy_J": float(e.body_kinetic[b]),
+            }
+            for b in range(model.body_count)
+        ],
+        "colliders": [
+            {"center_m": state.collider_q[c].tolist()} for c in range(model.collider_count)
+        ],
+    }
+    (tmp / f"{stem}-summary.json").write_text(json.dumps(summary, indent=2))
+    return summary
 
 
 def _num(x) -> float | None:
