@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import pickle
+from pathlib import Path
+
 import numpy as np
 from hypothesis import settings
 
@@ -89,3 +92,50 @@ def uniform_scaling_stationary(stiffness: float, rest_lengths: np.ndarray, nrt: 
     """Scale s where E(s) = 1/2 k (s - 1)^2 sum L0^2 - nRT ln(s^3 V0) is stationary:
     k s (s - 1) sum L0^2 = 3 nRT, so s = (1 + sqrt(1 + 12 nRT / (k sum L0^2))) / 2."""
     return (1 + np.sqrt(1 + 12 * nrt / (stiffness * np.sum(rest_lengths**2)))) / 2
+
+
+def cached_versions(cache: Path) -> dict[str, int]:
+    """Compiled versions per cached kernel: the entries of each Numba index file
+    (``<kernel>-<line>.pyXY.nbi``: a pickled version tag, then (stamp, {key: file}))."""
+    counts = {}
+    for index in sorted(cache.rglob("*.nbi")):
+        with open(index, "rb") as fh:
+            pickle.load(fh)
+            _, overloads = pickle.loads(fh.read())
+        counts[index.name.split(".py")[0]] = len(overloads)
+    return counts
+
+
+def kernel_cache_problems(folder: Path) -> list[str]:
+    """What is wrong with a kernel cache folder (``softbody._kernel_cache``): a kernel
+    with several compiled versions, or a cache file written after the warm-up finished
+    (compiled by a process that loaded the rest: the mix that crashed)."""
+    from softbody._kernel_cache import COMPLETE
+
+    marker = folder / COMPLETE
+    if not marker.is_file():
+        return [f"{folder} has no {COMPLETE} marker: not written by the warm-up"]
+    problems = [f"{name}: {n} versions" for name, n in cached_versions(folder).items() if n > 1]
+    finished = marker.stat().st_mtime
+    problems += [
+        f"{path.relative_to(folder)} written after the warm-up"
+        for path in sorted(folder.rglob("*.nb[ic]"))
+        if path.stat().st_mtime > finished
+    ]
+    return problems
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Fail the run if this session's kernel cache went wrong (``kernel_cache_problems``):
+    every test and every CLI subprocess of the session loaded from it, and a kernel
+    compiled outside the warm-up or with a second set of argument types is what crashes
+    a later process (``tests/test_kernel_cache.py``)."""
+    import numba
+
+    folder = Path(numba.config.CACHE_DIR or "")
+    if not folder.name.startswith("numba-"):
+        return  # no lasting cache (the warm-up failed and said so)
+    problems = kernel_cache_problems(folder)
+    if problems:
+        print(f"\nkernel cache {folder}: " + "; ".join(problems[:20]))
+        session.exitstatus = 1

@@ -1,0 +1,83 @@
+"""Compile every kernel in one process: ``python -m softbody._kernel_warmup FOLDER``.
+
+Run by :func:`softbody._kernel_cache.configure` in a child process when the kernel cache
+for this version of the sources is missing; the child's cache is ``FOLDER``
+(``SOFTBODY_KERNEL_FOLDER``), which the parent renames into place when this exits 0.
+Every path a run, the viewer, the diagnostics and the CLI's outputs take through the
+compiled code is exercised here: each integrator family's time loop, the threaded force
+terms, both soft-contact modes, every volume method, the stability estimate, the
+multigrid and projective set-up, the measurements and the rasteriser.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+
+def exercise() -> None:
+    """Run a little of everything that calls compiled code, so that all of it compiles
+    in this process."""
+    import numba
+
+    import softbody as sb
+    from softbody.diagnostics import body_volume_by
+    from softbody.render.frame import FrameRenderer
+    from softbody.scenes import list_scenes, load_scene
+
+    warnings.simplefilter("ignore")
+    integrators = ["midpoint", "rk4", "euler", "symplectic_euler", "velocity_verlet"]
+    integrators += ["implicit_euler", "bdf2", "projective"]
+    for name in list_scenes():
+        scene = load_scene(name)
+        model = scene.model
+        for integrator in integrators:
+            dt = 1e-4 if integrator in integrators[:5] else 1e-3
+            sim = sb.Simulator(model, integrator=integrator, dt=dt)
+            state = model.state()
+            sim.run(state, 2, model.control())
+            sim.run(state, 1)
+        threads = min(2, numba.config.NUMBA_NUM_THREADS)
+        if threads > 1:
+            sim = sb.Simulator(model, integrator="symplectic_euler", dt=1e-4, threads=threads)
+            sim.run(model.state(), 2)
+        state = model.state()
+        sb.Simulator(model, integrator="midpoint", dt="auto").advance(state, 1e-3)
+        sb.body_volume(model, state)
+        sb.body_pressure(model, state)
+        sb.energies(model, state, model.control())
+        for method in ("exact", "bounding_box", "bounding_sphere", "bounding_ellipsoid"):
+            body_volume_by(model, state, method)
+        body_volume_by(model, state, "monte_carlo")
+        renderer = FrameRenderer(model, scene.render, open_bodies=model.body_closed == 0)
+        renderer.render(state)
+    # both soft-contact modes and a Monte Carlo body
+    for mode in ("surface", "bounding"):
+        builder = sb.ModelBuilder()
+        builder.set_soft_contact(mode)
+        for x in (0.0, 2.1):
+            builder.add_soft_body(
+                sb.icosphere(1, center=(x, 0.0, 0.0)),
+                mass=1.0,
+                stiffness=100.0,
+                damping=0.1,
+                gas=10.0,
+                volume_method="monte_carlo",
+                monte_carlo_samples=64,
+            )
+        model = builder.finalize()
+        for integrator in integrators:
+            dt = 1e-4 if integrator in integrators[:5] else 1e-3
+            sb.Simulator(model, integrator=integrator, dt=dt).run(model.state(), 2)
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) != 1:
+        print("usage: python -m softbody._kernel_warmup FOLDER", file=sys.stderr)
+        return 2
+    exercise()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
