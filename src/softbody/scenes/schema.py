@@ -685,14 +685,13 @@ def check_sizes(spec: SceneSpec) -> None:
     for b, body in enumerate(spec.bodies):
         where = f"bodies.{b}"
         vertices, faces = _mesh_count(body.mesh)
-        size_key = next(
-            (
-                k
-                for k in ("subdivisions", "rings", "segments", "resolution")
-                if k in type(body.mesh).model_fields
-            ),
-            "shape",
-        )
+        # name the count that makes the mesh large (the largest of those the shape has)
+        counts = {
+            k: max(v) if isinstance(v, tuple) else v
+            for k, v in body.mesh
+            if k in ("subdivisions", "rings", "segments", "resolution")
+        }
+        size_key = max(counts, key=counts.get) if counts else "shape"
         _guard_mesh(f"{where}.mesh.{size_key}", vertices, faces)
         total_vertices += vertices
         total_faces += faces
