@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from softbody.cli import main
@@ -194,6 +194,8 @@ KEYS = {
     "description": st.text(max_size=50),
 }
 UNKNOWN = ["simulation.dtt", "bodies.0.gass", "render.colour", "bodies.0.mesh.rings", "zz"]
+#: overrides that walk through a value (a TypeError traceback before the fix)
+THROUGH_VALUES = ["simulation.gravity.0.x", "bodies.0.position.1.y", "simulation.dt.x"]
 
 
 def _set(data: dict, dotted: str, value) -> None:
@@ -288,17 +290,28 @@ OVERRIDE_VALUES = st.one_of(
 )
 
 
+@st.composite
+def overrides(draw) -> list[tuple[str, str]]:
+    """1 to 3 ``(key, value)`` overrides: a value of the key's type written as TOML, or one
+    out of range, for known keys, unknown keys and paths through values."""
+    out = []
+    for key in draw(
+        st.lists(st.sampled_from(sorted(KEYS) + UNKNOWN + THROUGH_VALUES), min_size=1, max_size=3)
+    ):
+        typed = KEYS[key].map(toml_value) if key in KEYS else OVERRIDE_VALUES
+        out.append((key, draw(st.one_of(typed, OVERRIDE_VALUES))))
+    return out
+
+
 @FUZZ
-@given(
-    keys=st.lists(st.sampled_from(sorted(KEYS) + UNKNOWN), min_size=1, max_size=3),
-    values=st.lists(OVERRIDE_VALUES, min_size=3, max_size=3),
-)
-def test_fuzz_set_overrides(tmp_path_factory, keys, values):
+@given(pairs=overrides())
+@example(pairs=[("bodies.0.position.1.y", "1")])  # a TypeError traceback before the fix
+def test_fuzz_set_overrides(tmp_path_factory, pairs):
     """Random ``--set key=value`` on a valid scene: a short run or a one-line error."""
     folder = tmp_path_factory.mktemp("set")
     (folder / "s.toml").write_text(toml_document(base_scene()), encoding="utf-8")
     argv = ["s.toml"]
-    for key, value in zip(keys, values, strict=False):
+    for key, value in pairs:
         argv += ["--set", f"{key}={value}"]
     run_case(folder, argv)
 
