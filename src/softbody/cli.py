@@ -41,20 +41,29 @@ INTEGRATORS = [
 
 
 def _scenes(args) -> int:
-    from softbody.scenes import list_scenes, scene_text
+    from softbody.scenes import builtin_scene_text, list_scenes, scene_json_schema
 
+    if args.schema:
+        import json
+
+        print(json.dumps(scene_json_schema(), indent=2))
+        return 0
     if args.show:
-        print(scene_text(args.show)[1], end="")
+        # built-in scenes only: a path here would print any file the user can read
+        print(builtin_scene_text(args.show), end="")
         return 0
     if args.copy:
         name, dest = args.copy
-        _, text, _ = scene_text(name)
+        text = builtin_scene_text(name)
         target = Path(dest)
         if target.is_dir():
             target = target / f"{name}.toml"
-        if target.exists():
-            raise ValueError(f"{target} exists; not overwriting it")
-        target.write_text(text)
+        try:
+            # "x": never overwrite, even a file created since we looked
+            with target.open("x", encoding="utf-8") as f:
+                f.write(text)
+        except FileExistsError:
+            raise ValueError(f"{target} exists; not overwriting it") from None
         print(f"wrote {target} (edit it, then: softbody run {target})")
         return 0
     scenes = list_scenes()
@@ -218,12 +227,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     scenes = sub.add_parser("scenes", help="list the built-in scenes, show or copy one")
     group = scenes.add_mutually_exclusive_group()
-    group.add_argument("--show", metavar="NAME", help="print a scene's TOML")
+    group.add_argument("--show", metavar="NAME", help="print a built-in scene's TOML")
     group.add_argument(
         "--copy",
         nargs=2,
         metavar=("NAME", "DEST"),
-        help="copy a built-in scene to a file for editing",
+        help="copy a built-in scene to a file for editing (never overwrites)",
+    )
+    group.add_argument(
+        "--schema",
+        action="store_true",
+        help="print the scene file's JSON Schema (every key's type, unit, default, bounds)",
     )
     scenes.set_defaults(func=_scenes)
 
