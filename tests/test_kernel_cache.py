@@ -39,9 +39,9 @@ def test_every_family_in_turn_leaves_one_version_per_kernel_in_a_fresh_cache(tmp
         [],  # the scene's own integrator (midpoint)
         ["--integrator", "implicit_euler", "--dt", "0.01"],
         ["--integrator", "implicit_euler", "--dt", "0.01"],  # crashed with signal 11
-        ["--integrator", "projective", "--dt", "0.01"],
+        ["--integrator", "projective", "--dt", "0.004"],  # its gas limit is 5 ms here
         [],
-        ["--integrator", "projective", "--dt", "0.01"],
+        ["--integrator", "projective", "--dt", "0.004"],
         ["--integrator", "bdf2", "--dt", "0.01"],
     ]
     for k, extra in enumerate(sequence):
@@ -51,7 +51,7 @@ def test_every_family_in_turn_leaves_one_version_per_kernel_in_a_fresh_cache(tmp
             command + extra, env=env, capture_output=True, text=True, timeout=600
         )
         assert done.returncode == 0, (k, extra, done.returncode, done.stderr[-2000:])
-    (folder,) = cache.glob("numba-*")
+    (folder,) = [p for p in cache.glob("numba-*") if p.is_dir()]  # no partial folder left
     assert len(cached_versions(folder)) > 50  # the three families' kernels were cached
     assert kernel_cache_problems(folder) == []
 

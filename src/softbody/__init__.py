@@ -6,7 +6,7 @@ ideal gas inside whose pressure pushes every face outward along its normal.
 
 from softbody import _kernel_cache
 
-_kernel_cache.configure()  # before any compiled kernel is defined
+_kernel_cache.configure()  # before any compiled kernel is defined (compiles nothing)
 
 from softbody.collision import (
     ColliderBox,

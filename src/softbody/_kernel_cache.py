@@ -18,7 +18,9 @@ Numba issues 4807 and 10128: cached code compiled in different processes against
 other). So the cache for a version of the sources is written by one child process that
 compiles every kernel (``softbody._kernel_warmup``) into a temporary folder, under a lock
 so that two first runs do not both compile, and the folder is renamed into place only
-when that process succeeded. Until then nothing else is cached. Set NUMBA_CACHE_DIR to
+when that process succeeded. It runs before the first kernel does (``ensure_compiled``:
+building a model, making a simulator), not at import, so ``softbody --help`` or a
+library import never waits for it. Set NUMBA_CACHE_DIR to
 choose the location yourself: the cache is then a folder inside it.
 """
 
@@ -67,44 +69,77 @@ def cache_folder() -> Path:
     return base / f"numba-{source_digest()}"
 
 
-def configure() -> None:
-    """Point Numba's cache at this version's folder (before any kernel is defined),
-    compiling every kernel first in a child process when the folder does not exist yet.
+_ready = False
 
-    When that fails (an unwritable home, a compiler error), this process compiles what
-    it uses and caches it only until it exits."""
+
+def configure() -> None:
+    """Point Numba's cache at this version's folder; call before any kernel is defined
+    (Numba fixes each kernel's cache folder when it is decorated). Nothing is compiled
+    here: :func:`ensure_compiled` fills the folder before the first kernel runs.
+
+    When the folder cannot be made (an unwritable home), this process compiles what it
+    uses into a scratch folder removed when it exits."""
+    global _ready
     import numba
 
     warmup_folder = os.environ.get(FOLDER_VARIABLE)
     if warmup_folder:  # this process is the warm-up child: compile into its folder
         numba.config.CACHE_DIR = warmup_folder
+        _ready = True
         return
     folder = cache_folder()
-    if not folder.is_dir():
-        try:
-            _warm(folder)
-        except (OSError, RuntimeError) as exc:
-            # no lasting cache then (a piecemeal one is what crashes): this process
-            # compiles what it uses into a folder removed when it exits
-            print(f"softbody: {exc}; compiling in this process instead", file=sys.stderr)
-            scratch = tempfile.mkdtemp(prefix="softbody-kernels-")
-            atexit.register(shutil.rmtree, scratch, ignore_errors=True)
-            numba.config.CACHE_DIR = scratch
-            return
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        _use_scratch(numba, f"cannot write the kernel cache ({exc})")
+        return
     numba.config.CACHE_DIR = str(folder)
 
 
+def _use_scratch(numba, reason: str) -> None:
+    """No lasting cache (a piecemeal one is what crashes): compile in this process, into
+    a folder removed at exit."""
+    global _ready
+    print(f"softbody: {reason}; compiling in this process instead", file=sys.stderr)
+    scratch = tempfile.mkdtemp(prefix="softbody-kernels-")
+    atexit.register(shutil.rmtree, scratch, ignore_errors=True)
+    numba.config.CACHE_DIR = scratch
+    _ready = True
+
+
+def ensure_compiled() -> None:
+    """Make sure the kernel cache is complete before a kernel runs: if it is not, compile
+    every kernel in one child process (the module docstring says why) and put its folder
+    in place. Called by ``ModelBuilder.finalize`` and ``Simulator``; cheap once done.
+
+    Raises ``RuntimeError`` (one line) when compiling fails, and lets KeyboardInterrupt
+    through after stopping the child and removing its folder."""
+    global _ready
+    if _ready:
+        return
+    import numba
+
+    folder = Path(numba.config.CACHE_DIR)
+    if not (folder / COMPLETE).is_file():
+        _warm(folder)
+    _ready = True
+
+
 def _warm(folder: Path) -> None:
-    """Compile every kernel into ``folder`` in one child process, under a lock."""
+    """Compile every kernel into a staging folder in one child process, under a lock,
+    then swap it in for ``folder`` (which holds at most the empty folders Numba made
+    when the kernels were decorated)."""
     import fcntl
 
-    folder.parent.mkdir(parents=True, exist_ok=True)
     with open(folder.parent / f"{folder.name}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # another first run compiles: wait for it
-        if folder.is_dir():
+        if (folder / COMPLETE).is_file():
             return
+        # with the lock held no other warm-up of this version runs: what a killed one
+        # left behind is garbage
+        for stale in folder.parent.glob(f"{folder.name}.partial-*"):
+            shutil.rmtree(stale, ignore_errors=True)
         staging = folder.parent / f"{folder.name}.partial-{os.getpid()}"
-        shutil.rmtree(staging, ignore_errors=True)
         print(
             "softbody: compiling the kernels, once per installed version "
             "(about two minutes on a 2-core machine)...",
@@ -113,23 +148,32 @@ def _warm(folder: Path) -> None:
         )
         start = time.perf_counter()
         env = {**os.environ, FOLDER_VARIABLE: str(staging)}
+        child = subprocess.Popen(
+            [sys.executable, "-m", "softbody._kernel_warmup", str(staging)],
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,  # a Ctrl-C reaches this process, which stops the child
+        )
         try:
-            done = subprocess.run(
-                [sys.executable, "-m", "softbody._kernel_warmup", str(staging)],
-                env=env,
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
+            _, errors = child.communicate()
         except BaseException:
+            child.kill()
+            child.wait()
             shutil.rmtree(staging, ignore_errors=True)
             raise
-        if done.returncode != 0:
+        if child.returncode != 0:
             shutil.rmtree(staging, ignore_errors=True)
-            last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+            last = (errors.strip().splitlines() or ["no message"])[-1]
             raise RuntimeError(f"compiling the kernels failed ({last})")
         (staging / COMPLETE).write_text(f"{time.time()}\n")  # later files: compiled after
+        old = folder.parent / f"{folder.name}.old-{os.getpid()}"
+        if folder.exists():
+            folder.rename(old)
         staging.rename(folder)
+        shutil.rmtree(old, ignore_errors=True)
         print(
             f"softbody: kernels compiled in {time.perf_counter() - start:.0f} s",
             file=sys.stderr,

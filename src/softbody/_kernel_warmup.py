@@ -22,6 +22,7 @@ def exercise() -> None:
 
     import softbody as sb
     from softbody.diagnostics import body_volume_by
+    from softbody.integrators.workspace import Workspace
     from softbody.render.frame import FrameRenderer
     from softbody.scenes import list_scenes, load_scene
 
@@ -37,6 +38,7 @@ def exercise() -> None:
             state = model.state()
             sim.run(state, 2, model.control())
             sim.run(state, 1)
+        Workspace.for_model(model, chunk_count=2)  # the partition kernels, at any core count
         threads = min(2, numba.config.NUMBA_NUM_THREADS)
         if threads > 1:
             sim = sb.Simulator(model, integrator="symplectic_euler", dt=1e-4, threads=threads)

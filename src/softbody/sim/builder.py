@@ -10,7 +10,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from softbody import limits
+from softbody import _kernel_cache, limits
 from softbody.collision.colliders import Collider, collider_arrays
 from softbody.errors import MeshError
 from softbody.gas import Gas, GasLaw
@@ -491,9 +491,13 @@ class ModelBuilder:
 
     # -- finalize ------------------------------------------------------------------------
     def finalize(self) -> Model:
-        """Freeze everything into an immutable :class:`Model`."""
+        """Freeze everything into an immutable :class:`Model`.
+
+        The first call after installing compiles every kernel (about two minutes; see
+        ``softbody._kernel_cache``); later ones load them."""
         if self._particle_count == 0:
             raise ValueError("the model is empty: add a soft body or particles first")
+        _kernel_cache.ensure_compiled()  # before the rest volume below runs a kernel
         q = np.vstack(self._q)
         qd = np.vstack(self._qd)
         mass = np.concatenate(self._mass)

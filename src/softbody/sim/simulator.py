@@ -9,6 +9,7 @@ import weakref
 import numba
 import numpy as np
 
+from softbody import _kernel_cache
 from softbody.errors import SimulationError, StabilityWarning
 from softbody.integrators import Integrator
 from softbody.integrators import loop as _loop
@@ -117,6 +118,7 @@ class Simulator:
     ):
         if not isinstance(model, Model):
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
+        _kernel_cache.ensure_compiled()  # a Model built elsewhere (unpickled) may come first
         self.model = model
         self.integrator = Integrator.parse(integrator)
         self.auto_dt = isinstance(dt, str) and dt == "auto"
