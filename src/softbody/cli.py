@@ -23,10 +23,7 @@ import signal
 import sys
 from pathlib import Path
 
-#: defaults of ``--max-steps`` and ``--max-frames`` (softbody.run's, without importing
-#: the simulator to build the parser)
-MAX_STEPS = 100_000_000
-MAX_FRAMES = 100_000
+from softbody.run import MAX_FRAMES, MAX_STEPS
 
 INTEGRATORS = [
     "euler",
@@ -358,6 +355,10 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
+    except BrokenPipeError:
+        # the reader went away (`softbody scenes --schema | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except (MeshError, SimulationError, StabilityWarning, ValueError, RuntimeError, OSError) as exc:
         _traceback(debug)
         print(f"softbody: error: {_one_line(exc)}", file=sys.stderr)

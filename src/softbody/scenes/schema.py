@@ -36,10 +36,12 @@ from pydantic_core import PydanticCustomError
 
 from softbody import limits
 from softbody.integrators import Integrator
+from softbody.volume import VolumeMethod
 
-#: Most steps a scene may ask for (duration / dt, or one frame / dt): hours of compute on a
-#: small mesh; a scene past it is a typo (``dt = 1e-12``, ``fps = 1e-6``), not a job.
-MAX_STEPS = 10**8
+#: Shortest time step [s]: a nanosecond is far below any soft body's stable step; a
+#: smaller one is a typo (``dt = 1e-12``). How many steps a run may take is checked where
+#: its length is known (``softbody.run.plan_frames``, with ``--max-steps``).
+MIN_DT = 1e-9
 #: Renderer memory per output pixel [bytes]: a 2x2 supersampled float64 colour and depth
 #: buffer (4 x 32 B) plus the 8-bit frame and the encoder's copy, rounded up.
 BYTES_PER_PIXEL = 160
@@ -113,13 +115,29 @@ def _color(value: Any) -> Any:
     return value
 
 
+def _canonical(enum) -> Any:
+    """A validator mapping the names ``enum.parse`` accepts (``"verlet"``, ``"RK4"``,
+    ``"bounding-sphere"``) to the canonical one; anything else is left for the Literal
+    to refuse with the list of names."""
+
+    def canonical(value: Any) -> Any:
+        if isinstance(value, str):
+            try:
+                return enum.parse(value).name.lower()
+            except ValueError:
+                pass
+        return value
+
+    return canonical
+
+
 def _dt(value: Any) -> Any:
     if value == "auto":
         return value
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise _error("dt", 'must be seconds or "auto"')
-    if not (math.isfinite(value) and 0 < value <= 1):
-        raise _error("dt", 'must be seconds in (0, 1] or "auto"')
+    if not (math.isfinite(value) and value >= MIN_DT):
+        raise _error("dt", f'must be finite seconds >= {MIN_DT:g} or "auto"')
     return float(value)
 
 
@@ -145,7 +163,7 @@ TimeStep = Annotated[
     WithJsonSchema(
         {
             "anyOf": [
-                {"type": "number", "exclusiveMinimum": 0, "maximum": 1},
+                {"type": "number", "minimum": MIN_DT},
                 {"const": "auto"},
             ]
         }
@@ -229,11 +247,14 @@ class Table(BaseModel):
 class Simulation(Table):
     """``[simulation]``: integrator, time step and duration."""
 
-    integrator: Literal[INTEGRATORS] = Field(  # type: ignore[valid-type]
+    integrator: Annotated[
+        Literal[INTEGRATORS],  # type: ignore[valid-type]
+        BeforeValidator(_canonical(Integrator)),
+    ] = Field(
         "midpoint", description="time integrator (`--integrator` overrides it)"
     )
     dt: TimeStep = Field(
-        1e-3, description='time step [s] in (0, 1], or "auto" (chosen from the stability estimate)'
+        1e-3, description='time step [s], >= 1e-9, or "auto" (chosen from the stability estimate)'
     )
     duration: Real = Field(5.0, gt=0, le=86400, description="simulated time [s]")
     gravity: Vec3 = Field((0.0, -9.81, 0.0), description="gravitational acceleration [m/s^2]")
@@ -265,8 +286,8 @@ class Contact(Table):
 class Render(Table):
     """``[render]``: the video and images."""
 
-    width: Count = Field(640, ge=16, le=4096, description="image width [px]")
-    height: Count = Field(480, ge=16, le=4096, description="image height [px]")
+    width: Count = Field(640, ge=16, le=16384, description="image width [px]")
+    height: Count = Field(480, ge=16, le=16384, description="image height [px]")
     fps: Real = Field(30.0, ge=0.01, le=1000, description="frames per simulated second [1/s]")
     camera: Vec3 = Field((0.0, 1.5, 6.0), description="camera position [m]")
     target: Vec3 = Field((0.0, 0.5, 0.0), description="point the camera looks at [m]")
@@ -488,8 +509,9 @@ class SoftBody(_BodyBase):
 
     kind: Literal["soft"] = "soft"
     gas: Gas
-    volume_method: Literal[
-        "exact", "bounding_box", "bounding_sphere", "bounding_ellipsoid", "monte_carlo"
+    volume_method: Annotated[
+        Literal["exact", "bounding_box", "bounding_sphere", "bounding_ellipsoid", "monte_carlo"],
+        BeforeValidator(_canonical(VolumeMethod)),
     ] = "exact"
     contact_shape: Literal["bounding_ellipsoid", "bounding_sphere", "bounding_box"] = (
         "bounding_ellipsoid"
@@ -628,17 +650,6 @@ class SceneSpec(Table):
                     "field",
                     f"must be a body index in [0, {len(self.bodies) - 1}]",
                     field=f"attachments.{a}.body",
-                )
-        sim = self.simulation
-        if sim.dt != "auto":
-            # the run goes on to the first frame at or after the duration
-            steps = max(sim.duration, 1.0 / self.render.fps) / sim.dt
-            if steps > MAX_STEPS:
-                raise _error(
-                    "field",
-                    f"{steps:.3g} steps (max(duration, 1 / render.fps) / dt) is more than "
-                    f"{MAX_STEPS:.0e}: raise dt or shorten the run",
-                    field="simulation.dt",
                 )
         return self
 
