@@ -262,3 +262,33 @@ def test_cli_warns_when_reachable_from_the_network():
     warnings = [line for line in err.splitlines() if line.startswith("softbody: warning:")]
     assert len(warnings) == 1 and "reachable from the network" in warnings[0], err
     assert "Traceback" not in err
+
+
+def test_a_start_that_times_out_never_serves_later():
+    """If viser's server is not bound within the timeout, ``start_guarded`` gives up; a
+    build that reaches viser's ``serve`` call after that must meet the guard's refusing
+    proxy, not the real ``websockets`` module (which would serve with no checks), and
+    viser's module gets its real ``websockets`` back once that build has ended."""
+    import viser.infra._infra as infra
+    import websockets
+
+    from softbody.viewer.guard import Guard, start_guarded
+
+    late_call: dict = {}
+
+    def slow_factory():
+        time.sleep(0.6)  # past the 0.2 s timeout below
+        try:
+            infra.websockets.asyncio.server.serve(None, "127.0.0.1", 0, process_request=None)
+        except RuntimeError as exc:
+            late_call["refused"] = str(exc)
+        return None
+
+    guard = Guard(loopback=True)
+    with pytest.raises(RuntimeError, match="did not start within"):
+        start_guarded(slow_factory, guard, timeout=0.2)
+    deadline = time.monotonic() + 10
+    while infra.websockets is not websockets and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert "abandoned" in late_call.get("refused", "")
+    assert infra.websockets is websockets

@@ -90,6 +90,8 @@ class Guard:
     token: str = field(default_factory=lambda: secrets.token_urlsafe(32))
     hooked: bool = False
     server_thread: threading.Thread | None = None
+    abandoned: bool = False
+    """Set when :func:`start_guarded` gave up: a late start is refused."""
     refused: int = 0
 
     def cookie_name(self, port: int) -> str:
@@ -180,6 +182,8 @@ def _websockets_proxy(real: Any, guard: Guard) -> _Namespace:
     real_serve = real.asyncio.server.serve
 
     def serve(*args: Any, **kwargs: Any) -> Any:
+        if guard.abandoned:  # start_guarded gave up waiting: never serve after that
+            raise RuntimeError("the viewer's start was abandoned; not serving")
         if "process_request" not in kwargs:
             raise RuntimeError("viser's serve call changed: process_request is not passed")
         kwargs["process_request"] = guard.process_request(kwargs["process_request"])
@@ -229,6 +233,15 @@ def start_guarded(factory: Any, guard: Guard, timeout: float = START_TIMEOUT) ->
         finally:
             done.set()
 
+    def clean_up_late(real: Any) -> None:
+        # the proxy stays in viser's module until the abandoned build ends (a late serve
+        # call must meet the refusing proxy, not the real module), then goes
+        done.wait()
+        with _BUILD_LOCK:
+            infra.websockets = real
+        if result.get("server") is not None:
+            result["server"].stop()
+
     with _BUILD_LOCK:
         real = infra.websockets
         infra.websockets = _websockets_proxy(real, guard)
@@ -242,12 +255,16 @@ def start_guarded(factory: Any, guard: Guard, timeout: float = START_TIMEOUT) ->
                 # it forever: give up now instead
                 dead = thread is not None and not thread.is_alive()
                 if dead or waited >= timeout:
+                    if not dead:  # the build may still reach viser's serve call
+                        guard.abandoned = True
+                        threading.Thread(target=clean_up_late, args=(real,), daemon=True).start()
                     raise RuntimeError(
                         "the viewer's server did not start"
                         + (" (its thread stopped)" if dead else f" within {timeout:.0f} s")
                     )
         finally:
-            infra.websockets = real
+            if not guard.abandoned:
+                infra.websockets = real
     if "error" in result:
         raise RuntimeError(f"the viewer's server did not start: {result['error']}") from None
     server = result["server"]
