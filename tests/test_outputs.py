@@ -6,12 +6,16 @@ hanging-ball scene (midpoint, the kernels every CLI test shares), in a temporary
 
 from __future__ import annotations
 
+import errno
+import hashlib
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -228,12 +232,13 @@ def test_signal_removes_temporary_files_and_ffmpeg(tmp_path, signum, code):
 def test_step_guards_refuse_endless_runs(tmp_path):
     """Issue 19 item 2: ``--set render.fps=1e-6`` made one frame of about 10^9 steps (a
     hang) and ``--dt 1e-12`` ran 5e12 steps in silence. Both now stop at once with one
-    line giving the step count and the way to allow it (``--max-steps``); a frame count
-    above ``--max-frames`` is refused the same way. Nothing is written."""
+    line: the fps by the scene's bounds, the dt by the step count and the way to allow
+    it (``--max-steps``); a frame count above ``--max-frames`` is refused the same way.
+    Nothing is written."""
     out = tmp_path / "out"
     base = ("run", "hanging-ball", "--out", str(out), "--no-video", "--no-gif")
     cases = [
-        (("--duration", "0.01", "--set", "render.fps=1e-6"), "1,000,000,000 steps"),
+        (("--duration", "0.01", "--set", "render.fps=1e-6"), "render.fps: must be >= 0.01"),
         (("--dt", "1e-12",), "--max-steps"),
         (("--duration", "10", "--max-frames", "100"), "304 frames"),
     ]  # fmt: skip
@@ -338,3 +343,190 @@ def test_failed_ffmpeg_is_one_line(tmp_path):
     assert "\n" not in message and "No such file or directory" in message, message
     assert message.startswith("x.mp4: ffmpeg")
     assert not any("ffmpeg" in name for name in _children(os.getpid()).values())
+
+
+# --- symlinks below --out, interrupted commits, stale temporary folders --------------
+
+
+def _commit(out: Path, files: dict[str, bytes]) -> list[Path]:
+    """Commit ``files`` (relative path -> contents) into ``out`` as a run does: written
+    into a fresh temporary folder inside ``out`` and moved in by ``commit``, under the
+    folder lock. No simulation: the output-folder code alone, in milliseconds."""
+    from softbody.io import outputs
+
+    outputs.prepare(out)
+    with outputs.folder_lock(out):
+        tmp = Path(tempfile.mkdtemp(prefix=".softbody-run-", dir=out))
+        try:
+            for rel, data in files.items():
+                (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+                (tmp / rel).write_bytes(data)
+            return outputs.commit(tmp, out)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _listed(out: Path) -> list[str]:
+    """The paths the manifest in ``out`` lists."""
+    return sorted(item["path"] for item in json.loads((out / MANIFEST).read_text())["files"])
+
+
+def _forge_manifest(out: Path, files: dict[str, Path]) -> None:
+    """Write a manifest in ``out`` (the format softbody has always written) listing each
+    path with the size and hash of the file it names (``files``: listed path -> file)."""
+    items = [
+        {"path": rel, "size": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+        for rel, data in ((rel, f.read_bytes()) for rel, f in files.items())
+    ]
+    (out / MANIFEST).write_text(json.dumps({"format": "softbody-run/1", "files": items}))
+
+
+def _quick_run(out: Path, **outputs) -> dict:
+    """``run_scene`` of the hanging ball for 0.01 s (in this process), no video, no GIF."""
+    from softbody.run import Outputs, run_scene
+    from softbody.scenes import load_scene
+
+    return run_scene(
+        load_scene("hanging-ball"),
+        out,
+        duration=outputs.pop("duration", 0.01),
+        outputs=Outputs(video=False, gif=False, **outputs),
+    )
+
+
+def test_meshes_moved_behind_a_link_are_not_deleted(tmp_path):
+    """Review, defect 1a: after ``--meshes obj`` the user moved ``out/meshes`` away and
+    left a link in its place (``mv out/meshes keep && ln -s keep out/meshes``); the next
+    run without ``--meshes`` deleted every ``keep/frame_*.obj`` through the link (only
+    the last path component was checked for a link). Files reached through a link below
+    ``--out`` are not ours: nothing outside ``out`` is deleted, the link stays, and a run
+    that would write meshes through it stops with one line before moving anything."""
+    from softbody.io.outputs import OutputError
+
+    out, keep = tmp_path / "out", tmp_path / "keep"
+    _quick_run(out, meshes="obj", duration=0.05)
+    assert len(list((out / "meshes").iterdir())) > 1
+    (out / "meshes").rename(keep)
+    (out / "meshes").symlink_to(keep, target_is_directory=True)
+    kept = snapshot(keep)
+    _quick_run(out)
+    assert snapshot(keep) == kept
+    assert (out / "meshes").is_symlink()
+    assert _listed(out) == [
+        "hanging-ball-last-frame.png",
+        "hanging-ball-plots.png",
+        "hanging-ball-summary.json",
+    ]
+    before = snapshot(out)
+    with pytest.raises(OutputError, match="meshes is not a folder softbody wrote"):
+        _quick_run(out, meshes="obj")
+    assert snapshot(keep) == kept and snapshot(out) == before
+
+
+@pytest.mark.parametrize("at", [True, False], ids=["dir_fd", "lstat-walk"])
+@pytest.mark.parametrize("case", ["link", "deep-link", "link-write", "parent", "absolute"])
+def test_forged_manifest_never_reaches_outside_out(tmp_path, monkeypatch, case, at):
+    """Review, defect 1b: a downloaded project folder holding a link ``home -> ~`` and a
+    forged ``softbody-run.json`` listing ``home/.bashrc`` with that file's hash made
+    ``softbody run s.toml --out .`` delete ``~/.bashrc``. A manifest path through a
+    link (at any depth) is not ours: it is neither deleted nor written through (a run
+    writing there stops with one line); one naming ``../x`` or an absolute path makes
+    the manifest not one softbody wrote. Checked with the ``dir_fd`` calls and with
+    the lstat walk used where a platform lacks them."""
+    from softbody.io import outputs
+
+    monkeypatch.setattr(outputs, "_AT", at, raising=False)
+    home, out = tmp_path / "home", tmp_path / "project"
+    home.mkdir()
+    out.mkdir()
+    bashrc = home / ".bashrc"
+    bashrc.write_text("export PATH=~/bin:$PATH\n")
+    if case == "deep-link":
+        (out / "a").mkdir()
+        (out / "a" / "b").symlink_to(home, target_is_directory=True)
+        listed = "a/b/.bashrc"
+    else:
+        (out / "home").symlink_to(home, target_is_directory=True)
+        listed = {"parent": "../home/.bashrc", "absolute": str(bashrc)}.get(case, "home/.bashrc")
+    _forge_manifest(out, {listed: bashrc})
+    before = snapshot(tmp_path)
+    files = {"s-summary.json": b"{}"}
+    if case == "link-write":  # a new file in the folder the manifest says is ours
+        files["home/run.sh"] = b"echo owned\n"
+    match = {"link-write": "home is not a folder", "parent": "not a manifest softbody wrote"}
+    match["absolute"] = match["parent"]
+    if case in match:
+        with pytest.raises(outputs.OutputError, match=match[case]):
+            _commit(out, files)
+        assert snapshot(tmp_path) == before
+    else:
+        _commit(out, files)
+        assert _listed(out) == ["s-summary.json"]
+    assert bashrc.read_text() == "export PATH=~/bin:$PATH\n"
+    assert snapshot(home) == {".bashrc": bashrc.read_bytes()}
+
+
+@pytest.mark.parametrize("step,call", [("move", 1), ("move", 2), ("move", 3), ("delete", 1),
+                                       ("delete", 2)])  # fmt: skip
+def test_interrupted_commit_is_recovered(tmp_path, monkeypatch, step, call):
+    """Review, defect 2: the interim manifest written before the moves listed only the
+    new hash of a path both runs write, so a commit stopped after some moves (a full
+    disk, SIGKILL) left that path holding the old file under a manifest that did not
+    accept it: every later run refused it as "changed since softbody wrote it", for
+    good. The interim manifest now accepts the old or the new file there: whichever
+    move or deletion the commit stops at, the next run accepts the folder and leaves
+    exactly its own files."""
+    from softbody.io import outputs
+
+    out = tmp_path / "out"
+    _commit(out, {"a.txt": b"a1", "b.txt": b"b1", "meshes/f0.obj": b"m1", "x.gif": b"g1"})
+    real = {"move": os.replace, "delete": os.unlink}[step]
+    calls = []
+
+    def fail(src, *args, **kwargs):
+        if not os.fspath(src).rpartition("/")[2].startswith("."):  # not the manifest
+            calls.append(src)
+            if len(calls) == call:
+                raise OSError(errno.ENOSPC, "No space left on device")
+        return real(src, *args, **kwargs)
+
+    with monkeypatch.context() as m:
+        m.setattr(outputs.os, "replace" if step == "move" else "unlink", fail)
+        with pytest.raises(OSError, match="No space left"):
+            _commit(out, {"a.txt": b"a2", "b.txt": b"b2", "c.txt": b"c2"})
+    assert len(calls) == call
+    # moved in order: a.txt, b.txt, c.txt
+    assert (out / "b.txt").read_bytes() == (b"b1" if step == "move" and call <= 2 else b"b2")
+    _commit(out, {"b.txt": b"b3", "d.txt": b"d3"})
+    files = snapshot(out)
+    assert files.pop(MANIFEST) and files == {"b.txt": b"b3", "d.txt": b"d3"}
+    assert sorted(os.listdir(out)) == ["b.txt", "d.txt", MANIFEST]
+    assert _listed(out) == ["b.txt", "d.txt"]
+
+
+def test_stale_temporary_folder_is_removed(tmp_path):
+    """Review, defect 3: a run killed with SIGKILL leaves its ``.softbody-run-*``
+    temporary folder (frames, meshes) in ``--out`` for good. The next run, holding the
+    folder lock (so no other run can be using it), removes such folders: only real
+    folders named exactly as the run's ``tempfile.mkdtemp`` names them; a user's
+    ``.softbody-run-notes`` folder or a link with a matching name stays, as does what
+    the link points to."""
+    out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
+    stale = out / ".softbody-run-k3j_9x0q"
+    (stale / "meshes").mkdir(parents=True)
+    (stale / "meshes" / "frame_00000.obj").write_text("v 0 0 0\n")
+    (stale / "hanging-ball.mp4").write_bytes(b"\0" * 1000)
+    (out / ".softbody-run-notes").mkdir()
+    (out / ".softbody-run-notes" / "n.txt").write_text("mine")
+    elsewhere.mkdir()
+    (elsewhere / "f.txt").write_text("mine too")
+    (out / ".softbody-run-zzzzzzzz").symlink_to(elsewhere, target_is_directory=True)
+    _quick_run(out)
+    assert not os.path.lexists(stale)
+    assert (out / ".softbody-run-notes" / "n.txt").read_text() == "mine"
+    assert (out / ".softbody-run-zzzzzzzz").is_symlink()
+    assert snapshot(elsewhere) == {"f.txt": b"mine too"}
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == [
+        ".softbody-run-notes",
+        ".softbody-run-zzzzzzzz",
+    ]
