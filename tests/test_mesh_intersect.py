@@ -178,3 +178,28 @@ def test_info_prints_the_count(tmp_path):
     assert f"self-intersecting: {count} pairs of triangles cross" in out.stdout
     assert "e.g. triangles" in out.stdout
     assert "self-intersections: none" in run(HAND).stdout
+
+
+def test_run_warns_in_one_line_and_still_runs(tmp_path):
+    """`softbody run` of a scene whose mesh crosses itself prints the load warning as
+    one `softbody: warning:` line naming the file and the count (the CLI used to drop
+    every warning) and still runs: the mesh can hold gas."""
+    from softbody.cli import main
+
+    path = tmp_path / "pushed.obj"
+    sb.save_mesh(_pushed_sphere(), path)
+    (tmp_path / "s.toml").write_text(
+        "[simulation]\nintegrator = 'implicit_euler'\ndt = 0.01\nduration = 0.02\n"
+        "[[bodies]]\nmesh = { file = 'pushed.obj' }\nmass = 1.0\nstiffness = 100.0\n"
+        "gas = 10.0\n"
+    )
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = main(["run", str(tmp_path / "s.toml"), "--out", str(tmp_path / "out"),
+                     "--no-video", "--no-gif"])  # fmt: skip
+    assert code == 0, err.getvalue()
+    lines = [line for line in err.getvalue().splitlines() if line.startswith("softbody: warning")]
+    assert len(lines) == 1 and str(path) in lines[0] and "pairs of triangles cross" in lines[0]

@@ -127,7 +127,7 @@ def _view(args) -> int:
     from softbody.viewer.app import show
 
     scene = load_scene(args.scene, list(args.set or []))
-    print(f"{scene.name}: preparing (the first run compiles the kernels, about 40 s)", flush=True)
+    print(f"{scene.name}: preparing", flush=True)
 
     try:
         with warnings.catch_warnings():
@@ -317,6 +317,23 @@ def _on_sigterm(signum, frame) -> None:
     raise _Terminated()
 
 
+def _warning_printer():
+    """A ``warnings.showwarning`` for the CLI: ``softbody: warning: ...`` on one line,
+    with no source line or file name of ours, each finding once: a mesh file is validated
+    when it is read (``FILE: finding``) and again when its body is built (``body N mesh:
+    finding``), and the first names the file."""
+    shown: set[str] = set()
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        text = _one_line(message)
+        finding = text.split(": ", 1)[-1]
+        if finding not in shown:
+            shown.add(finding)
+            print(f"softbody: warning: {text}", file=sys.stderr, flush=True)
+
+    return show
+
+
 def _one_line(exc: BaseException) -> str:
     """An exception's message on one line: an OSError as ``file: reason``; several lines
     joined with ``; ``."""
@@ -331,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``softbody`` console script."""
     import warnings
 
-    from softbody.errors import MeshError, SimulationError, StabilityWarning
+    from softbody.errors import MeshError, MeshWarning, SimulationError, StabilityWarning
 
     args = build_parser().parse_args(argv)
     debug = os.environ.get("SOFTBODY_DEBUG", "").strip() not in ("", "0")
@@ -339,7 +356,10 @@ def main(argv: list[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main else None
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # repairs are reported by info
+            warnings.simplefilter("ignore", UserWarning)  # other libraries' chatter
+            # a mesh that was repaired or crosses itself: one line each, the run goes on
+            warnings.simplefilter("default", MeshWarning)
+            warnings.showwarning = _warning_printer()
             return args.func(args)
     except KeyboardInterrupt as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
