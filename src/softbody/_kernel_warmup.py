@@ -73,11 +73,35 @@ def exercise() -> None:
             sb.Simulator(model, integrator=integrator, dt=dt).run(model.state(), 2)
 
 
+def exercise_internals() -> None:
+    """The internal kernels the test suite calls on their own from Python (the multigrid
+    V-cycle, the smoother's sums), with the argument kinds it passes: compiled here, so
+    that no process compiles a kernel into the cache after this one."""
+    import numpy as np
+
+    import softbody as sb
+    from softbody.integrators import implicit as im
+    from softbody.integrators.multigrid import apply_multigrid
+
+    builder = sb.ModelBuilder()
+    builder.add_soft_body(sb.icosphere(2), mass=1.0, stiffness=100.0, damping=0.1, gas=10.0)
+    model = builder.finalize()
+    sim = sb.Simulator(model, integrator="implicit_euler", dt=1e-2)
+    sim.run(model.state(), 1)
+    mg, n = sim._multigrid, model.particle_count
+    r, z, x = np.ones((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
+    apply_multigrid(mg, r, z)
+    for i in np.flatnonzero(model.particle_inv_mass > 0)[:2]:
+        im._offdiagonal_sum(mg, i, x)
+        im._entries_sum(mg, x, im._first_later_entry(mg, i), mg.vertex_spring_ptr[i + 1])
+
+
 def main(argv: list[str]) -> int:
     if len(argv) != 1:
         print("usage: python -m softbody._kernel_warmup FOLDER", file=sys.stderr)
         return 2
     exercise()
+    exercise_internals()
     return 0
 
 

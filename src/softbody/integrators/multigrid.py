@@ -319,9 +319,9 @@ def _diagonals(mg):
             mg.a_diag[v0 + i] = d
 
 
-# inlined: its callers pass constants (a level of 0, a direction), which Numba would
-# compile as separate versions, and a cached kernel with several versions can crash a
-# later process that loads it
+# inlined, as are restrict, prolong and cycle_from: their callers pass constants (a
+# level, a direction), which Numba compiles as separate versions of a kernel, one per
+# constant, and a cached kernel with several versions is what crashes (_kernel_cache)
 @njit(cache=True, inline="always")
 def _gauss_seidel(mg, lv, forward):
     """One Gauss-Seidel sweep on A_l x_l = b_l (3 right-hand sides), in place."""
@@ -344,10 +344,7 @@ def _gauss_seidel(mg, lv, forward):
         x[v0 + i, 2] = s2 * inv
 
 
-# inlined: its callers pass constants (a level of 0, a direction), which Numba would
-# compile as separate versions, and a cached kernel with several versions can crash a
-# later process that loads it
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always")  # called with the constant level 0 (see _gauss_seidel)
 def restrict(mg, lv, res):
     """b_{l+1} = P_l^T res for res (n_l, 3)."""
     vc = mg.vec_offset[lv + 1]
@@ -365,10 +362,7 @@ def restrict(mg, lv, res):
             mg.b[vc + col, 2] += p * s2
 
 
-# inlined: its callers pass constants (a level of 0, a direction), which Numba would
-# compile as separate versions, and a cached kernel with several versions can crash a
-# later process that loads it
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always")  # called with the constant level 0 (see _gauss_seidel)
 def prolong(mg, lv):
     """x_l += P_l x_{l+1}."""
     v0, vc = mg.vec_offset[lv], mg.vec_offset[lv + 1]
@@ -419,7 +413,7 @@ def _coarse_solve(mg):
             _gauss_seidel(mg, last, False)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # called with the constants 0 and 1 (see _gauss_seidel)
 def cycle_from(mg, first):
     """V-cycle on levels first..L for A_first x = b_first (b set, x overwritten)."""
     for lv in range(first, mg.level_count):
