@@ -7,7 +7,9 @@ Two parts, one run:
   dynamics), a fresh Python process with an empty Numba cache imports softbody, builds a
   162-vertex ball, a simulator, and runs 3 steps; then a second process does the same
   from the cache the first one wrote. Each family starts from its own empty cache: what
-  a user of that family alone waits for on a fresh machine.
+  a user of that family alone waits for on a fresh machine (since the cache is written
+  whole, by one process compiling every family, the cold start is the same for all).
+  ``--baseline OLD/src`` times another version's sources alternately in the same run.
 * **Set-up against size** (cache warm, this process): for the ball drop's ball
   (``ball_drop.ball_drop``) from 162 to 163,842 vertices, the time to build the model,
   and for velocity Verlet (its stability estimate), implicit Euler (its multigrid
@@ -15,7 +17,7 @@ Two parts, one run:
   simulator plus its first step less its second (a step's own cost), best of
   ``REPEATS``.
 
-Writes results/startup.{json,png}. Usage: python benchmarks/startup.py
+Writes results/startup.{json,png}. Usage: python benchmarks/startup.py [--baseline SRC]
 """
 
 from __future__ import annotations
@@ -60,9 +62,12 @@ print(json.dumps({"import_s": t1 - t0, "model_s": t2 - t1, "simulator_s": t3 - t
 """
 
 
-def start(integrator: str, cache: Path) -> dict:
-    """One fresh process's start-up phases [s] with Numba's cache in ``cache``."""
+def start(integrator: str, cache: Path, source: Path | None = None) -> dict:
+    """One fresh process's start-up phases [s] with Numba's cache in ``cache``; with
+    ``source``, softbody is imported from that folder (another version's ``src``)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    if source is not None:
+        env["PYTHONPATH"] = str(source)
     t = time.perf_counter()
     out = subprocess.run(
         [sys.executable, "-c", CHILD, integrator],
@@ -74,18 +79,30 @@ def start(integrator: str, cache: Path) -> dict:
     return {**json.loads(out.stdout.strip().splitlines()[-1]), "process_s": time.perf_counter() - t}
 
 
-def compile_times() -> list[dict]:
+def compile_times(baseline: Path | None) -> list[dict]:
+    """Cold and warm start per family, for this version and, alternating with it in the
+    same run, the ``baseline`` version's sources when given."""
+    versions = {"this": None} | ({"baseline": baseline} if baseline else {})
     rows = []
     for name, integrator in FAMILIES.items():
-        with tempfile.TemporaryDirectory() as cache:
-            cold = start(integrator, Path(cache))
-            warm = start(integrator, Path(cache))
-        rows.append({"family": name, "integrator": integrator, "cold": cold, "warm": warm})
-        print(
-            f"{name:10s} ({integrator}): cold start {cold['process_s']:6.1f} s, "
-            f"warm {warm['process_s']:5.2f} s",
-            flush=True,
-        )
+        for version, source in versions.items():
+            with tempfile.TemporaryDirectory() as cache:
+                cold = start(integrator, Path(cache), source)
+                warm = start(integrator, Path(cache), source)
+            rows.append(
+                {
+                    "family": name,
+                    "integrator": integrator,
+                    "version": version,
+                    "cold": cold,
+                    "warm": warm,
+                }
+            )
+            print(
+                f"{name:10s} ({integrator}, {version}): cold start {cold['process_s']:6.1f} s, "
+                f"warm {warm['process_s']:5.2f} s",
+                flush=True,
+            )
     return rows
 
 
@@ -129,12 +146,22 @@ def setup_times() -> list[dict]:
 
 
 def main() -> None:
-    compiled = compile_times()
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--baseline",
+        type=Path,
+        help="another version's src folder, timed alternately with this one (cold starts)",
+    )
+    args = parser.parse_args()
+    compiled = compile_times(args.baseline)
     sizes = setup_times()
     result = run_record(
         "startup",
         threads=1,
         python=sys.version.split()[0],
+        baseline=str(args.baseline) if args.baseline else None,
         compile=compiled,
         setup=sizes,
     )
@@ -160,7 +187,9 @@ def plot(result: dict) -> None:
     ax0.bar_label(bars, labels=[f"{v:.0f} s" for v in cold], padding=3, fontsize=8)
     bars = ax0.barh(y + 0.2, warm, height=0.4, color="C0", label="cache written")
     ax0.bar_label(bars, labels=[f"{v:.1f} s" for v in warm], padding=3, fontsize=8)
-    ax0.set_yticks(y, [f"{r['family']}\n({r['integrator']})" for r in rows])
+    ax0.set_yticks(
+        y, [f"{r['family']} ({r['integrator']})\n{r.get('version', 'this')}" for r in rows]
+    )
     ax0.invert_yaxis()
     ax0.set_xlim(right=1.25 * max(cold))
     ax0.set_xlabel("seconds from a fresh process to 3 steps (162 vertices)")
