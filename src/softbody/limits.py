@@ -6,7 +6,8 @@ traceback or the kernel's out-of-memory killer. Every guard compares an *estimat
 made from sizes alone (vertex counts, sample counts, file sizes) with
 :func:`memory_limit`.
 
-The limit is half of this machine's physical memory, or the ``SOFTBODY_MEMORY_LIMIT``
+The limit is half of this machine's physical memory (or of its container's memory limit,
+when it runs in one with a smaller limit), or the ``SOFTBODY_MEMORY_LIMIT``
 environment variable (bytes, or a number with a ``K``, ``M``, ``G`` or ``T`` suffix,
 powers of 1024), for a user who knows their machine better.
 """
@@ -53,9 +54,33 @@ def physical_memory() -> int:
         return 0
 
 
+#: Files that hold a container's memory limit (cgroup v2, then v1), read by
+#: :func:`available_memory`.
+CGROUP_LIMIT_FILES = (
+    "/sys/fs/cgroup/memory.max",
+    "/sys/fs/cgroup/memory/memory.limit_in_bytes",
+)
+
+
+def available_memory() -> int:
+    """Physical memory [bytes], or a container's (cgroup) memory limit when that is
+    smaller: a job in a 2 GB container on a 24 GB host has 2 GB (0 when unknown)."""
+    total = physical_memory()
+    for name in CGROUP_LIMIT_FILES:
+        try:
+            text = open(name).read().strip()
+        except OSError:
+            continue
+        # v2 writes "max" when there is no limit; v1 a huge number, which min() passes over
+        if text.isdigit() and int(text) > 0:
+            total = min(total, int(text)) if total > 0 else int(text)
+        break
+    return total
+
+
 def memory_limit() -> int:
     """Most memory [bytes] one job may plan to use: ``SOFTBODY_MEMORY_LIMIT`` if set,
-    else ``MEMORY_FRACTION`` of physical memory (8 GiB when that is unknown)."""
+    else ``MEMORY_FRACTION`` of :func:`available_memory` (8 GiB when that is unknown)."""
     text = os.environ.get("SOFTBODY_MEMORY_LIMIT", "").strip()
     if text:
         unit = text[-1].upper() if text[-1].isalpha() else ""
@@ -69,7 +94,7 @@ def memory_limit() -> int:
                 f"SOFTBODY_MEMORY_LIMIT must be a positive number of bytes (e.g. 8G), got {text!r}"
             )
         return int(value)
-    total = physical_memory()
+    total = available_memory()
     return int(MEMORY_FRACTION * total) if total > 0 else 8 * 1024**3
 
 
@@ -103,7 +128,8 @@ def check_memory(key: str, estimate: float, what: str) -> None:
         source = (
             "SOFTBODY_MEMORY_LIMIT"
             if os.environ.get("SOFTBODY_MEMORY_LIMIT", "").strip()
-            else "half of this machine's memory; set SOFTBODY_MEMORY_LIMIT to change it"
+            else "half of this machine's or container's memory; set SOFTBODY_MEMORY_LIMIT "
+            "to change it"
         )
         raise SizeLimitError(
             f"{key}: {what} would need about {format_bytes(estimate)} of memory, over the "
