@@ -292,3 +292,25 @@ def test_a_start_that_times_out_never_serves_later():
         time.sleep(0.05)
     assert "abandoned" in late_call.get("refused", "")
     assert infra.websockets is websockets
+
+
+def test_default_port_may_be_left_out_of_host():
+    """On port 80 a browser sends ``Host: localhost`` with no port (the scheme's default):
+    the Host check takes that as port 80 there, and as a mismatch on any other port."""
+    from types import SimpleNamespace
+
+    from websockets.datastructures import Headers
+
+    from softbody.viewer.guard import Guard
+
+    guard = Guard(loopback=True)
+
+    def status(port: int) -> int | None:
+        connection = SimpleNamespace(
+            local_address=("127.0.0.1", port), respond=lambda code, text: int(code)
+        )
+        request = SimpleNamespace(path=f"/?token={guard.token}", headers=Headers(Host="localhost"))
+        return guard.check(connection, request)[0]
+
+    assert status(80) is None  # served
+    assert status(8080) == 403

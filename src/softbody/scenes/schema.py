@@ -95,6 +95,17 @@ Vec3 = Annotated[tuple[Real, Real, Real], _vector(3)]
 Vec2 = Annotated[tuple[Real, Real], _vector(2)]
 Flag = Annotated[bool, Strict()]
 Text = Annotated[str, Strict()]
+
+
+def _label(value: Any) -> Any:
+    """A number where a label goes (``name = 2024``) reads as its text, as it always did."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return str(value)
+    return value
+
+
+#: A name or description: text, or a number taken as its text.
+Label = Annotated[str, BeforeValidator(_label), Strict()]
 #: ``[axis_x, axis_y, axis_z, angle_degrees]``: a rotation by the angle about the axis.
 Rotation = Annotated[
     tuple[Real, Real, Real, Real],
@@ -486,7 +497,7 @@ class Pin(Table):
 
 
 class _BodyBase(Table):
-    name: Text | None = Field(None, max_length=200, description="label (default: body N)")
+    name: Label | None = Field(None, max_length=200, description="label (default: body N)")
     mesh: Mesh
     position: Vec3 = Field((0.0, 0.0, 0.0), description="translation [m]")
     rotation: Rotation | None = None
@@ -631,10 +642,10 @@ Collider = Annotated[
 class SceneSpec(Table):
     """A whole scene file."""
 
-    name: Text | None = Field(
+    name: Label | None = Field(
         None, max_length=200, description="output file stem (default: the file's name)"
     )
-    description: Text = Field("", max_length=10_000, description="one line for the scene list")
+    description: Label = Field("", max_length=10_000, description="one line for the scene list")
     simulation: Simulation = Simulation()
     contact: Contact | None = Field(None, description="soft-soft contact (default: surface)")
     render: Render = Render()

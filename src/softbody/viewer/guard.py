@@ -124,6 +124,8 @@ class Guard:
         if split is None:
             return self._refuse(connection, "malformed Host header"), None
         name, host_port = split
+        if host_port is None and port == 80:
+            host_port = 80  # browsers leave the default port out of Host
         if self.loopback and not (_loopback_name(name) and host_port == port):
             return self._refuse(connection, f"Host {host!r} is not this server"), None
         query = parse_qs(urlsplit(request.path).query)
