@@ -94,6 +94,29 @@ def uniform_scaling_stationary(stiffness: float, rest_lengths: np.ndarray, nrt: 
     return (1 + np.sqrt(1 + 12 * nrt / (stiffness * np.sum(rest_lengths**2)))) / 2
 
 
+def free_port() -> int:
+    """A loopback port free at the time of asking (for a command line that needs a
+    number; a library call can pass port 0)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start_viewer(**options):
+    """The hanging-ball scene in a viewer on a free loopback port, its simulator built
+    with ``options`` (keyword options of ``Simulator``)."""
+    from softbody.scenes import load_scene
+    from softbody.viewer.app import show
+
+    scene = load_scene("hanging-ball")
+    sim = sb.Simulator(scene.model, integrator=scene.integrator, dt=scene.dt, **options)
+    return show(
+        scene.model, scene.model.state(), sim, port=0, block=False, body_names=scene.body_names
+    )
+
+
 def cached_versions(cache: Path) -> dict[str, int]:
     """Compiled versions per cached kernel: the entries of each Numba index file
     (``<kernel>-<line>.pyXY.nbi``: a pickled version tag, then (stamp, {key: file}))."""

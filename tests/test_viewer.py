@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import os
 import re
-import socket
 import time
 from pathlib import Path
 
@@ -30,12 +29,6 @@ ARGS = [
 ]
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def page():
     """The hanging-ball scene in the viewer, open in headless Chromium."""
@@ -52,7 +45,7 @@ def page():
         scene.model,
         scene.model.state(),
         sim,
-        port=free_port(),
+        port=0,
         block=False,
         body_names=scene.body_names,
         body_colors=scene.render.body_colors,

@@ -10,7 +10,6 @@ from __future__ import annotations
 import http.client
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -19,6 +18,7 @@ import time
 import pytest
 
 import softbody as sb
+from conftest import free_port, start_viewer
 
 pytest.importorskip("viser")
 
@@ -26,21 +26,10 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import connect
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture(scope="module")
 def viewer():
     """The hanging-ball scene in a viewer on a free loopback port."""
-    from softbody.scenes import load_scene
-    from softbody.viewer.app import show
-
-    scene = load_scene("hanging-ball")
-    sim = sb.Simulator(scene.model, integrator=scene.integrator, dt=scene.dt)
-    v = show(scene.model, scene.model.state(), sim, port=free_port(), block=False)
+    v = start_viewer()
     yield v
     v.stop()
 

@@ -10,14 +10,13 @@ run with a message, the loop stays alive, and Reset (the page's button) goes on.
 from __future__ import annotations
 
 import math
-import socket
 import threading
 import time
 
 import msgspec
 import pytest
 
-import softbody as sb
+from conftest import start_viewer
 
 pytest.importorskip("viser")
 
@@ -37,17 +36,7 @@ CAMERA = {
 @pytest.fixture
 def viewer():
     """The hanging-ball scene in a viewer on a free loopback port."""
-    from softbody.scenes import load_scene
-    from softbody.viewer.app import show
-
-    scene = load_scene("hanging-ball")
-    sim = sb.Simulator(scene.model, integrator=scene.integrator, dt=scene.dt)
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    v = show(
-        scene.model, scene.model.state(), sim, port=port, block=False, body_names=scene.body_names
-    )
+    v = start_viewer()
     yield v
     v.stop()
 

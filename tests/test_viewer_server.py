@@ -2,28 +2,12 @@
 
 from __future__ import annotations
 
-import socket
 import time
 
 import pytest
 
 import softbody as sb
-
-
-def start_viewer(**options):
-    """The hanging-ball scene in a viewer on a free port, its simulator built with
-    ``options`` (keyword options of ``Simulator``)."""
-    from softbody.scenes import load_scene
-    from softbody.viewer.app import show
-
-    scene = load_scene("hanging-ball")
-    sim = sb.Simulator(scene.model, integrator=scene.integrator, dt=scene.dt, **options)
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    return show(
-        scene.model, scene.model.state(), sim, port=port, block=False, body_names=scene.body_names
-    )
+from conftest import start_viewer
 
 
 @pytest.fixture
