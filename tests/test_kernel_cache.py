@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -117,3 +118,28 @@ def test_state_of_the_wrong_size_is_refused_by_name():
         sim.run(state, 1)
     with pytest.raises(ValueError, match="particle_qd"):
         sb.energies(model, state)
+
+
+def test_a_second_copy_of_the_package_gets_its_own_cache_folder(tmp_path):
+    """Numba files each cached kernel under its source file's path, so a second checkout
+    of the same sources that shared the first one's (complete) folder compiled its kernels
+    one process at a time into it, the mix that crashes. Reference: the same sources at
+    two paths name two folders; at one path, one (imports only, nothing compiles)."""
+    import shutil
+
+    import softbody
+
+    copy = tmp_path / "copy"
+    shutil.copytree(Path(softbody.__file__).parent, copy / "softbody")
+    code = "from softbody._kernel_cache import cache_folder; print(cache_folder().name)"
+
+    def folder(source: Path) -> str:
+        env = {**os.environ, "PYTHONPATH": str(source), "NUMBA_CACHE_DIR": str(tmp_path / "c")}
+        done = subprocess.run(
+            [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120
+        )
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
+
+    here = Path(softbody.__file__).parents[1]
+    assert folder(copy) != folder(here) == folder(here)

@@ -45,10 +45,15 @@ COMPLETE = "complete"
 
 def source_digest() -> str:
     """Short SHA-256 of the package's kernel sources: the .py files that use Numba or
-    define named tuples (names and contents). Editing the CLI or the viewer keeps the
-    cache."""
+    define named tuples (names and contents), and where the package is. Editing the CLI
+    or the viewer keeps the cache.
+
+    The location counts because Numba files each kernel under its source file's path: a
+    second checkout of the same version would find the first one's folder complete but
+    none of its own kernels in it, and compile them piecemeal into it, which is what
+    crashes. Each installed copy gets its own folder and its own warm-up."""
     root = Path(__file__).resolve().parent
-    h = hashlib.sha256()
+    h = hashlib.sha256(str(root).encode())
     for path in sorted(root.rglob("*.py")):
         text = path.read_bytes()
         if b"numba" not in text and b"NamedTuple" not in text:
