@@ -20,6 +20,14 @@ def kernel_array(a) -> np.ndarray:
     return np.require(a, dtype=np.float64, requirements=["C", "A", "W"])
 
 
+def _kernel_ready(a, shape: tuple) -> bool:
+    """Whether ``a`` is already what :func:`kernel_array` makes, with this shape."""
+    if type(a) is not np.ndarray or a.dtype != np.float64 or a.shape != shape:
+        return False
+    flags = a.flags
+    return flags.c_contiguous and flags.writeable and flags.aligned
+
+
 def kernel_input(a, dtype=np.float64) -> np.ndarray:
     """``a`` as the compiled kernels take a model's arrays: C-contiguous, aligned and
     read-only (a read-only view; a copy only when the layout or ``dtype`` differs), for
@@ -79,15 +87,17 @@ class State:
         """Check this state's array shapes against ``model`` and make every array
         float64, C-contiguous and writable (:func:`kernel_array`), replacing an attribute
         a user set to some other kind of array. Raises ``ValueError`` naming the array."""
-        expected = {
-            "particle_q": (model.particle_count, 3),
-            "particle_qd": (model.particle_count, 3),
-            "collider_q": (model.collider_count, 3),
-            "collider_rotation": (model.collider_count, 3, 3),
-            "collider_impulse": (model.collider_count, 3),
-        }
-        for name, shape in expected.items():
+        n, c = model.particle_count, model.collider_count
+        for name, shape in (
+            ("particle_q", (n, 3)),
+            ("particle_qd", (n, 3)),
+            ("collider_q", (c, 3)),
+            ("collider_rotation", (c, 3, 3)),
+            ("collider_impulse", (c, 3)),
+        ):
             value = getattr(self, name)
+            if _kernel_ready(value, shape):
+                continue  # the usual case, in a few flag reads (this runs every run call)
             try:
                 array = kernel_array(value)
             except (TypeError, ValueError):
@@ -96,8 +106,7 @@ class State:
                 raise ValueError(
                     f"state.{name} has shape {array.shape}, the model needs {shape}"
                 )
-            if array is not value:
-                setattr(self, name, array)
+            setattr(self, name, array)
 
     def copy(self) -> State:
         """An independent copy."""
