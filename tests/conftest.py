@@ -63,16 +63,15 @@ def deformed(model: sb.Model, seed: int, amplitude: float) -> sb.State:
 
 
 def forces(model: sb.Model, state: sb.State, control: sb.Control | None = None) -> np.ndarray:
-    """Total force on each particle (N, 3) [N] from the compiled force kernels."""
-    from softbody.forces.evaluate import eval_forces
-    from softbody.integrators.workspace import Workspace
+    """Total force on each particle (N, 3) [N] from the compiled core's force terms."""
+    from softbody import _core
+    from softbody.core import core_model
     from softbody.sim.control import control_data
 
-    w = Workspace.for_model(model)
     c = control_data(model) if control is None else control.write(model, control_data(model))
-    f = np.zeros((model.particle_count, 3))
-    eval_forces(model.data, c, float(state.time), state.particle_q, state.particle_qd, w, f)
-    return f
+    state.conform(model)
+    q, qd = state.particle_q, state.particle_qd
+    return _core.eval_forces(core_model(model), c, float(state.time), q, qd)[0]
 
 
 def settle(
@@ -146,6 +145,14 @@ def kernel_cache_problems(folder: Path) -> list[str]:
         if path.stat().st_mtime > finished
     ]
     return problems
+
+
+def pytest_sessionstart(session):
+    """Compile the Numba kernels (or load them) before any test runs: tests call some of
+    them directly, and one compiled outside the warm-up would be cached piecemeal."""
+    from softbody import _kernel_cache
+
+    _kernel_cache.ensure_compiled()
 
 
 def pytest_sessionfinish(session, exitstatus):

@@ -2,56 +2,42 @@
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
+from softbody import _core
+from softbody.core import core_model
 from softbody.forces.springs import attachment_energy, spring_energy
-from softbody.gas import eval_model_pressure, gas_energy, gas_value_at
-from softbody.integrators.workspace import Workspace
+from softbody.gas import gas_energy
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
 from softbody.sim.state import State, kernel_input
-from softbody.volume import eval_body_volume, eval_model_volume_only
-
-#: one scratch workspace per model for the measurements (allocating one took 15 ms at
-#: 40,962 particles, more than the volume it was for: sampling a run every step doubled
-#: its time)
-_WORKSPACES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def _workspace(model: Model) -> Workspace:
-    w = _WORKSPACES.get(model)
-    if w is None:
-        w = _WORKSPACES[model] = Workspace.for_model(model)
-    return w
+def _control(model: Model, control: Control | None):
+    return control_data(model) if control is None else control.write(model, control_data(model))
 
 
-def _volumes(model: Model, q: np.ndarray) -> Workspace:
-    w = _workspace(model)
-    m = model.data
-    eval_model_volume_only(m, q, w)
-    return w
+def _gas(model: Model, state: State, control: Control | None = None):
+    """(volume (B,) [m^3], pressure (B,) [Pa], dV/dx (N, 3) [m^2]) of every body at
+    ``state``, each body's volume by its own method."""
+    state.conform(model)
+    return _core.eval_volumes(
+        core_model(model), _control(model, control), float(state.time), state.particle_q
+    )
 
 
 def _gas_values(model: Model, time: float, control: Control | None) -> np.ndarray:
-    data = control_data(model) if control is None else control.write(model, control_data(model))
-    m = model.data
-    return np.array(
-        [
-            gas_value_at(
-                b,
-                time,
-                m.body_gas_value,
-                m.body_schedule_range,
-                m.schedule_time,
-                m.schedule_value,
-                data.gas_override,
-            )
-            for b in range(model.body_count)
-        ]
-    )
+    """Each body's driving gas value at ``time`` [s]: the control's override where
+    finite, else its piecewise-linear schedule (held before the first and after the last
+    point), else the model's value; shape (B,)."""
+    override = _control(model, control).gas_override
+    values = model.body_gas_value.copy()
+    for b, (s0, s1) in enumerate(model.body_schedule_range):
+        if s1 > s0:
+            values[b] = np.interp(time, model.schedule_time[s0:s1], model.schedule_value[s0:s1])
+    return np.where(np.isfinite(override), override, values)
 
 
 def body_volume_by(model: Model, state: State, method: str) -> np.ndarray:
@@ -66,41 +52,29 @@ def body_volume_by(model: Model, state: State, method: str) -> np.ndarray:
     if chosen[0] == VolumeMethod.MONTE_CARLO and len(samples) == 0:
         samples = np.random.default_rng(0).random((4096, 2))
         mc_range = np.tile([0, 4096], (model.body_count, 1))
-    w = _workspace(model)
     state.conform(model)
-    eval_body_volume(
+    return _core.body_volumes(
         state.particle_q,
         model.tri_indices,
         model.body_particle_range,
         model.body_tri_range,
-        kernel_input(chosen, np.int64),  # read-only like the model's own arrays
+        kernel_input(chosen, np.int64),
         kernel_input(mc_range, np.int64),
         kernel_input(samples),
-        w.body_lo,
-        w.body_hi,
-        w.volume_gradient,
-        w.body_volume,
     )
-    return w.body_volume.copy()
 
 
 def body_volume(model: Model, state: State) -> np.ndarray:
     """Volume of each body by its own volume method [m^3], shape (B,); NaN for open
     surfaces (cloth)."""
-    state.conform(model)
-    v = _volumes(model, state.particle_q).body_volume.copy()
+    v = _gas(model, state)[0]
     v[model.body_closed == 0] = np.nan
     return v
 
 
 def body_pressure(model: Model, state: State, control: Control | None = None) -> np.ndarray:
     """Absolute gas pressure of each body at ``state.time`` [Pa], shape (B,)."""
-    state.conform(model)
-    w = _volumes(model, state.particle_q)
-    data = control_data(model) if control is None else control.write(model, control_data(model))
-    m = model.data
-    eval_model_pressure(m, float(state.time), data.gas_override, w)
-    return w.body_pressure.copy()
+    return _gas(model, state, control)[1]
 
 
 def body_gas_value(model: Model, state: State, control: Control | None = None) -> np.ndarray:
@@ -206,7 +180,7 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
         keep = owner >= 0
         return np.bincount(owner[keep], weights=values[keep], minlength=bodies)
 
-    volume = _volumes(model, q).body_volume
+    volume = _gas(model, state, control)[0]
     values = _gas_values(model, float(state.time), control)
     gas = gas_energy(
         model.body_gas_law,

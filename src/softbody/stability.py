@@ -48,9 +48,10 @@ from math import factorial
 
 import numpy as np
 
+from softbody import _core
+from softbody.core import core_model
 from softbody.gas import GasLaw
 from softbody.integrators import Integrator
-from softbody.integrators.implicit import apply_jacobians
 from softbody.sim.control import control_data
 from softbody.sim.state import kernel_array
 
@@ -160,9 +161,7 @@ def spectral_bounds(
     volume_gradient (N, 3) = dV/dx [m^2]; products come from the implicit integrator's
     matrix-free ``apply_jacobians``. Pinned particles (inverse mass 0) drop out."""
     n = model.particle_count
-    # apply_jacobians is also called inside the implicit step, with writable float64
-    # arrays: hand it the same kinds of arrays here (kernel_array), or Numba compiles and
-    # caches a second version of it, and a later process may load the wrong one and crash
+    # the compiled product takes C-contiguous float64 arrays
     q = kernel_array(q)
     body_pnet, body_dpdv = kernel_array(body_pnet), kernel_array(body_dpdv)
     volume_gradient = kernel_array(volume_gradient)
@@ -184,7 +183,7 @@ def spectral_bounds(
     damped_a = ka[:, None, None] * axial_block
     undamped_a = ta[:, None, None] * (np.eye(3) - axial_block)
     damping_a = model.attachment_damping[:, None, None] * axial_block
-    data = model.data._replace(attachment_particle=model.attachment_particle[:0])
+    core = core_model(model)
     control = control_data(model)
     out = np.zeros((n, 3))
     no_gas = np.zeros(model.body_count)
@@ -193,9 +192,10 @@ def spectral_bounds(
         # spring blocks (axial - side) u u^T + side I, as apply_jacobians builds them
         def matvec(y):
             p = scale * y.reshape(n, 3)
-            apply_jacobians(
-                data, control, q, p, 0.0, alpha_c, alpha_k, u, axial, side,
-                volume_gradient, dpdv, pnet, out,
+            # attachments are added below, as the blocks at this call's anchors
+            _core.apply_jacobians(
+                core, control, q, p, 0.0, alpha_c, alpha_k, u, axial, side,
+                volume_gradient, dpdv, pnet, out, attachments=False,
             )  # fmt: skip
             r = -out
             if len(a):

@@ -10,7 +10,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from softbody import _kernel_cache, limits
+from softbody import _core, limits
 from softbody.collision.colliders import Collider, collider_arrays
 from softbody.errors import MeshError
 from softbody.gas import Gas, GasLaw
@@ -19,7 +19,7 @@ from softbody.mesh.tri_mesh import TriMesh
 from softbody.mesh.validate import validate_mesh
 from softbody.sim.model import Model
 from softbody.sim.state import kernel_input
-from softbody.volume import VolumeMethod, eval_body_volume
+from softbody.volume import VolumeMethod
 
 
 def _number(name: str, value, *, minimum: float | None = 0.0, strict: bool = False) -> float:
@@ -491,13 +491,9 @@ class ModelBuilder:
 
     # -- finalize ------------------------------------------------------------------------
     def finalize(self) -> Model:
-        """Freeze everything into an immutable :class:`Model`.
-
-        The first call after installing compiles every kernel (about two minutes; see
-        ``softbody._kernel_cache``); later ones load them."""
+        """Freeze everything into an immutable :class:`Model`."""
         if self._particle_count == 0:
             raise ValueError("the model is empty: add a soft body or particles first")
-        _kernel_cache.ensure_compiled()  # before the rest volume below runs a kernel
         q = np.vstack(self._q)
         qd = np.vstack(self._qd)
         mass = np.concatenate(self._mass)
@@ -552,21 +548,14 @@ class ModelBuilder:
         sched = np.vstack(schedules) if schedules else np.zeros((0, 2))
 
         # rest volume by each body's own method, at the initial positions
-        rest_volume = np.zeros(bcount)
-        # the model's arrays as the Model will hold them (read-only), so that this call
-        # and the simulator's share one compiled version of the volume kernels
-        eval_body_volume(
-            q,
+        rest_volume = _core.body_volumes(
+            np.ascontiguousarray(q, dtype=np.float64),
             kernel_input(tri, np.int64),
             kernel_input(body_particle_range, np.int64),
             kernel_input(body_tri_range, np.int64),
             kernel_input(method, np.int64),
             kernel_input(body_mc_range, np.int64),
             kernel_input(mc_samples),
-            np.zeros((bcount, 3)),
-            np.zeros((bcount, 3)),
-            np.zeros((len(q), 3)),
-            rest_volume,
         )
         for b in range(bcount):
             if bodies[b].closed and not rest_volume[b] > 0:

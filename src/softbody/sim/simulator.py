@@ -9,7 +9,8 @@ import weakref
 import numba
 import numpy as np
 
-from softbody import _kernel_cache
+from softbody import _core, _kernel_cache
+from softbody.core import core_model
 from softbody.errors import SimulationError, StabilityWarning
 from softbody.integrators import Integrator
 from softbody.integrators import loop as _loop
@@ -118,7 +119,6 @@ class Simulator:
     ):
         if not isinstance(model, Model):
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
-        _kernel_cache.ensure_compiled()  # a Model built elsewhere (unpickled) may come first
         self.model = model
         self.integrator = Integrator.parse(integrator)
         self.auto_dt = isinstance(dt, str) and dt == "auto"
@@ -185,6 +185,14 @@ class Simulator:
                 f"got {threads!r}"
             )
         self.threads = int(threads)
+        # the explicit schemes step in the compiled C++ core; the rest (implicit and
+        # projective solvers, surface contacts, threads) still in the Numba kernels, which
+        # compile on first use (softbody._kernel_cache)
+        self._core = None
+        if self.integrator.explicit and self.threads == 1 and model.soft_contact_mode != 2:
+            self._core = _core.ExplicitSolver(core_model(model))
+        else:
+            _kernel_cache.ensure_compiled()
         self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
         self._control = control_data(model)
@@ -375,7 +383,13 @@ class Simulator:
         return cache[dt]
 
     def _simulate(self, *args):
-        """``loop.simulate`` on this simulator's thread count (restored afterwards)."""
+        """``loop.simulate`` on this simulator's thread count (restored afterwards), or the
+        compiled core's loop for the schemes it has."""
+        if self._core is not None:
+            scheme, steps, t0, dt, _, control, q, qd, _, max_speed, lo, hi, cq, crot, ci = args[:15]
+            return self._core.simulate(
+                scheme, steps, t0, dt, control, q, qd, cq, crot, ci, max_speed, lo, hi
+            )
         if self.threads == 1:
             return _loop.simulate(*args)
         before = numba.get_num_threads()

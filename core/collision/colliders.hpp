@@ -1,0 +1,245 @@
+// Rigid colliders (paper, section 3.5, with continuous detection): their poses over time, and
+// particles against them. A particle found inside is put back on the surface (for a solid
+// collider, where its path of this step entered it), its approaching normal velocity relative
+// to the surface reflected and scaled by the restitution, its tangential part scaled by
+// (1 - friction); the collider receives the opposite impulse. Port of softbody.collision.
+#pragma once
+
+#include "model.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::colliders {
+
+constexpr double kTwoPi = 6.28318530717958647692;
+
+/// Rodrigues rotation (3, 3) about unit axis a by angle [rad].
+inline void rotate_about(V3 a, double angle, double* out) {
+    const double s = std::sin(angle), c = std::cos(angle), t = 1.0 - c;
+    out[0] = c + a.x * a.x * t;
+    out[1] = a.x * a.y * t - a.z * s;
+    out[2] = a.x * a.z * t + a.y * s;
+    out[3] = a.y * a.x * t + a.z * s;
+    out[4] = c + a.y * a.y * t;
+    out[5] = a.y * a.z * t - a.x * s;
+    out[6] = a.z * a.x * t - a.y * s;
+    out[7] = a.z * a.y * t + a.x * s;
+    out[8] = c + a.z * a.z * t;
+}
+
+/// Pose (collider_q (C, 3), collider_rot (C, 3, 3)) and velocity (v (C, 3) [m/s], w (C, 3)
+/// [rad/s]) of every collider at time t [s]. A collider with a finite Control target moves
+/// in a straight line from q_start to it over `duration` [s], `fraction` of which has passed.
+inline void poses(const Model& m, const Control& c, double fraction, double duration, double t,
+                  const double* q_start, double* cq, double* crot, double* cv, double* cw) {
+    for (index k = 0; k < m.collider_count; ++k) {
+        store(cw, k, {0.0, 0.0, 0.0});
+        store(cv, k, {0.0, 0.0, 0.0});
+        const double* rest_rot = m.collider_rotation + 9 * k;
+        double* rot = crot + 9 * k;
+        if (std::isfinite(c.collider_target[3 * k])) {
+            const V3 d = load(c.collider_target, k) - load(q_start, k);
+            store(cq, k, load(q_start, k) + fraction * d);
+            store(cv, k, (1.0 / duration) * d);
+            continue;
+        }
+        const index motion = m.collider_motion[k];
+        const V3 center = load(m.collider_center, k);
+        const V3 vec = load(m.collider_motion_vector, k);
+        if (motion == 1) {  // rotation about a pivot
+            const double rate = std::sqrt(dot(vec, vec));
+            double r[9];
+            if (rate > 0.0)
+                rotate_about((1.0 / rate) * vec, rate * t, r);
+            else
+                rotate_about({1.0, 0.0, 0.0}, 0.0, r);
+            const V3 p = load(m.collider_motion_pivot, k);
+            const V3 d = center - p;
+            for (int i = 0; i < 3; ++i) {
+                cq[3 * k + i] =
+                    (&p.x)[i] + (r[3 * i] * d.x + r[3 * i + 1] * d.y + r[3 * i + 2] * d.z);
+                for (int j = 0; j < 3; ++j)
+                    rot[3 * i + j] = r[3 * i] * rest_rot[j] + r[3 * i + 1] * rest_rot[3 + j] +
+                                     r[3 * i + 2] * rest_rot[6 + j];
+            }
+            store(cw, k, vec);
+            store(cv, k, cross(vec, load(cq, k) - p));
+            continue;
+        }
+        for (int j = 0; j < 9; ++j) rot[j] = rest_rot[j];
+        if (motion == 0) {
+            store(cq, k, center);
+        } else if (motion == 2) {  // constant velocity
+            store(cq, k, center + t * vec);
+            store(cv, k, vec);
+        } else {  // oscillation a sin(omega t)
+            const double omega = kTwoPi * m.collider_motion_frequency[k];
+            store(cq, k, center + std::sin(omega * t) * vec);
+            store(cv, k, (omega * std::cos(omega * t)) * vec);
+        }
+    }
+}
+
+struct Hit {
+    bool hit = false;
+    V3 x{0.0, 0.0, 0.0};  // corrected position [m]
+    V3 n{0.0, 0.0, 0.0};  // surface normal toward the allowed side
+};
+
+inline void slab(double l0, double l1, double h, int k, double& s_in, double& s_out, int& axis,
+                 double& side) {
+    const double d = l1 - l0;
+    if (d == 0.0) {
+        if (std::fabs(l0) > h) {
+            s_in = std::numeric_limits<double>::infinity();
+            s_out = -std::numeric_limits<double>::infinity();
+        }
+        return;
+    }
+    double a = (-h - l0) / d, b = (h - l0) / d, enter_side = -1.0;
+    if (a > b) {
+        std::swap(a, b);
+        enter_side = 1.0;
+    }
+    if (a > s_in) {
+        s_in = a;
+        axis = k;
+        side = enter_side;
+    }
+    s_out = std::min(s_out, b);
+}
+
+inline double clamp_inward(double& value, double h) {
+    if (value > h) {
+        value = h;
+        return -1.0;
+    }
+    if (value < -h) {
+        value = -h;
+        return 1.0;
+    }
+    return 0.0;
+}
+
+/// Whether a particle at p (at p0 when the step began) violates collider kind `kind` with
+/// centre c, rotation r (3, 3; columns are its local axes) and half extents h.
+inline Hit contact(index kind, V3 c, const double* r, V3 h, V3 p, V3 p0) {
+    Hit out;
+    const V3 ax{r[0], r[3], r[6]}, ay{r[1], r[4], r[7]}, az{r[2], r[5], r[8]};
+    const V3 d = p - c;
+    if (kind == 0) {  // plane: local +y is the normal
+        const double dist = dot(d, ay);
+        if (dist >= 0.0) return out;
+        return {true, p - dist * ay, ay};
+    }
+    if (kind == 1) {  // container: clamp into the box
+        double lx = dot(ax, d), ly = dot(ay, d), lz = dot(az, d);
+        if (std::fabs(lx) <= h.x && std::fabs(ly) <= h.y && std::fabs(lz) <= h.z) return out;
+        const double mx = clamp_inward(lx, h.x), my = clamp_inward(ly, h.y),
+                     mz = clamp_inward(lz, h.z);
+        if (mx == 0.0 && my == 0.0 && mz == 0.0) return out;
+        const double norm = std::sqrt(mx * mx + my * my + mz * mz);
+        const V3 x = c + lx * ax + ly * ay + lz * az;
+        const V3 n = (mx * ax + my * ay + mz * az);
+        return {true, x, {n.x / norm, n.y / norm, n.z / norm}};
+    }
+    if (kind == 2) {  // solid sphere: did the path enter it? |p0 + s (p - p0) - c| = r
+        const double radius = h.x;
+        const double d2 = dot(d, d);
+        const V3 e = p0 - c, u = p - p0;
+        const double a = dot(u, u), b = dot(e, u), cc = dot(e, e) - radius * radius;
+        if (a > 0.0 && cc >= 0.0 && b < 0.0 && b * b - a * cc >= 0.0) {
+            const double s = (-b - std::sqrt(b * b - a * cc)) / a;
+            if (s <= 1.0) {
+                const V3 x = p0 + s * u;
+                const V3 rel = x - c;
+                return {true, x, {rel.x / radius, rel.y / radius, rel.z / radius}};
+            }
+        }
+        if (d2 >= radius * radius) return out;
+        double dist = std::sqrt(d2);
+        V3 dir = d;
+        if (dist == 0.0) {
+            dir = {0.0, 1.0, 0.0};
+            dist = 1.0;
+        }
+        const V3 n{dir.x / dist, dir.y / dist, dir.z / dist};
+        return {true, c + radius * n, n};
+    }
+    // solid box: the path's entry first, else the nearest face for a particle already inside
+    double lx = dot(ax, d), ly = dot(ay, d), lz = dot(az, d);
+    const V3 e = p0 - c;
+    const double bx = dot(ax, e), by = dot(ay, e), bz = dot(az, e);
+    double s_in = -std::numeric_limits<double>::infinity();
+    double s_out = std::numeric_limits<double>::infinity();
+    int axis = -1;
+    double side = 0.0;
+    slab(bx, lx, h.x, 0, s_in, s_out, axis, side);
+    slab(by, ly, h.y, 1, s_in, s_out, axis, side);
+    slab(bz, lz, h.z, 2, s_in, s_out, axis, side);
+    if (axis >= 0 && 0.0 <= s_in && s_in <= s_out && s_in <= 1.0) {
+        lx = bx + s_in * (lx - bx);
+        ly = by + s_in * (ly - by);
+        lz = bz + s_in * (lz - bz);
+        if (axis == 0)
+            lx = side * h.x;
+        else if (axis == 1)
+            ly = side * h.y;
+        else
+            lz = side * h.z;
+    } else if (std::fabs(lx) < h.x && std::fabs(ly) < h.y && std::fabs(lz) < h.z) {
+        const double ox = h.x - std::fabs(lx), oy = h.y - std::fabs(ly), oz = h.z - std::fabs(lz);
+        if (ox <= oy && ox <= oz) {
+            axis = 0;
+            side = lx >= 0.0 ? 1.0 : -1.0;
+            lx = side * h.x;
+        } else if (oy <= oz) {
+            axis = 1;
+            side = ly >= 0.0 ? 1.0 : -1.0;
+            ly = side * h.y;
+        } else {
+            axis = 2;
+            side = lz >= 0.0 ? 1.0 : -1.0;
+            lz = side * h.z;
+        }
+    } else {
+        return out;
+    }
+    const V3 n = side * (axis == 0 ? ax : axis == 1 ? ay : az);
+    return {true, c + lx * ax + ly * ay + lz * az, n};
+}
+
+/// Resolve every particle against every collider, in collider order. q_start (N, 3) holds
+/// the positions at the start of the step; q, qd (N, 3) change in place; impulse (C, 3)
+/// [N s] accumulates what each collider receives.
+inline void contacts(const Model& m, const double* cq, const double* crot, const double* cv,
+                     const double* cw, const double* q_start, double* q, double* qd,
+                     double* impulse) {
+    for (index k = 0; k < m.collider_count; ++k) {
+        const index kind = m.collider_kind[k];
+        const V3 center = load(cq, k);
+        const double* rot = crot + 9 * k;
+        const V3 size = load(m.collider_size, k);
+        const V3 vc = load(cv, k), wc = load(cw, k);
+        const double e = m.collider_restitution[k];
+        const double keep = 1.0 - m.collider_friction[k];
+        V3 j{0.0, 0.0, 0.0};
+        for (index i = 0; i < m.particle_count; ++i) {
+            if (m.particle_inv_mass[i] == 0.0) continue;
+            const Hit hit = contact(kind, center, rot, size, load(q, i), load(q_start, i));
+            if (!hit.hit) continue;
+            const V3 u = vc + cross(wc, hit.x - center);  // the surface's velocity there
+            const V3 v_old = load(qd, i);
+            const V3 v = v_old - u;
+            const double vn = dot(v, hit.n);
+            store(q, i, hit.x);
+            if (vn >= 0.0) continue;  // separating already: only the position is corrected
+            const V3 tangent = v - vn * hit.n;
+            const V3 v_new = u - (e * vn) * hit.n + keep * tangent;
+            j = j - m.particle_mass[i] * (v_new - v_old);
+            store(qd, i, v_new);
+        }
+        add_to(impulse, k, j);
+    }
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::colliders

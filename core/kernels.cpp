@@ -1,0 +1,56 @@
+// The step kernels of one instruction set (SOFTBODY_ISA: scalar, avx2 or avx512), gathered
+// into its KernelTable. CMake compiles this file once per set with that set's flags.
+#include "kernels.hpp"
+
+#include "solvers/explicit.hpp"
+#include "terms/gas.hpp"
+
+#define SOFTBODY_STRING2(x) #x
+#define SOFTBODY_STRING(x) SOFTBODY_STRING2(x)
+
+namespace softbody::SOFTBODY_KERNELS {
+
+namespace {
+
+RunResult simulate_explicit(const Model& m, const Control& c, const RunParams& p,
+                            const StateView& s, const ExplicitBuffers& w) {
+    return explicit_solver::simulate(m, c, p, s, w);
+}
+
+void eval_forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
+                 const BodyGas& gas, double* f) {
+    explicit_solver::eval_forces(m, c, t, q, qd, gas, f);
+}
+
+void eval_gas(const Model& m, const Control& c, double t, const double* q, const BodyGas& gas) {
+    gas::evaluate(m, c, t, q, gas);
+}
+
+void eval_volumes(const Model& m, const double* q, const BodyGas& gas) {
+    volume::evaluate(m, q, gas);
+}
+
+void apply_jacobians(const Model& m, const Control& c, const double* q, const double* p,
+                     double alpha_m, double alpha_c, double alpha_k, const double* u,
+                     const double* a, const double* b, const double* gradient, const double* dpdv,
+                     const double* pnet, bool with_attachments, double* out) {
+    for (index i = 0; i < m.particle_count; ++i) {
+        const double w = alpha_m * m.particle_mass[i];
+        for (int k = 0; k < 3; ++k) out[3 * i + k] = w * p[3 * i + k];
+    }
+    springs::jacobian_product(m, u, a, b, alpha_c, alpha_k, p, out);
+    if (with_attachments) attachments::jacobian_product(m, c, q, alpha_c, alpha_k, p, out);
+    external::grab_jacobian_product(c, alpha_c, alpha_k, p, out);
+    gas::jacobian_product(m, q, gradient, dpdv, pnet, alpha_k, p, out);
+}
+
+}  // namespace
+
+const KernelTable& kernel_table() {
+    static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), simulate_explicit, eval_forces,
+                                   eval_gas, eval_volumes,
+                                   apply_jacobians};
+    return table;
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS

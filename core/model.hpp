@@ -1,0 +1,156 @@
+// The plain views the kernels read and write: the model (constant), the control (per call),
+// the state (changing) and a solver's scratch. Pointers into NumPy arrays owned by Python
+// (module.cpp checks their shapes and indices once) or into buffers a solver owns. Rows of
+// (n, 3) arrays are contiguous: x_i is p[3 i .. 3 i + 2].
+#pragma once
+
+#include "config.hpp"
+
+namespace softbody {
+
+/// Everything fixed after ModelBuilder.finalize (softbody.sim.model.Model), SI units.
+struct Model {
+    index particle_count = 0, spring_count = 0, attachment_count = 0, tri_count = 0;
+    index body_count = 0, collider_count = 0, pin_count = 0, schedule_count = 0;
+    index mc_count = 0;
+
+    const double* particle_mass = nullptr;      // (N,) [kg]
+    const double* particle_inv_mass = nullptr;  // (N,) [1/kg], 0 for pinned particles
+    const index* particle_body = nullptr;       // (N,) body or -1
+    double gravity[3] = {0.0, 0.0, 0.0};        // [m/s^2]
+
+    const index* spring_indices = nullptr;        // (S, 2)
+    const double* spring_rest_length = nullptr;   // (S,) [m]
+    const double* spring_stiffness = nullptr;     // (S,) [N/m]
+    const double* spring_damping = nullptr;       // (S,) [N s/m]
+
+    const index* attachment_particle = nullptr;       // (A,)
+    const double* attachment_rest_length = nullptr;   // (A,) [m]
+    const double* attachment_stiffness = nullptr;     // (A,) [N/m]
+    const double* attachment_damping = nullptr;       // (A,) [N s/m]
+
+    const index* tri_indices = nullptr;  // (T, 3), outward-wound
+    const index* tri_body = nullptr;     // (T,)
+
+    const index* body_particle_range = nullptr;  // (B, 2) [begin, end)
+    const index* body_tri_range = nullptr;       // (B, 2)
+    const index* body_volume_method = nullptr;   // (B,) VolumeMethod
+    const index* body_mc_range = nullptr;        // (B, 2) rows of mc_samples
+    const double* mc_samples = nullptr;          // (M, 2) in [0, 1)^2
+    const index* body_gas_law = nullptr;         // (B,) GasLaw
+    const double* body_gas_value = nullptr;      // (B,) nRT [J] or P0 [Pa]
+    const double* body_gas_gamma = nullptr;      // (B,)
+    const double* body_gas_reference_volume = nullptr;  // (B,) [m^3]
+    const double* body_ambient_pressure = nullptr;      // (B,) [Pa]
+    const index* body_schedule_range = nullptr;  // (B, 2) rows of the gas schedule
+    const double* schedule_time = nullptr;       // (K,) [s]
+    const double* schedule_value = nullptr;      // (K,)
+    const double* body_rest_volume = nullptr;    // (B,) [m^3]
+    const index* body_closed = nullptr;          // (B,) 1 closed, 0 open surface
+    const index* body_contact_shape = nullptr;   // (B,) 1 box, 2 sphere, 3 ellipsoid
+
+    const index* pin_particle = nullptr;  // (P,)
+
+    int soft_contact_mode = 0;  // 0 none, 1 bounding objects, 2 surfaces
+    double soft_contact_restitution = 0.0, soft_contact_friction = 0.0;
+    double contact_margin = 0.0, contact_cell_size = 1.0;  // [m]
+
+    const index* collider_kind = nullptr;               // (C,) ColliderKind
+    const double* collider_center = nullptr;            // (C, 3) [m]
+    const double* collider_rotation = nullptr;          // (C, 3, 3)
+    const double* collider_size = nullptr;              // (C, 3) [m]
+    const double* collider_restitution = nullptr;       // (C,)
+    const double* collider_friction = nullptr;          // (C,)
+    const index* collider_motion = nullptr;             // (C,) MotionKind
+    const double* collider_motion_vector = nullptr;     // (C, 3)
+    const double* collider_motion_pivot = nullptr;      // (C, 3) [m]
+    const double* collider_motion_frequency = nullptr;  // (C,) [Hz]
+};
+
+/// Inputs held constant over one call (softbody.sim.control.Control).
+struct Control {
+    const double* gas_override = nullptr;       // (B,) NaN = the model's value or schedule
+    const double* particle_f = nullptr;         // (N, 3) [N]
+    const double* attachment_anchor = nullptr;  // (A, 3) [m]
+    const double* pin_target = nullptr;         // (P, 3) [m]
+    bool pin_active = false;
+    const double* collider_target = nullptr;  // (C, 3) [m], NaN = prescribed motion
+    index grab_particle = -1;
+    double grab_target[3] = {0.0, 0.0, 0.0};  // [m]
+    double grab_stiffness = 0.0;              // [N/m]
+    double grab_damping = 0.0;                // [N s/m]
+};
+
+/// The changing state a run advances in place (softbody.sim.state.State).
+struct StateView {
+    double* q = nullptr;                 // (N, 3) [m]
+    double* qd = nullptr;                // (N, 3) [m/s]
+    double* collider_q = nullptr;        // (C, 3) [m]
+    double* collider_rot = nullptr;      // (C, 3, 3)
+    double* collider_impulse = nullptr;  // (C, 3) [N s], accumulated over the call
+};
+
+/// What the gas terms compute once per force evaluation, per body.
+struct BodyGas {
+    double* volume = nullptr;           // (B,) [m^3]
+    double* pressure = nullptr;         // (B,) [Pa]
+    double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2]
+    double* lo = nullptr;               // (B, 3) bounds of bodies with a bounding or MC volume
+    double* hi = nullptr;               // (B, 3)
+};
+
+/// Scratch for contacts, owned by a solver.
+struct ContactBuffers {
+    double* body_lo = nullptr;        // (B, 3)
+    double* body_hi = nullptr;        // (B, 3)
+    double* body_velocity = nullptr;  // (B, 3) mass-weighted mean velocity [m/s]
+    double* body_mass = nullptr;      // (B,) [kg]
+    double* body_center = nullptr;    // (B, 3)
+    double* body_axes = nullptr;      // (B, 3)
+    double* body_dv = nullptr;        // (B, 3)
+    double* collider_q_start = nullptr;  // (C, 3)
+    double* collider_v = nullptr;        // (C, 3)
+    double* collider_w = nullptr;        // (C, 3)
+};
+
+/// Scratch for the explicit schemes, owned by softbody::ExplicitSolver.
+struct ExplicitBuffers {
+    double* f = nullptr;      // (N, 3) force accumulator [N]
+    double* q0 = nullptr;     // (N, 3) start-of-step positions
+    double* v0 = nullptr;     // (N, 3) start-of-step velocities
+    double* qs = nullptr;     // (N, 3) stage positions
+    double* vs = nullptr;     // (N, 3) stage velocities
+    double* acc_q = nullptr;  // (N, 3) RK4 sums
+    double* acc_v = nullptr;  // (N, 3)
+    BodyGas gas;
+    ContactBuffers contact;
+};
+
+/// Outcome of a run of steps (the codes of softbody.integrators.loop).
+enum Status : int {
+    OK = 0,
+    NONFINITE = 1,   // a position or velocity became NaN or infinite
+    RUNAWAY = 2,     // a particle moved faster than the speed limit
+    BAD_VOLUME = 3,  // a body volume became NaN, zero or negative
+    SHRUNK = 4,      // a body volume fell below the lower limit
+    EXPLODED = 5,    // a body volume grew past the upper limit
+    NEED_HASH = 6,   // the spatial hash needs more room
+};
+
+struct RunResult {
+    int status = OK;
+    index steps_done = 0;
+    index where = -1;    // body or particle at fault
+    double value = 0.0;  // the offending quantity
+};
+
+/// The run's limits and its step.
+struct RunParams {
+    int scheme = 3;  // Integrator value 0-4
+    index steps = 0;
+    double t0 = 0.0, dt = 0.0;
+    double max_speed = 1e4;
+    double ratio_min = 1e-3, ratio_max = 1e3;
+};
+
+}  // namespace softbody

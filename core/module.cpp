@@ -1,0 +1,495 @@
+// softbody._core: the Python face of the engine core. Python plans (builder, meshes, scenes,
+// solver set-up); these objects hold views of its NumPy arrays, check them once, and step.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/tuple.h>
+#include <nanobind/stl/vector.h>
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "kernels.hpp"
+#include "model.hpp"
+
+namespace nb = nanobind;
+using Index = softbody::index;
+
+namespace {
+
+using ConstF64 = nb::ndarray<const double, nb::c_contig, nb::device::cpu>;
+using ConstI64 = nb::ndarray<const std::int64_t, nb::c_contig, nb::device::cpu>;
+using F64 = nb::ndarray<double, nb::c_contig, nb::device::cpu>;
+
+[[noreturn]] void fail(const std::string& what) { throw nb::value_error(what.c_str()); }
+
+std::string shape_text(const std::vector<Index>& shape) {
+    std::string s = "(";
+    for (size_t k = 0; k < shape.size(); ++k) {
+        if (k) s += ", ";
+        s += std::to_string(shape[k]);
+    }
+    return s + (shape.size() == 1 ? ",)" : ")");
+}
+
+template <typename Array>
+void check_shape(const Array& a, const std::string& name, const std::vector<Index>& shape) {
+    bool ok = a.ndim() == shape.size();
+    for (size_t k = 0; ok && k < shape.size(); ++k)
+        ok = shape[k] < 0 || static_cast<Index>(a.shape(k)) == shape[k];
+    if (!ok) {
+        std::vector<Index> got;
+        for (size_t k = 0; k < a.ndim(); ++k) got.push_back(static_cast<Index>(a.shape(k)));
+        fail(name + " must have shape " + shape_text(shape) + ", got " + shape_text(got));
+    }
+}
+
+/// A float64 (or int64) C-contiguous array attribute of a Python bundle, shape-checked.
+template <typename Array>
+Array attribute(nb::handle bundle, const char* name, const std::vector<Index>& shape) {
+    nb::object value = bundle.attr(name);
+    Array a;
+    if (!nb::try_cast(value, a, false))
+        fail(std::string(name) + " must be a C-contiguous " +
+             (std::is_same_v<Array, ConstI64> ? "int64" : "float64") + " array");
+    check_shape(a, name, shape);
+    return a;
+}
+
+void check_indices(const Index* v, Index count, Index lo, Index hi, const std::string& name) {
+    for (Index k = 0; k < count; ++k)
+        if (v[k] < lo || v[k] >= hi)
+            fail(name + " holds " + std::to_string(v[k]) + " at " + std::to_string(k) +
+                 ", outside [" + std::to_string(lo) + ", " + std::to_string(hi) + ")");
+}
+
+void check_ranges(const Index* r, Index count, Index limit, const std::string& name) {
+    for (Index b = 0; b < count; ++b)
+        if (r[2 * b] < 0 || r[2 * b] > r[2 * b + 1] || r[2 * b + 1] > limit)
+            fail(name + " row " + std::to_string(b) + " is not a range within [0, " +
+                 std::to_string(limit) + "]");
+}
+
+/// softbody._core.Model: checked views of a softbody Model's arrays (kept alive here).
+class CoreModel {
+public:
+    explicit CoreModel(nb::handle d) {
+        softbody::Model& m = model_;
+        auto f64 = [&](const char* name, std::vector<Index> shape) {
+            ConstF64 a = attribute<ConstF64>(d, name, shape);
+            keep_f_.push_back(a);
+            return a.data();
+        };
+        auto i64 = [&](const char* name, std::vector<Index> shape) {
+            ConstI64 a = attribute<ConstI64>(d, name, shape);
+            keep_i_.push_back(a);
+            return a.data();
+        };
+        ConstF64 mass = attribute<ConstF64>(d, "particle_mass", {-1});
+        const Index n = static_cast<Index>(mass.shape(0));
+        ConstI64 springs = attribute<ConstI64>(d, "spring_indices", {-1, 2});
+        const Index s = static_cast<Index>(springs.shape(0));
+        ConstI64 tris = attribute<ConstI64>(d, "tri_indices", {-1, 3});
+        const Index t = static_cast<Index>(tris.shape(0));
+        ConstI64 ranges = attribute<ConstI64>(d, "body_particle_range", {-1, 2});
+        const Index b = static_cast<Index>(ranges.shape(0));
+        ConstI64 att = attribute<ConstI64>(d, "attachment_particle", {-1});
+        const Index a = static_cast<Index>(att.shape(0));
+        ConstI64 kinds = attribute<ConstI64>(d, "collider_kind", {-1});
+        const Index c = static_cast<Index>(kinds.shape(0));
+        ConstI64 pins = attribute<ConstI64>(d, "pin_particle", {-1});
+        ConstF64 samples = attribute<ConstF64>(d, "mc_samples", {-1, 2});
+        ConstF64 times = attribute<ConstF64>(d, "schedule_time", {-1});
+        keep_f_.insert(keep_f_.end(), {mass, samples, times});
+        keep_i_.insert(keep_i_.end(), {springs, tris, ranges, att, kinds, pins});
+
+        m.particle_count = n;
+        m.spring_count = s;
+        m.tri_count = t;
+        m.body_count = b;
+        m.attachment_count = a;
+        m.collider_count = c;
+        m.pin_count = static_cast<Index>(pins.shape(0));
+        m.mc_count = static_cast<Index>(samples.shape(0));
+        m.schedule_count = static_cast<Index>(times.shape(0));
+
+        m.particle_mass = mass.data();
+        m.particle_inv_mass = f64("particle_inv_mass", {n});
+        m.particle_body = i64("particle_body", {n});
+        const double* g = f64("gravity", {3});
+        for (int k = 0; k < 3; ++k) m.gravity[k] = g[k];
+        m.spring_indices = springs.data();
+        m.spring_rest_length = f64("spring_rest_length", {s});
+        m.spring_stiffness = f64("spring_stiffness", {s});
+        m.spring_damping = f64("spring_damping", {s});
+        m.attachment_particle = att.data();
+        m.attachment_rest_length = f64("attachment_rest_length", {a});
+        m.attachment_stiffness = f64("attachment_stiffness", {a});
+        m.attachment_damping = f64("attachment_damping", {a});
+        m.tri_indices = tris.data();
+        m.tri_body = i64("tri_body", {t});
+        m.body_particle_range = ranges.data();
+        m.body_tri_range = i64("body_tri_range", {b, 2});
+        m.body_volume_method = i64("body_volume_method", {b});
+        m.body_mc_range = i64("body_mc_range", {b, 2});
+        m.mc_samples = samples.data();
+        m.body_gas_law = i64("body_gas_law", {b});
+        m.body_gas_value = f64("body_gas_value", {b});
+        m.body_gas_gamma = f64("body_gas_gamma", {b});
+        m.body_gas_reference_volume = f64("body_gas_reference_volume", {b});
+        m.body_ambient_pressure = f64("body_ambient_pressure", {b});
+        m.body_schedule_range = i64("body_schedule_range", {b, 2});
+        m.schedule_time = times.data();
+        m.schedule_value = f64("schedule_value", {m.schedule_count});
+        m.body_rest_volume = f64("body_rest_volume", {b});
+        m.body_closed = i64("body_closed", {b});
+        m.body_contact_shape = i64("body_contact_shape", {b});
+        m.pin_particle = pins.data();
+        m.soft_contact_mode = nb::cast<int>(d.attr("soft_contact_mode"));
+        m.soft_contact_restitution = nb::cast<double>(d.attr("soft_contact_restitution"));
+        m.soft_contact_friction = nb::cast<double>(d.attr("soft_contact_friction"));
+        m.contact_margin = nb::cast<double>(d.attr("contact_margin"));
+        m.contact_cell_size = nb::cast<double>(d.attr("contact_cell_size"));
+        m.collider_kind = kinds.data();
+        m.collider_center = f64("collider_center", {c, 3});
+        m.collider_rotation = f64("collider_rotation", {c, 3, 3});
+        m.collider_size = f64("collider_size", {c, 3});
+        m.collider_restitution = f64("collider_restitution", {c});
+        m.collider_friction = f64("collider_friction", {c});
+        m.collider_motion = i64("collider_motion", {c});
+        m.collider_motion_vector = f64("collider_motion_vector", {c, 3});
+        m.collider_motion_pivot = f64("collider_motion_pivot", {c, 3});
+        m.collider_motion_frequency = f64("collider_motion_frequency", {c});
+        validate();
+    }
+
+    const softbody::Model& model() const { return model_; }
+
+private:
+    // Indices and enumerations in range, so no kernel reads outside an array.
+    void validate() const {
+        const softbody::Model& m = model_;
+        check_indices(m.spring_indices, 2 * m.spring_count, 0, m.particle_count, "spring_indices");
+        check_indices(m.tri_indices, 3 * m.tri_count, 0, m.particle_count, "tri_indices");
+        check_indices(m.tri_body, m.tri_count, 0, m.body_count, "tri_body");
+        check_indices(m.particle_body, m.particle_count, -1, m.body_count, "particle_body");
+        check_indices(m.attachment_particle, m.attachment_count, 0, m.particle_count,
+                      "attachment_particle");
+        check_indices(m.pin_particle, m.pin_count, 0, m.particle_count, "pin_particle");
+        check_ranges(m.body_particle_range, m.body_count, m.particle_count, "body_particle_range");
+        check_ranges(m.body_tri_range, m.body_count, m.tri_count, "body_tri_range");
+        check_ranges(m.body_mc_range, m.body_count, m.mc_count, "body_mc_range");
+        check_ranges(m.body_schedule_range, m.body_count, m.schedule_count, "body_schedule_range");
+        for (Index b = 0; b < m.body_count; ++b) {
+            // a body's triangles Index its own particles (the volume's reference point)
+            const Index p0 = m.body_particle_range[2 * b], p1 = m.body_particle_range[2 * b + 1];
+            if (m.body_tri_range[2 * b + 1] > m.body_tri_range[2 * b] && p1 == p0)
+                fail("body " + std::to_string(b) + " has triangles but no particles");
+        }
+        check_indices(m.body_volume_method, m.body_count, 0, 5, "body_volume_method");
+        check_indices(m.body_gas_law, m.body_count, 0, 3, "body_gas_law");
+        check_indices(m.body_contact_shape, m.body_count, 0, 4, "body_contact_shape");
+        check_indices(m.collider_kind, m.collider_count, 0, 4, "collider_kind");
+        check_indices(m.collider_motion, m.collider_count, 0, 4, "collider_motion");
+        if (m.soft_contact_mode < 0 || m.soft_contact_mode > 2)
+            fail("soft_contact_mode must be 0, 1 or 2");
+    }
+
+    softbody::Model model_;
+    std::vector<ConstF64> keep_f_;
+    std::vector<ConstI64> keep_i_;
+};
+
+/// Views of a ControlData bundle, checked against the model (held for one call).
+struct CoreControl {
+    CoreControl(const softbody::Model& m, nb::handle d) {
+        gas = attribute<ConstF64>(d, "gas_override", {m.body_count});
+        particle_f = attribute<ConstF64>(d, "particle_f", {m.particle_count, 3});
+        anchor = attribute<ConstF64>(d, "attachment_anchor", {m.attachment_count, 3});
+        pin = attribute<ConstF64>(d, "pin_target", {m.pin_count, 3});
+        target = attribute<ConstF64>(d, "collider_target", {m.collider_count, 3});
+        ConstF64 grab = attribute<ConstF64>(d, "grab_target", {3});
+        view.gas_override = gas.data();
+        view.particle_f = particle_f.data();
+        view.attachment_anchor = anchor.data();
+        view.pin_target = pin.data();
+        view.pin_active = nb::cast<bool>(d.attr("pin_active"));
+        view.collider_target = target.data();
+        view.grab_particle = nb::cast<Index>(d.attr("grab_particle"));
+        if (view.grab_particle < -1 || view.grab_particle >= m.particle_count)
+            fail("grab_particle must be -1 or a particle Index");
+        for (int k = 0; k < 3; ++k) view.grab_target[k] = grab.data()[k];
+        view.grab_stiffness = nb::cast<double>(d.attr("grab_stiffness"));
+        view.grab_damping = nb::cast<double>(d.attr("grab_damping"));
+    }
+    ConstF64 gas, particle_f, anchor, pin, target;
+    softbody::Control view;
+};
+
+F64 writable(nb::handle h, const char* name, const std::vector<Index>& shape) {
+    F64 a;
+    if (!nb::try_cast(h, a, false))
+        fail(std::string(name) + " must be a writable C-contiguous float64 array");
+    check_shape(a, name, shape);
+    return a;
+}
+
+/// A solver's scratch, allocated once: (N, 3) rows and per-body and per-collider arrays.
+class Buffers {
+public:
+    explicit Buffers(const softbody::Model& m, int rows) {
+        const size_t n3 = static_cast<size_t>(3 * m.particle_count);
+        const size_t b = static_cast<size_t>(m.body_count), c = static_cast<size_t>(m.collider_count);
+        rows_.assign(static_cast<size_t>(rows), std::vector<double>(n3, 0.0));
+        per_body_.assign(11, std::vector<double>(3 * b, 0.0));
+        per_collider_.assign(3, std::vector<double>(3 * c, 0.0));
+        gradient_.assign(n3, 0.0);
+        gas.volume = per_body_[0].data();
+        gas.pressure = per_body_[1].data();
+        gas.lo = per_body_[2].data();
+        gas.hi = per_body_[3].data();
+        gas.volume_gradient = gradient_.data();
+        contact.body_lo = per_body_[4].data();
+        contact.body_hi = per_body_[5].data();
+        contact.body_velocity = per_body_[6].data();
+        contact.body_mass = per_body_[7].data();
+        contact.body_center = per_body_[8].data();
+        contact.body_axes = per_body_[9].data();
+        contact.body_dv = per_body_[10].data();
+        contact.collider_q_start = per_collider_[0].data();
+        contact.collider_v = per_collider_[1].data();
+        contact.collider_w = per_collider_[2].data();
+    }
+    double* row(int k) { return rows_[static_cast<size_t>(k)].data(); }
+    softbody::BodyGas gas;
+    softbody::ContactBuffers contact;
+
+private:
+    std::vector<std::vector<double>> rows_, per_body_, per_collider_;
+    std::vector<double> gradient_;
+};
+
+/// softbody._core.ExplicitSolver: the explicit schemes' time loop and its scratch.
+class ExplicitSolver {
+public:
+    explicit ExplicitSolver(nb::object model)
+        : handle_(model), model_(nb::cast<const CoreModel&>(model)), buffers_(model_.model(), 7) {
+        w_.f = buffers_.row(0);
+        w_.q0 = buffers_.row(1);
+        w_.v0 = buffers_.row(2);
+        w_.qs = buffers_.row(3);
+        w_.vs = buffers_.row(4);
+        w_.acc_q = buffers_.row(5);
+        w_.acc_v = buffers_.row(6);
+        w_.gas = buffers_.gas;
+        w_.contact = buffers_.contact;
+    }
+
+    std::tuple<int, Index, Index, double> simulate(int scheme, Index steps, double t0, double dt,
+                                                   nb::handle control, nb::handle q,
+                                                   nb::handle qd, nb::handle collider_q,
+                                                   nb::handle collider_rot,
+                                                   nb::handle collider_impulse, double max_speed,
+                                                   double ratio_min, double ratio_max) {
+        const softbody::Model& m = model_.model();
+        if (scheme < 0 || scheme > 4) fail("scheme must be an explicit Integrator (0-4)");
+        if (steps < 0) fail("steps must be >= 0");
+        if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
+        if (m.soft_contact_mode == 2) fail("surface soft contacts are not in the C++ core yet");
+        CoreControl c(m, control);
+        F64 aq = writable(q, "q", {m.particle_count, 3});
+        F64 aqd = writable(qd, "qd", {m.particle_count, 3});
+        F64 acq = writable(collider_q, "collider_q", {m.collider_count, 3});
+        F64 arot = writable(collider_rot, "collider_rot", {m.collider_count, 3, 3});
+        F64 aimp = writable(collider_impulse, "collider_impulse", {m.collider_count, 3});
+        softbody::StateView s{aq.data(), aqd.data(), acq.data(), arot.data(), aimp.data()};
+        softbody::RunParams p;
+        p.scheme = scheme;
+        p.steps = steps;
+        p.t0 = t0;
+        p.dt = dt;
+        p.max_speed = max_speed;
+        p.ratio_min = ratio_min;
+        p.ratio_max = ratio_max;
+        softbody::RunResult r;
+        {
+            nb::gil_scoped_release release;
+            r = softbody::kernels().simulate_explicit(m, c.view, p, s, w_);
+        }
+        return {r.status, r.steps_done, r.where, r.value};
+    }
+
+private:
+    nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
+    const CoreModel& model_;
+    Buffers buffers_;
+    softbody::ExplicitBuffers w_;
+};
+
+/// Forces, volumes, dV/dx and pressures at (q, qd, t): for diagnostics and tests.
+nb::tuple eval_forces(const CoreModel& core, nb::handle control, double t, ConstF64 q,
+                      ConstF64 qd) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particle_count, 3});
+    check_shape(qd, "qd", {m.particle_count, 3});
+    CoreControl c(m, control);
+    Buffers b(m, 1);
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().eval_forces(m, c.view, t, q.data(), qd.data(), b.gas, b.row(0));
+    }
+    auto out = [](const double* data, std::vector<size_t> shape) {
+        size_t count = 1;
+        for (size_t s : shape) count *= s;
+        double* copy = new double[count];
+        std::copy(data, data + count, copy);
+        nb::capsule owner(copy, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+        return nb::ndarray<nb::numpy, double>(copy, shape.size(), shape.data(), owner);
+    };
+    const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
+    return nb::make_tuple(out(b.row(0), {n, 3}), out(b.gas.volume, {nb_}),
+                          out(b.gas.pressure, {nb_}), out(b.gas.volume_gradient, {n, 3}));
+}
+
+/// Every body's volume by its own method at q, with dV/dx when asked.
+nb::tuple eval_volumes(const CoreModel& core, nb::handle control, double t, ConstF64 q) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particle_count, 3});
+    CoreControl c(m, control);
+    Buffers b(m, 0);
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().eval_gas(m, c.view, t, q.data(), b.gas);
+    }
+    auto out = [](const double* data, std::vector<size_t> shape) {
+        size_t count = 1;
+        for (size_t s : shape) count *= s;
+        double* copy = new double[count];
+        std::copy(data, data + count, copy);
+        nb::capsule owner(copy, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+        return nb::ndarray<nb::numpy, double>(copy, shape.size(), shape.data(), owner);
+    };
+    const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
+    return nb::make_tuple(out(b.gas.volume, {nb_}), out(b.gas.pressure, {nb_}),
+                          out(b.gas.volume_gradient, {n, 3}));
+}
+
+/// The implicit schemes' matrix-free product, also behind the stability estimate.
+void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, ConstF64 p,
+                     double alpha_m, double alpha_c, double alpha_k, ConstF64 u, ConstF64 a,
+                     ConstF64 b, ConstF64 gradient, ConstF64 dpdv, ConstF64 pnet, F64 out,
+                     bool attachments) {
+    const softbody::Model& m = core.model();
+    const Index n = m.particle_count, s = m.spring_count, nb_ = m.body_count;
+    check_shape(q, "q", {n, 3});
+    check_shape(p, "p", {n, 3});
+    check_shape(u, "spring_u", {s, 3});
+    check_shape(a, "spring_a", {s});
+    check_shape(b, "spring_b", {s});
+    check_shape(gradient, "volume_gradient", {n, 3});
+    check_shape(dpdv, "body_dpdv", {nb_});
+    check_shape(pnet, "body_pnet", {nb_});
+    check_shape(out, "out", {n, 3});
+    CoreControl c(m, control);
+    nb::gil_scoped_release release;
+    softbody::kernels().apply_jacobians(m, c.view, q.data(), p.data(), alpha_m, alpha_c, alpha_k,
+                                        u.data(), a.data(), b.data(), gradient.data(),
+                                        dpdv.data(), pnet.data(), attachments, out.data());
+}
+
+/// Volumes of bodies given by plain arrays (before a Model exists, or by another method).
+nb::ndarray<nb::numpy, double> body_volumes(ConstF64 q, ConstI64 tri_indices,
+                                            ConstI64 body_particle_range, ConstI64 body_tri_range,
+                                            ConstI64 body_volume_method, ConstI64 body_mc_range,
+                                            ConstF64 mc_samples) {
+    softbody::Model m;
+    check_shape(q, "q", {-1, 3});
+    check_shape(tri_indices, "tri_indices", {-1, 3});
+    check_shape(body_particle_range, "body_particle_range", {-1, 2});
+    m.particle_count = static_cast<Index>(q.shape(0));
+    m.tri_count = static_cast<Index>(tri_indices.shape(0));
+    m.body_count = static_cast<Index>(body_particle_range.shape(0));
+    check_shape(body_tri_range, "body_tri_range", {m.body_count, 2});
+    check_shape(body_volume_method, "body_volume_method", {m.body_count});
+    check_shape(body_mc_range, "body_mc_range", {m.body_count, 2});
+    check_shape(mc_samples, "mc_samples", {-1, 2});
+    m.mc_count = static_cast<Index>(mc_samples.shape(0));
+    m.tri_indices = tri_indices.data();
+    m.body_particle_range = body_particle_range.data();
+    m.body_tri_range = body_tri_range.data();
+    m.body_volume_method = body_volume_method.data();
+    m.body_mc_range = body_mc_range.data();
+    m.mc_samples = mc_samples.data();
+    check_indices(m.tri_indices, 3 * m.tri_count, 0, m.particle_count, "tri_indices");
+    check_ranges(m.body_particle_range, m.body_count, m.particle_count, "body_particle_range");
+    check_ranges(m.body_tri_range, m.body_count, m.tri_count, "body_tri_range");
+    check_ranges(m.body_mc_range, m.body_count, m.mc_count, "body_mc_range");
+    check_indices(m.body_volume_method, m.body_count, 0, 5, "body_volume_method");
+    for (Index b = 0; b < m.body_count; ++b)
+        if (m.body_tri_range[2 * b + 1] > m.body_tri_range[2 * b] &&
+            m.body_particle_range[2 * b + 1] == m.body_particle_range[2 * b])
+            fail("body " + std::to_string(b) + " has triangles but no particles");
+    const size_t count = static_cast<size_t>(m.body_count);
+    double* volume = new double[count > 0 ? count : 1];
+    nb::capsule owner(volume, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+    std::vector<double> lo(3 * count), hi(3 * count);
+    softbody::BodyGas gas;
+    gas.volume = volume;
+    gas.lo = lo.data();
+    gas.hi = hi.data();
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().eval_volumes(m, q.data(), gas);
+    }
+    size_t shape[1] = {count};
+    return nb::ndarray<nb::numpy, double>(volume, 1, shape, owner);
+}
+
+}  // namespace
+
+NB_MODULE(_core, mod) {
+    mod.doc() = "softbody's compiled engine core (C++17): the step kernels.";
+    mod.def("simd_paths", &softbody::available_simd,
+            "Instruction sets this build has and this CPU runs, best last.");
+    mod.def("simd_path", [] { return std::string(softbody::kernels().name); },
+            "The instruction set the kernels use now.");
+    mod.def("select_simd", &softbody::select_simd, nb::arg("name"),
+            "Use the named instruction set ('scalar', 'avx2', 'avx512' or 'auto'); False "
+            "if this build or CPU lacks it.");
+
+    nb::class_<CoreModel>(mod, "Model", "Checked views of a Model's arrays (ModelData).")
+        .def(nb::init<nb::handle>(), nb::arg("data"))
+        .def_prop_ro("particle_count", [](const CoreModel& c) { return c.model().particle_count; });
+
+    nb::class_<ExplicitSolver>(mod, "ExplicitSolver",
+                               "The explicit schemes' time loop with its scratch buffers.")
+        .def(nb::init<nb::object>(), nb::arg("model"))
+        .def("simulate", &ExplicitSolver::simulate, nb::arg("scheme"), nb::arg("steps"),
+             nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
+             nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
+             nb::arg("max_speed"), nb::arg("ratio_min"), nb::arg("ratio_max"),
+             "Advance q, qd in place; returns (status, steps_done, Index, value).");
+
+    mod.def("eval_forces", &eval_forces, nb::arg("model"), nb::arg("control"), nb::arg("t"),
+            nb::arg("q").noconvert(), nb::arg("qd").noconvert(),
+            "(f (N, 3) [N], volume (B,) [m^3], pressure (B,) [Pa], dV/dx (N, 3) [m^2]).");
+    mod.def("apply_jacobians", &apply_jacobians, nb::arg("model"), nb::arg("control"),
+            nb::arg("q").noconvert(), nb::arg("p").noconvert(), nb::arg("alpha_m"),
+            nb::arg("alpha_c"), nb::arg("alpha_k"), nb::arg("spring_u").noconvert(),
+            nb::arg("spring_a").noconvert(), nb::arg("spring_b").noconvert(),
+            nb::arg("volume_gradient").noconvert(), nb::arg("body_dpdv").noconvert(),
+            nb::arg("body_pnet").noconvert(), nb::arg("out").noconvert(),
+            nb::arg("attachments") = true,
+            "out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p (C = df/dv, K = df/dx).");
+    mod.def("body_volumes", &body_volumes, nb::arg("q").noconvert(),
+            nb::arg("tri_indices").noconvert(), nb::arg("body_particle_range").noconvert(),
+            nb::arg("body_tri_range").noconvert(), nb::arg("body_volume_method").noconvert(),
+            nb::arg("body_mc_range").noconvert(), nb::arg("mc_samples").noconvert(),
+            "Volume (B,) [m^3] of each body by its method, from plain arrays.");
+    mod.def("eval_volumes", &eval_volumes, nb::arg("model"), nb::arg("control"), nb::arg("t"),
+            nb::arg("q").noconvert(),
+            "(volume (B,) [m^3], pressure (B,) [Pa], dV/dx (N, 3) [m^2]) at time t [s].");
+}

@@ -1,0 +1,81 @@
+// What every solver's time loop shares: the blow-up checks, the start of a run (collider
+// start poses, pinned particles aimed at their targets) and the contacts that end a step
+// (paper, step 5: soft-soft contacts, then rigid colliders, last, so that no particle ends a
+// step inside a collider).
+#pragma once
+
+#include "collision/colliders.hpp"
+#include "collision/soft.hpp"
+#include "model.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::loop {
+
+/// A closed body whose volume is not finite and positive, or outside [ratio_min, ratio_max]
+/// times its rest volume.
+inline RunResult check_volumes(const Model& m, const double* volume, double ratio_min,
+                               double ratio_max) {
+    for (index b = 0; b < m.body_count; ++b) {
+        if (m.body_closed[b] == 0) continue;  // an open surface encloses no volume
+        const double v = volume[b];
+        if (!(std::isfinite(v) && v > 0.0)) return {BAD_VOLUME, 0, b, v};
+        const double r = v / m.body_rest_volume[b];
+        if (r < ratio_min) return {SHRUNK, 0, b, r};
+        if (r > ratio_max) return {EXPLODED, 0, b, r};
+    }
+    return {};
+}
+
+/// A particle with a non-finite position or velocity, or faster than max_speed [m/s].
+inline RunResult check_particles(const Model& m, const double* q, const double* qd,
+                                 double max_speed) {
+    const double limit = max_speed * max_speed;
+    for (index i = 0; i < m.particle_count; ++i) {
+        double s = 0.0;
+        bool bad = false;
+        for (int k = 0; k < 3; ++k) {
+            if (!(std::isfinite(q[3 * i + k]) && std::isfinite(qd[3 * i + k]))) bad = true;
+            s += qd[3 * i + k] * qd[3 * i + k];
+        }
+        if (bad) return {NONFINITE, 0, i, std::numeric_limits<double>::quiet_NaN()};
+        if (s > limit) return {RUNAWAY, 0, i, std::sqrt(s)};
+    }
+    return {};
+}
+
+inline void copy(const double* from, double* to, index count) {
+    for (index k = 0; k < count; ++k) to[k] = from[k];
+}
+
+/// Before the first step: the colliders' start poses, and pinned particles' velocities to
+/// reach their Control targets at the end of the run.
+inline void begin_run(const Model& m, const Control& c, const RunParams& p, const StateView& s,
+                      const ContactBuffers& w) {
+    copy(s.collider_q, w.collider_q_start, 3 * m.collider_count);
+    if (!c.pin_active) return;
+    const double inv = 1.0 / (static_cast<double>(p.steps) * p.dt);
+    for (index k = 0; k < m.pin_count; ++k) {
+        const index i = m.pin_particle[k];
+        for (int d = 0; d < 3; ++d) s.qd[3 * i + d] = (c.pin_target[3 * k + d] - s.q[3 * i + d]) * inv;
+    }
+}
+
+/// Contacts at the end of step `step` (of p.steps, ending at time t [s]); q_start (N, 3) is
+/// the step's start positions (continuous collider detection). Surface soft contacts
+/// (soft_contact_mode 2) are not in this core yet: the Python side keeps such models on the
+/// Numba loop.
+inline void contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
+                     const StateView& s, const double* q_start, const ContactBuffers& w) {
+    if (m.collider_count > 0) {
+        const double fraction = (static_cast<double>(step) + 1.0) / static_cast<double>(p.steps);
+        colliders::poses(m, c, fraction, static_cast<double>(p.steps) * p.dt, t,
+                         w.collider_q_start, s.collider_q, s.collider_rot, w.collider_v,
+                         w.collider_w);
+    }
+    if (m.soft_contact_mode == 1) soft::contacts_bounding(m, s.q, s.qd, w);
+    if (m.collider_count > 0)
+        colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
+                            s.q, s.qd, s.collider_impulse);
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::loop

@@ -1,0 +1,51 @@
+// Damped springs tying particles to anchor points (the paper's hanging ball). The anchors
+// come from Control and do not move during a step. Force on particle i with
+// u = (anchor - x_i) / L: [k (L - L0) - c v_i . u] u.
+#pragma once
+
+#include "model.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::attachments {
+
+/// Accumulate the attachment forces into f (N, 3) [N].
+inline void force(const Model& m, const Control& c, const double* q, const double* qd,
+                  double* f) {
+    for (index a = 0; a < m.attachment_count; ++a) {
+        const index i = m.attachment_particle[a];
+        const V3 d = load(c.attachment_anchor, a) - load(q, i);
+        const double length = std::sqrt(dot(d, d));
+        if (length == 0.0) continue;
+        const V3 u = (1.0 / length) * d;
+        const double rel = -dot(load(qd, i), u);
+        const double mag = m.attachment_stiffness[a] * (length - m.attachment_rest_length[a]) +
+                           m.attachment_damping[a] * rel;
+        add_to(f, i, mag * u);
+    }
+}
+
+/// out += alpha_c C p + alpha_k K p: per attachment -(k_iso p_i + ((k - k_iso) u.p) u) with
+/// k_iso = k max(0, 1 - L0/L), and -c (u.p) u for the damping.
+inline void jacobian_product(const Model& m, const Control& c, const double* q, double alpha_c,
+                             double alpha_k, const double* p, double* out) {
+    for (index a = 0; a < m.attachment_count; ++a) {
+        const index i = m.attachment_particle[a];
+        const V3 d = load(c.attachment_anchor, a) - load(q, i);
+        const double length = std::sqrt(dot(d, d));
+        const double k = m.attachment_stiffness[a];
+        double iso = k, ud = 0.0;
+        V3 u{0.0, 0.0, 0.0};
+        if (length != 0.0) {
+            u = (1.0 / length) * d;
+            iso = k * std::max(0.0, 1.0 - m.attachment_rest_length[a] / length);
+            ud = dot(u, load(p, i));
+        }
+        const double axial = alpha_k * (k - iso) * ud + alpha_c * m.attachment_damping[a] * ud;
+        const V3 pi = load(p, i);
+        out[3 * i] -= alpha_k * iso * pi.x + axial * u.x;
+        out[3 * i + 1] -= alpha_k * iso * pi.y + axial * u.y;
+        out[3 * i + 2] -= alpha_k * iso * pi.z + axial * u.z;
+    }
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::attachments

@@ -1,0 +1,34 @@
+// Forces given from outside each call through Control: per-particle forces, and a damped
+// grab spring pulling one particle toward a target (interactive use).
+#pragma once
+
+#include "model.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::external {
+
+/// f += Control.particle_f (N, 3) [N].
+inline void force(const Model& m, const Control& c, double* f) {
+    const index n = 3 * m.particle_count;
+    for (index k = 0; k < n; ++k) f[k] += c.particle_f[k];
+}
+
+/// f_g += k (target - x_g) - c v_g for the grabbed particle g (none when g < 0).
+inline void grab_force(const Control& c, const double* q, const double* qd, double* f) {
+    const index g = c.grab_particle;
+    if (g < 0) return;
+    for (int k = 0; k < 3; ++k)
+        f[3 * g + k] +=
+            c.grab_stiffness * (c.grab_target[k] - q[3 * g + k]) - c.grab_damping * qd[3 * g + k];
+}
+
+/// out += alpha_c C p + alpha_k K p of the grab spring: -(alpha_k k + alpha_c c) p_g.
+inline void grab_jacobian_product(const Control& c, double alpha_c, double alpha_k,
+                                  const double* p, double* out) {
+    const index g = c.grab_particle;
+    if (g < 0) return;
+    for (int k = 0; k < 3; ++k)
+        out[3 * g + k] -= (alpha_k * c.grab_stiffness + alpha_c * c.grab_damping) * p[3 * g + k];
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::external

@@ -1,0 +1,109 @@
+// The gas inside each body and its pressure force (paper, section 2.2, and softbody.gas).
+//
+//   isothermal      P = nRT / V                  E = -nRT ln V
+//   fixed pressure  P = P0                       E = -P0 V
+//   adiabatic       P = nRT V_ref^(g-1) / V^g     E = nRT V_ref^(g-1) V^(1-g) / (g - 1)
+//
+// The force on particle i is (P - P_ambient) dV/dx_i: each face's (P - P_a) A n shared by its
+// three corners. With the exact volume it is minus the gradient of E + P_a V, with zero net
+// force and torque. The driving value (nRT or P0) follows a schedule or a Control override.
+#pragma once
+
+#include "model.hpp"
+#include "terms/volume.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::gas {
+
+/// The driving value (nRT [J] or P0 [Pa]) of body b at time t [s]: a finite override wins,
+/// else the body's piecewise-linear schedule, else its value.
+inline double value_at(const Model& m, const Control& c, index b, double t) {
+    if (std::isfinite(c.gas_override[b])) return c.gas_override[b];
+    const index begin = m.body_schedule_range[2 * b], end = m.body_schedule_range[2 * b + 1];
+    if (end == begin) return m.body_gas_value[b];
+    const double* time = m.schedule_time;
+    const double* value = m.schedule_value;
+    if (t <= time[begin]) return value[begin];
+    for (index s = begin + 1; s < end; ++s)
+        if (t < time[s]) {
+            const double w = (t - time[s - 1]) / (time[s] - time[s - 1]);
+            return value[s - 1] + w * (value[s] - value[s - 1]);
+        }
+    return value[end - 1];
+}
+
+/// Absolute pressure [Pa] of a gas law at volume v [m^3] (NaN for v <= 0 unless fixed).
+inline double pressure(index law, double value, double gamma, double reference_volume, double v) {
+    if (law == 1) return value;
+    if (!(v > 0.0)) return std::numeric_limits<double>::quiet_NaN();
+    if (law == 0) return value / v;
+    return value * std::pow(reference_volume, gamma - 1.0) / std::pow(v, gamma);
+}
+
+/// Volumes, their gradients and the pressures of every body at time t, into gas.
+inline void evaluate(const Model& m, const Control& c, double t, const double* q,
+                     const BodyGas& gas) {
+    volume::evaluate(m, q, gas);
+    for (index b = 0; b < m.body_count; ++b)
+        gas.pressure[b] = pressure(m.body_gas_law[b], value_at(m, c, b, t), m.body_gas_gamma[b],
+                                   m.body_gas_reference_volume[b], gas.volume[b]);
+}
+
+/// f_i += (P_b - P_ambient,b) dV/dx_i for the particles of every body.
+inline void force(const Model& m, const BodyGas& gas, double* f) {
+    for (index b = 0; b < m.body_count; ++b) {
+        const double p = gas.pressure[b] - m.body_ambient_pressure[b];
+        for (index k = 3 * m.body_particle_range[2 * b]; k < 3 * m.body_particle_range[2 * b + 1];
+             ++k)
+            f[k] += p * gas.volume_gradient[k];
+    }
+}
+
+/// dP/dV (B,) [Pa/m^3] of each body's gas law at its volume, and P - P_ambient (B,) [Pa].
+inline void pressure_slopes(const Model& m, const BodyGas& gas, double* dpdv, double* pnet) {
+    for (index b = 0; b < m.body_count; ++b) {
+        const double v = gas.volume[b], p = gas.pressure[b];
+        pnet[b] = p - m.body_ambient_pressure[b];
+        const index law = m.body_gas_law[b];
+        if (law == 1 || m.body_closed[b] == 0 || !(v > 0.0))
+            dpdv[b] = 0.0;  // fixed pressure (or an open surface)
+        else if (law == 0)
+            dpdv[b] = -p / v;  // isothermal: P = nRT / V
+        else
+            dpdv[b] = -m.body_gas_gamma[b] * p / v;  // adiabatic: P V^gamma constant
+    }
+}
+
+/// out += alpha_k K p for the pressure: per body P'(V) g (g . p) + (P - P_a) H p with g =
+/// dV/dx (N, 3) and H = d2V/dx2, applied face by face: each corner's share of g is the
+/// face's (e1 x e2) / 6, whose change under p is (d1 x e2 + e1 x d2) / 6 (d the same
+/// differences of p), added to all three corners. Never a dense matrix.
+inline void jacobian_product(const Model& m, const double* q, const double* gradient,
+                             const double* dpdv, const double* pnet, double alpha_k,
+                             const double* p, double* out) {
+    if (alpha_k == 0.0) return;
+    for (index body = 0; body < m.body_count; ++body) {
+        const index p0 = m.body_particle_range[2 * body], p1 = m.body_particle_range[2 * body + 1];
+        double gp = 0.0;
+        for (index i = p0; i < p1; ++i) gp += dot(load(gradient, i), load(p, i));
+        const double c1 = alpha_k * dpdv[body] * gp;
+        if (c1 != 0.0)
+            for (index i = p0; i < p1; ++i) add_to(out, i, c1 * load(gradient, i));
+        const double coef = alpha_k * pnet[body] / 6.0;
+        if (coef == 0.0) continue;
+        for (index t = m.body_tri_range[2 * body]; t < m.body_tri_range[2 * body + 1]; ++t) {
+            const index ia = m.tri_indices[3 * t], ib = m.tri_indices[3 * t + 1],
+                        ic = m.tri_indices[3 * t + 2];
+            const V3 a = load(q, ia);
+            const V3 e1 = load(q, ib) - a, e2 = load(q, ic) - a;
+            const V3 pa = load(p, ia);
+            const V3 d1 = load(p, ib) - pa, d2 = load(p, ic) - pa;
+            const V3 h = coef * (cross(d1, e2) + cross(e1, d2));
+            add_to(out, ia, h);
+            add_to(out, ib, h);
+            add_to(out, ic, h);
+        }
+    }
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::gas

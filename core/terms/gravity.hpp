@@ -1,0 +1,20 @@
+// Uniform gravity: f_i = m_i g. Energy -m_i g . x_i; no Jacobian (constant force).
+#pragma once
+
+#include "model.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::gravity {
+
+/// Set f (N, 3) [N] to m_i g: the first term of the accumulator (it overwrites f).
+inline void force(const Model& m, double* f) {
+    const double gx = m.gravity[0], gy = m.gravity[1], gz = m.gravity[2];
+    for (index i = 0; i < m.particle_count; ++i) {
+        const double mass = m.particle_mass[i];
+        f[3 * i] = mass * gx;
+        f[3 * i + 1] = mass * gy;
+        f[3 * i + 2] = mass * gz;
+    }
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::gravity

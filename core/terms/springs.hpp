@@ -1,0 +1,81 @@
+// Damped Hooke springs between particles (mesh edges, bending springs, user springs).
+//
+// For a spring from i to j with direction u = (x_j - x_i) / L the force on i is
+//     f_i = [k (L - L0) + c (v_j - v_i) . u] u,   f_j = -f_i,
+// whose elastic part is -dE/dx_i for E = 1/2 k (L - L0)^2. Its stiffness K = df/dx is
+// k [u u^T + max(0, 1 - L0/L) (I - u u^T)] between the two ends (the compressive part of the
+// geometric stiffness dropped, so -K stays positive semi-definite), its damping C = c u u^T.
+#pragma once
+
+#include "model.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::springs {
+
+/// Accumulate every spring's damped force into f (N, 3) [N] at q, qd (N, 3).
+inline void force(const Model& m, const double* q, const double* qd, double* f) {
+    const index* ends = m.spring_indices;
+    for (index s = 0; s < m.spring_count; ++s) {
+        const index i = ends[2 * s], j = ends[2 * s + 1];
+        const V3 d = load(q, j) - load(q, i);
+        const double length = std::sqrt(dot(d, d));
+        if (length == 0.0) continue;  // direction undefined: a saddle point of the energy
+        const V3 u = (1.0 / length) * d;
+        const double rel = dot(load(qd, j) - load(qd, i), u);
+        const double mag =
+            m.spring_stiffness[s] * (length - m.spring_rest_length[s]) + m.spring_damping[s] * rel;
+        const V3 fi = mag * u;
+        add_to(f, i, fi);
+        add_to(f, j, -fi);
+    }
+}
+
+/// Per spring the unit direction u (S, 3), axial stiffness a = k and transverse stiffness
+/// b = k max(0, 1 - L0/L) (S,) at q: what jacobian_product reads.
+inline void prepare(const Model& m, const double* q, double* u, double* a, double* b) {
+    for (index s = 0; s < m.spring_count; ++s) {
+        const V3 d = load(q, m.spring_indices[2 * s + 1]) - load(q, m.spring_indices[2 * s]);
+        const double length = std::sqrt(dot(d, d));
+        const double k = m.spring_stiffness[s];
+        if (length == 0.0) {
+            store(u, s, {0.0, 0.0, 0.0});
+            a[s] = 0.0;
+            b[s] = k;
+            continue;
+        }
+        store(u, s, (1.0 / length) * d);
+        a[s] = k;
+        b[s] = k * std::max(0.0, 1.0 - m.spring_rest_length[s] / length);
+    }
+}
+
+/// out += alpha_c C p + alpha_k K p for p (N, 3): per spring the block (a - b) u u^T + b I
+/// (stiffness) and c u u^T (damping) acting on p_j - p_i, opposite on j. u, a, b from
+/// prepare (or any blocks of that form: the stability estimate splits them).
+inline void jacobian_product(const Model& m, const double* u, const double* a, const double* b,
+                             double alpha_c, double alpha_k, const double* p, double* out) {
+    for (index s = 0; s < m.spring_count; ++s) {
+        const index i = m.spring_indices[2 * s], j = m.spring_indices[2 * s + 1];
+        const V3 d = load(p, j) - load(p, i);
+        const V3 us = load(u, s);
+        const double ud = dot(us, d);
+        const double iso = alpha_k * b[s];
+        const double axial = alpha_k * (a[s] - b[s]) * ud + alpha_c * m.spring_damping[s] * ud;
+        const V3 w = iso * d + axial * us;
+        add_to(out, i, w);
+        add_to(out, j, -w);
+    }
+}
+
+/// Elastic energy sum 1/2 k (L - L0)^2 [J].
+inline double energy(const Model& m, const double* q) {
+    double e = 0.0;
+    for (index s = 0; s < m.spring_count; ++s) {
+        const V3 d = load(q, m.spring_indices[2 * s + 1]) - load(q, m.spring_indices[2 * s]);
+        const double stretch = std::sqrt(dot(d, d)) - m.spring_rest_length[s];
+        e += 0.5 * m.spring_stiffness[s] * stretch * stretch;
+    }
+    return e;
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::springs

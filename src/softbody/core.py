@@ -1,0 +1,64 @@
+"""The compiled engine core (``softbody._core``, C++17): which instruction set it uses,
+and the views of a :class:`Model` its solvers step.
+
+The kernels are compiled when the package is installed, once for each instruction set the
+build knows (AVX-512, AVX2 and a scalar path on x86-64; the scalar path elsewhere); the
+best one the CPU runs is chosen at import. ``SOFTBODY_SIMD=scalar|avx2|avx512`` (or
+:func:`use_simd`) forces one, to compare them: every path gives the same results to
+round-off.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+import weakref
+
+from softbody import _core
+
+__all__ = ["simd_path", "simd_paths", "use_simd"]
+
+_MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def simd_paths() -> list[str]:
+    """The instruction sets this build has and this CPU runs, best last
+    (``["scalar", "avx2", "avx512"]`` on a recent x86-64)."""
+    return list(_core.simd_paths())
+
+
+def simd_path() -> str:
+    """The instruction set the kernels use now."""
+    return str(_core.simd_path())
+
+
+def use_simd(name: str) -> None:
+    """Run the kernels with instruction set ``name`` (``"scalar"``, ``"avx2"``,
+    ``"avx512"``, or ``"auto"`` for the best available); a ``ValueError`` names the
+    available ones when this build or CPU lacks it."""
+    key = str(name).strip().lower()
+    if not _core.select_simd(key):
+        raise ValueError(
+            f"instruction set {name!r} is not available here; choose one of: "
+            + ", ".join([*simd_paths(), "auto"])
+        )
+
+
+def core_model(model):
+    """The compiled core's checked view of ``model`` (built once per model)."""
+    view = _MODELS.get(model)
+    if view is None:
+        view = _MODELS[model] = _core.Model(model.data)
+    return view
+
+
+def _from_environment() -> None:
+    name = os.environ.get("SOFTBODY_SIMD", "").strip().lower()
+    if name and name != "auto":
+        try:
+            use_simd(name)
+        except ValueError as error:
+            warnings.warn(f"SOFTBODY_SIMD: {error}; using {simd_path()}", stacklevel=3)
+
+
+_from_environment()
