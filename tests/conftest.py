@@ -163,7 +163,7 @@ def pytest_sessionfinish(session, exitstatus):
     import numba
 
     folder = Path(numba.config.CACHE_DIR or "")
-    if not folder.name.startswith("numba-"):
+    if numba.config.DISABLE_JIT or not folder.name.startswith("numba-"):
         return  # no lasting cache (the warm-up failed and said so)
     problems = kernel_cache_problems(folder)
     if problems:

@@ -19,16 +19,25 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def _tool(name: str) -> str:
+    """A build tool from this Python's environment (the test extras install cmake and
+    ninja there), else from PATH."""
+    here = Path(sys.executable).parent / name
+    return str(here) if here.is_file() else (shutil.which(name) or name)
+
+
 def build(build_dir: Path, out_dir: Path, *, sanitize: bool = False, jobs: int = 2) -> Path:
     """Configure and build with CMake; copy the module into ``out_dir``; return its path."""
+    cmake = _tool("cmake")
     args = [
-        "cmake", "-S", str(ROOT), "-B", str(build_dir), "-G", "Ninja",
+        cmake, "-S", str(ROOT), "-B", str(build_dir), "-G", "Ninja",
+        f"-DCMAKE_MAKE_PROGRAM={_tool('ninja')}",
         f"-DPython_EXECUTABLE={sys.executable}",
         "-DCMAKE_BUILD_TYPE=" + ("RelWithDebInfo" if sanitize else "Release"),
         f"-DSOFTBODY_SANITIZE={'ON' if sanitize else 'OFF'}",
     ]  # fmt: skip
     subprocess.run(args, check=True, stdout=subprocess.DEVNULL)
-    subprocess.run(["cmake", "--build", str(build_dir), "-j", str(jobs)], check=True)
+    subprocess.run([cmake, "--build", str(build_dir), "-j", str(jobs)], check=True)
     suffix = sysconfig.get_config_var("EXT_SUFFIX")
     built = build_dir / f"_core{suffix}"
     out_dir.mkdir(parents=True, exist_ok=True)

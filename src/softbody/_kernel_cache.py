@@ -124,6 +124,10 @@ def ensure_compiled() -> None:
         return
     import numba
 
+    if numba.config.DISABLE_JIT:
+        _ready = True  # kernels run as Python: nothing to compile
+        return
+
     folder = Path(numba.config.CACHE_DIR)
     if not (folder / COMPLETE).is_file():
         _warm(folder)

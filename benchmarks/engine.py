@@ -1,0 +1,136 @@
+"""The engine core against the Numba loop it replaces: explicit steps per second.
+
+The case: the ball drop's ball (``ball_drop.ball_drop``: an icosphere of radius 1 m,
+inflated, over the ground) at 2,562 to 40,962 vertices, stepped by symplectic Euler and
+by midpoint at 1e-5 s. For each size and scheme the C++ core runs on each instruction set
+this CPU has (scalar, AVX2, AVX-512), and the Numba loop (the previous engine, the same
+arithmetic) runs in the same process; the runs alternate, each timed over at least
+``MIN_SECONDS`` of wall time, best of ``ROUNDS``. Reported: million vertex-steps per
+second, and each path's speed-up over Numba in the same round (ratios are what this
+shared 2-core machine measures reliably).
+
+Writes results/engine.{json,png}. Usage: python benchmarks/engine.py [--max-subdivisions 6]
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+import warnings
+
+import numpy as np
+
+import softbody as sb
+from ball_drop import ball_drop
+from results_io import RESULTS, run_record, save_figure, write_json
+from softbody import _kernel_cache, core
+
+SCHEMES = ["symplectic_euler", "midpoint"]
+DT = 1e-5
+MIN_SECONDS = 0.3
+ROUNDS = 3
+
+
+def _rate(sim: sb.Simulator, model: sb.Model) -> float:
+    """Vertex-steps per second of ``sim`` over at least MIN_SECONDS."""
+    state = model.state()
+    sim.run(state, 2)  # first call: buffers warm
+    steps, elapsed = 4, 0.0
+    while elapsed < MIN_SECONDS:
+        steps *= 2
+        state = model.state()
+        start = time.perf_counter()
+        sim.run(state, steps)
+        elapsed = time.perf_counter() - start
+    return model.particle_count * steps / elapsed
+
+
+def _simulator(model: sb.Model, scheme: str, engine: str) -> sb.Simulator:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sb.StabilityWarning)
+        sim = sb.Simulator(model, integrator=scheme, dt=DT)
+    if engine == "numba":
+        sim._core = None  # the previous engine's loop, same arithmetic
+    return sim
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--max-subdivisions", type=int, default=6)
+    args = parser.parse_args()
+    _kernel_cache.ensure_compiled()
+    paths = core.simd_paths()
+    engines = [f"core-{p}" for p in paths] + ["numba"]
+    results = []
+    for subdivisions in range(4, args.max_subdivisions + 1):
+        model = ball_drop(subdivisions)
+        for scheme in SCHEMES:
+            sims = {e: _simulator(model, scheme, e) for e in engines}
+            best = {e: 0.0 for e in engines}
+            ratios = {e: [] for e in engines if e != "numba"}
+            for _ in range(ROUNDS):
+                rates = {}
+                for e in engines:
+                    if e.startswith("core-"):
+                        core.use_simd(e.removeprefix("core-"))
+                    rates[e] = _rate(sims[e], model)
+                    best[e] = max(best[e], rates[e])
+                for e in ratios:
+                    ratios[e].append(rates[e] / rates["numba"])
+            core.use_simd("auto")
+            row = {
+                "vertices": model.particle_count,
+                "scheme": scheme,
+                "mvps": {e: best[e] / 1e6 for e in engines},
+                "speedup_over_numba": {e: [min(r), max(r)] for e, r in ratios.items()},
+            }
+            results.append(row)
+            print(
+                f"{model.particle_count:6d} {scheme:17s} "
+                + " ".join(f"{e}={best[e] / 1e6:6.1f}" for e in engines)
+                + "  x"
+                + " ".join(f"{e}:{min(r):.2f}-{max(r):.2f}" for e, r in ratios.items()),
+                flush=True,
+            )
+    write_json(
+        RESULTS / "engine.json",
+        run_record(
+            "engine",
+            machine=f"{platform.machine()}, {platform.processor() or 'cpu'}",
+            command="python benchmarks/engine.py",
+            dt=DT,
+            simd_paths=paths,
+            units="million vertex-steps per second (mvps), one thread",
+            results=results,
+        ),
+    )
+    _plot(results, engines)
+
+
+def _plot(results: list[dict], engines: list[str]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(SCHEMES), figsize=(11, 4.2), sharey=True)
+    for ax, scheme in zip(np.atleast_1d(axes), SCHEMES, strict=True):
+        rows = [r for r in results if r["scheme"] == scheme]
+        x = [r["vertices"] for r in rows]
+        for e in engines:
+            style = "k--o" if e == "numba" else "-o"
+            ax.plot(x, [r["mvps"][e] for r in rows], style, label=e)
+        ax.set_xscale("log")
+        ax.set_title(f"{scheme}, dt = {DT:g} s, one thread")
+        ax.set_xlabel("vertices")
+        ax.grid(True, alpha=0.3)
+    np.atleast_1d(axes)[0].set_ylabel("million vertex-steps / s")
+    np.atleast_1d(axes)[0].legend()
+    fig.suptitle("Engine core (C++) against the Numba loop, ball drop, same process")
+    fig.tight_layout()
+    save_figure(fig, RESULTS / "engine.png")
+
+
+if __name__ == "__main__":
+    main()
