@@ -26,6 +26,7 @@ import json
 import os
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import time
 import warnings
@@ -66,11 +67,16 @@ def start(integrator: str, cache: Path, source: Path | None = None) -> dict:
     """One fresh process's start-up phases [s] with Numba's cache in ``cache``; with
     ``source``, softbody is imported from that folder (another version's ``src``)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    flags = []
     if source is not None:
-        env["PYTHONPATH"] = str(source)
+        # -S: no site hooks, so an editable install's import redirect cannot swap this
+        # version back in; the environment's packages come through PYTHONPATH
+        site = sysconfig.get_paths()
+        env["PYTHONPATH"] = os.pathsep.join([str(source), site["purelib"], site["platlib"]])
+        flags = ["-S"]
     t = time.perf_counter()
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, integrator],
+        [sys.executable, *flags, "-c", CHILD, integrator],
         env=env,
         capture_output=True,
         text=True,

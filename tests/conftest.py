@@ -147,6 +147,27 @@ def kernel_cache_problems(folder: Path) -> list[str]:
     return problems
 
 
+def package_copy(folder: Path) -> dict:
+    """Copy the installed package, compiled core included, into ``folder/softbody``;
+    return the environment under which ``python -S`` imports that copy: -S skips the
+    site hooks, so an editable install's import redirect cannot hand the child the
+    original, and the environment's packages come through PYTHONPATH."""
+    import os
+    import shutil
+    import sysconfig
+
+    from softbody import _core
+
+    source = Path(sb.__file__).parent
+    shutil.copytree(
+        source, folder / "softbody", ignore=shutil.ignore_patterns("__pycache__", "_core*")
+    )
+    shutil.copy2(_core.__file__, folder / "softbody" / Path(_core.__file__).name)
+    site = sysconfig.get_paths()
+    paths = dict.fromkeys([str(folder), site["purelib"], site["platlib"]])
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+
+
 def pytest_sessionstart(session):
     """Compile the Numba kernels (or load them) before any test runs: tests call some of
     them directly, and one compiled outside the warm-up would be cached piecemeal."""

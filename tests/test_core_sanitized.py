@@ -10,10 +10,11 @@ import os
 import shutil
 import subprocess
 import sys
-import sysconfig
 from pathlib import Path
 
 import pytest
+
+from conftest import package_copy
 
 ROOT = Path(__file__).resolve().parent.parent
 #: the core's tests that do not run the Numba kernels (Numba runs as Python here)
@@ -45,22 +46,14 @@ def test_core_tests_pass_under_address_and_undefined_behaviour_sanitizers(tmp_pa
     )
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
     (module,) = (tmp_path / "softbody").glob("_core*")
+    env = package_copy(tmp_path / "pkg")
     package = tmp_path / "pkg" / "softbody"
-    shutil.copytree(
-        ROOT / "src" / "softbody",
-        package,
-        ignore=shutil.ignore_patterns("__pycache__", "_core*"),
-    )
+    for old in package.glob("_core*"):
+        old.unlink()
     shutil.copy2(module, package / module.name)
-    # -S: no site hooks, so an editable install's import redirect cannot hand the child
-    # the release build; the environment's packages come through PYTHONPATH instead
-    site = sysconfig.get_paths()
-    paths = dict.fromkeys(
-        [str(tmp_path / "pkg"), str(ROOT / "tests"), site["purelib"], site["platlib"]]
-    )
     env = {
-        **os.environ,
-        "PYTHONPATH": os.pathsep.join(paths),
+        **env,
+        "PYTHONPATH": env["PYTHONPATH"] + os.pathsep + str(ROOT / "tests"),
         "LD_PRELOAD": f"{asan} {ubsan}",
         "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=1",
         "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1",

@@ -6,13 +6,12 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import softbody as sb
-from conftest import cached_versions, kernel_cache_problems
+from conftest import cached_versions, kernel_cache_problems, package_copy
 from softbody.integrators import loop
 from softbody.sim.simulator import MAX_STEPS
 
@@ -125,21 +124,16 @@ def test_a_second_copy_of_the_package_gets_its_own_cache_folder(tmp_path):
     of the same sources that shared the first one's (complete) folder compiled its kernels
     one process at a time into it, the mix that crashes. Reference: the same sources at
     two paths name two folders; at one path, one (imports only, nothing compiles)."""
-    import shutil
-
-    import softbody
-
-    copy = tmp_path / "copy"
-    shutil.copytree(Path(softbody.__file__).parent, copy / "softbody")
     code = "from softbody._kernel_cache import cache_folder; print(cache_folder().name)"
+    envs = {name: package_copy(tmp_path / name) for name in ("first", "second")}
 
-    def folder(source: Path) -> str:
-        env = {**os.environ, "PYTHONPATH": str(source), "NUMBA_CACHE_DIR": str(tmp_path / "c")}
+    def folder(name: str) -> str:
+        env = {**envs[name], "NUMBA_CACHE_DIR": str(tmp_path / "c")}
         done = subprocess.run(
-            [sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120
-        )
+            [sys.executable, "-S", "-c", code], env=env, capture_output=True, text=True,
+            timeout=120,
+        )  # fmt: skip
         assert done.returncode == 0, done.stderr
         return done.stdout.strip()
 
-    here = Path(softbody.__file__).parents[1]
-    assert folder(copy) != folder(here) == folder(here)
+    assert folder("first") != folder("second") == folder("second")
