@@ -662,9 +662,7 @@ class ModelBuilder:
             collider_motion_vector=colliders.motion_vector,
             collider_motion_pivot=colliders.motion_pivot,
             collider_motion_frequency=colliders.motion_frequency,
-            body_drag_coefficient=np.array(
-                [b.drag_coefficient for b in bodies], dtype=np.float64
-            ),
+            body_drag_coefficient=np.array([b.drag_coefficient for b in bodies], dtype=np.float64),
             air_density=float(self.air_density),
             wind=self.wind.copy(),
         )
