@@ -33,19 +33,20 @@
 namespace softbody::SOFTBODY_KERNELS::drag {
 
 /// F_t [N] of triangle t at q, qd (N, 3) in the wind [m/s]; half_rho_cd = 1/2 rho C_d
-/// [kg/m^3]. A degenerate face (zero area) has no normal and feels nothing.
+/// [kg/m^3]. With a = A_t n_t (half the edges' cross product) and s = v_rel . a = A_t v_n,
+/// F_t = -1/2 rho C_d A_t v_n |v_n| n_t = -1/2 rho C_d s |s| a / |a|^2: no square root.
+/// A degenerate face (zero area) has no normal and feels nothing.
 inline V3 face_force(const Model& m, index t, const double* q, const double* qd, V3 wind,
                      double half_rho_cd) {
     const index i = m.tri_indices[3 * t], j = m.tri_indices[3 * t + 1],
                 k = m.tri_indices[3 * t + 2];
     const V3 xi = load(q, i);
-    const V3 area_normal = 0.5 * cross(load(q, j) - xi, load(q, k) - xi);  // A_t n_t [m^2]
-    const double area = std::sqrt(dot(area_normal, area_normal));
-    if (area == 0.0) return {0.0, 0.0, 0.0};
-    const V3 n = (1.0 / area) * area_normal;
+    const V3 a = 0.5 * cross(load(q, j) - xi, load(q, k) - xi);  // A_t n_t [m^2]
+    const double a2 = dot(a, a);
+    if (a2 == 0.0) return {0.0, 0.0, 0.0};
     const V3 v_rel = (1.0 / 3.0) * (load(qd, i) + load(qd, j) + load(qd, k)) - wind;
-    const double vn = dot(v_rel, n);
-    return (-half_rho_cd * area * vn * std::abs(vn)) * n;
+    const double s = dot(v_rel, a);  // [m^3/s]
+    return (-half_rho_cd * s * std::abs(s) / a2) * a;
 }
 
 /// f (N, 3) [N] += each face's drag, a third on each corner, for bodies with C_d > 0.
