@@ -51,6 +51,11 @@ struct Model {
 
     const index* pin_particle = nullptr;  // (P,)
 
+    const double* body_drag_coefficient = nullptr;  // (B,) C_d [1], 0 = no drag
+    double air_density = 0.0;                       // rho [kg/m^3]
+    double wind[3] = {0.0, 0.0, 0.0};               // [m/s], Control.wind may override it
+    bool drag_active = false;  // rho > 0 and some C_d > 0 (else the drag term is skipped)
+
     int soft_contact_mode = 0;  // 0 none, 1 bounding objects, 2 surfaces
     double soft_contact_restitution = 0.0, soft_contact_friction = 0.0;
     double contact_margin = 0.0, contact_cell_size = 1.0;  // [m]
@@ -79,6 +84,7 @@ struct Control {
     double grab_target[3] = {0.0, 0.0, 0.0};  // [m]
     double grab_stiffness = 0.0;              // [N/m]
     double grab_damping = 0.0;                // [N s/m]
+    double wind[3] = {0.0, 0.0, 0.0};         // [m/s], the model's unless overridden
 };
 
 /// The changing state a run advances in place (softbody.sim.state.State).

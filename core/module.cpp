@@ -148,6 +148,10 @@ public:
         m.body_closed = i64("body_closed", {b});
         m.body_contact_shape = i64("body_contact_shape", {b});
         m.pin_particle = pins.data();
+        m.body_drag_coefficient = f64("body_drag_coefficient", {b});
+        m.air_density = nb::cast<double>(d.attr("air_density"));
+        const double* wind = f64("wind", {3});
+        for (int k = 0; k < 3; ++k) m.wind[k] = wind[k];
         m.soft_contact_mode = nb::cast<int>(d.attr("soft_contact_mode"));
         m.soft_contact_restitution = nb::cast<double>(d.attr("soft_contact_restitution"));
         m.soft_contact_friction = nb::cast<double>(d.attr("soft_contact_friction"));
@@ -170,7 +174,7 @@ public:
 
 private:
     // Indices and enumerations in range, so no kernel reads outside an array.
-    void validate() const {
+    void validate() {
         const softbody::Model& m = model_;
         check_indices(m.spring_indices, 2 * m.spring_count, 0, m.particle_count, "spring_indices");
         check_indices(m.tri_indices, 3 * m.tri_count, 0, m.particle_count, "tri_indices");
@@ -196,6 +200,27 @@ private:
         check_indices(m.collider_motion, m.collider_count, 0, 4, "collider_motion");
         if (m.soft_contact_mode < 0 || m.soft_contact_mode > 2)
             fail("soft_contact_mode must be 0, 1 or 2");
+        check_drag();
+    }
+
+    // Air and drag coefficients physical (finite, >= 0); the drag term runs only when some
+    // body has drag in air of positive density.
+    void check_drag() {
+        softbody::Model& m = model_;
+        if (!(std::isfinite(m.air_density) && m.air_density >= 0.0))
+            fail("air_density must be finite and >= 0 kg/m^3, got " +
+                 std::to_string(m.air_density));
+        for (int k = 0; k < 3; ++k)
+            if (!std::isfinite(m.wind[k])) fail("wind must be 3 finite numbers [m/s]");
+        bool any = false;
+        for (Index b = 0; b < m.body_count; ++b) {
+            const double cd = m.body_drag_coefficient[b];
+            if (!(std::isfinite(cd) && cd >= 0.0))
+                fail("body_drag_coefficient holds " + std::to_string(cd) + " at " +
+                     std::to_string(b) + "; it must be finite and >= 0");
+            any = any || cd > 0.0;
+        }
+        m.drag_active = any && m.air_density > 0.0;
     }
 
     softbody::Model model_;
@@ -224,6 +249,15 @@ struct CoreControl {
         for (int k = 0; k < 3; ++k) view.grab_target[k] = grab.data()[k];
         view.grab_stiffness = nb::cast<double>(d.attr("grab_stiffness"));
         view.grab_damping = nb::cast<double>(d.attr("grab_damping"));
+        wind_from(m, attribute<ConstF64>(d, "wind", {3}).data());
+    }
+
+    // Control.wind: 3 finite numbers [m/s], or all NaN for the model's wind.
+    void wind_from(const softbody::Model& m, const double* w) {
+        const bool given = std::isfinite(w[0]) && std::isfinite(w[1]) && std::isfinite(w[2]);
+        const bool unset = std::isnan(w[0]) && std::isnan(w[1]) && std::isnan(w[2]);
+        if (!given && !unset) fail("Control wind must be 3 finite numbers [m/s] or all NaN");
+        for (int k = 0; k < 3; ++k) view.wind[k] = given ? w[k] : m.wind[k];
     }
     ConstF64 gas, particle_f, anchor, pin, target;
     softbody::Control view;

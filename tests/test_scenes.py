@@ -8,11 +8,19 @@ import pytest
 import softbody as sb
 from softbody.scenes import SceneError, list_scenes, load_scene
 
-BUILT_IN = ["bouncing-balls", "hanging-ball", "hand-punch", "cloth-wind", "bounding-volumes"]
+BUILT_IN = [
+    "bouncing-balls",
+    "hanging-ball",
+    "hand-punch",
+    "cloth-wind",
+    "bounding-volumes",
+    "balloon-drop",
+]
 
 
 def test_all_paper_scenes_are_built_in():
-    """The five scenes of the paper's figures ship with the package."""
+    """The five scenes of the paper's figures, and balloon-drop (face drag), ship with the
+    package."""
     assert sorted(list_scenes()) == sorted(BUILT_IN)
 
 
@@ -97,7 +105,8 @@ def test_bad_overrides_name_the_key(override, match):
 
 
 def test_unknown_scene_lists_the_built_ins():
-    with pytest.raises(SceneError, match="unknown scene 'bouncy'; built-in scenes: bouncing"):
+    listed = "unknown scene 'bouncy'; built-in scenes: balloon-drop, bouncing"
+    with pytest.raises(SceneError, match=listed):
         load_scene("bouncy")
 
 

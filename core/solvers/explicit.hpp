@@ -7,6 +7,7 @@
 #include "model.hpp"
 #include "solvers/common.hpp"
 #include "terms/attachments.hpp"
+#include "terms/drag.hpp"
 #include "terms/external.hpp"
 #include "terms/gas.hpp"
 #include "terms/gravity.hpp"
@@ -26,6 +27,7 @@ inline void eval_forces(const Model& m, const Control& c, double t, const double
     external::grab_force(c, q, qd, f);      // a grabbed particle pulled to a target
     gas::evaluate(m, c, t, q, gas);         // volumes, dV/dx and the gas law's P(V, t)
     gas::force(m, gas, f);                  // (P - P_ambient) dV/dx
+    drag::force(m, c, q, qd, f);            // air drag on faces (skipped when off)
 }
 
 /// q_out = q0 + h slope_q; v_out = v0 + h f / m (safe when slope_q is v_out).

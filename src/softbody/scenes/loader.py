@@ -281,6 +281,7 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
         builder.set_soft_contact(
             c.mode, restitution=c.restitution, friction=c.friction, margin=c.margin
         )
+    builder.set_air(density=spec.air.density, wind=spec.air.wind)
 
     names, colors, meshes = [], [], []
     for b, body in enumerate(spec.bodies):
@@ -301,6 +302,7 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
             bend_damping=body.bend_damping,
             mass_distribution=body.mass_distribution,
             velocity=body.velocity,
+            drag_coefficient=body.drag_coefficient,
         )
         if isinstance(body, schema.Cloth):
             builder.add_cloth(mesh, pressure=_gas(body.pressure, cloth=True), **common)

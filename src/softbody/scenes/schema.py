@@ -294,6 +294,15 @@ class Contact(Table):
     )
 
 
+class Air(Table):
+    """``[air]``: the air bodies with a ``drag_coefficient`` move through."""
+
+    density: Real = Field(
+        1.2, ge=0, le=1e4, description="air density [kg/m^3] (0: no drag anywhere)"
+    )
+    wind: Vec3 = Field((0.0, 0.0, 0.0), description="wind velocity [m/s]")
+
+
 class Render(Table):
     """``[render]``: the video and images."""
 
@@ -513,6 +522,13 @@ class _BodyBase(Table):
     mass_distribution: Literal["uniform", "area"] = Field(
         "uniform", description="equal particle masses, or by each vertex's area share"
     )
+    drag_coefficient: Real = Field(
+        0.0,
+        ge=0,
+        le=1e3,
+        description="quadratic air drag coefficient C_d of every face [1] (0: none; "
+        "explicit integrators only)",
+    )
 
 
 class SoftBody(_BodyBase):
@@ -648,6 +664,7 @@ class SceneSpec(Table):
     description: Label = Field("", max_length=10_000, description="one line for the scene list")
     simulation: Simulation = Simulation()
     contact: Contact | None = Field(None, description="soft-soft contact (default: surface)")
+    air: Air = Air()
     render: Render = Render()
     bodies: list[Body] = Field(min_length=1, description="[[bodies]]: at least one")
     attachments: list[Attachment] = []

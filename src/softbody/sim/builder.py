@@ -53,6 +53,10 @@ def _sample_count(value) -> int:
     return n
 
 
+#: Density of air at sea level and 20 C [kg/m^3], the builder's default.
+DEFAULT_AIR_DENSITY = 1.2
+
+
 @dataclass
 class _Body:
     particle_begin: int
@@ -64,6 +68,7 @@ class _Body:
     mc_samples: np.ndarray  # (S, 2)
     contact_shape: VolumeMethod
     closed: bool
+    drag_coefficient: float = 0.0
 
 
 class ModelBuilder:
@@ -73,6 +78,9 @@ class ModelBuilder:
     ----------
     gravity : (3,) array of float
         Gravitational acceleration [m/s^2]; default -9.81 along y.
+
+    The air the bodies move through (for face drag, :meth:`set_air`) is still sea-level
+    air, 1.2 kg/m^3; it acts only on bodies given a ``drag_coefficient`` > 0.
 
     Examples
     --------
@@ -96,6 +104,8 @@ class ModelBuilder:
         self._bodies: list[_Body] = []
         self._colliders: list[Collider] = []
         self._soft_contact = ("none", 0.5, 0.1, None)
+        self.air_density = DEFAULT_AIR_DENSITY
+        self.wind = np.zeros(3)
 
     # -- sizes ---------------------------------------------------------------------------
     @property
@@ -225,6 +235,7 @@ class ModelBuilder:
         monte_carlo_samples: int = 4096,
         seed: int = 0,
         contact_shape: str = "bounding_ellipsoid",
+        drag_coefficient: float = 0.0,
     ) -> int:
         """Add a closed mesh filled with gas as a soft body; returns the body index.
 
@@ -258,6 +269,11 @@ class ModelBuilder:
             The body's bounding object for the paper's soft-soft contacts
             (``set_soft_contact("bounding")``): ``"bounding_ellipsoid"`` (default),
             ``"bounding_sphere"`` or ``"bounding_box"``.
+        drag_coefficient : float
+            C_d [1] >= 0 of the quadratic air drag on every face,
+            -1/2 rho C_d A (v_rel . n) |v_rel . n| n with v_rel the face's velocity
+            relative to the wind (:meth:`set_air`); 0 (default) means no drag. Drag is
+            stepped by the explicit integrators only.
         """
         if not isinstance(gas, Gas):
             gas = Gas.isothermal(_number("gas nRT", gas))
@@ -277,6 +293,7 @@ class ModelBuilder:
             monte_carlo_samples=monte_carlo_samples,
             seed=seed,
             contact_shape=contact_shape,
+            drag_coefficient=drag_coefficient,
         )
 
     def add_cloth(
@@ -292,6 +309,7 @@ class ModelBuilder:
         bend_damping: float = 0.0,
         mass_distribution: Literal["uniform", "area"] = "uniform",
         velocity: ArrayLike = (0.0, 0.0, 0.0),
+        drag_coefficient: float = 0.0,
     ) -> int:
         """Add an open surface (a cloth) with a pressure difference across it; returns the
         body index (the paper's starting point, Figures 2-3: wind on a cloth).
@@ -323,6 +341,7 @@ class ModelBuilder:
             monte_carlo_samples=0,
             seed=0,
             contact_shape="bounding_box",
+            drag_coefficient=drag_coefficient,
         )
 
     def _add_surface(
@@ -343,6 +362,7 @@ class ModelBuilder:
         monte_carlo_samples,
         seed,
         contact_shape,
+        drag_coefficient,
     ) -> int:
         if isinstance(mesh, TriMesh):
             source = mesh
@@ -380,6 +400,7 @@ class ModelBuilder:
         c = _number("damping", damping)
         kb = _number("bend_stiffness", bend_stiffness)
         cb = _number("bend_damping", bend_damping)
+        cd = _number("drag_coefficient", drag_coefficient)
         shape = VolumeMethod.parse(contact_shape)
         if shape not in (
             VolumeMethod.BOUNDING_BOX,
@@ -449,6 +470,7 @@ class ModelBuilder:
                 samples,
                 shape,
                 closed,
+                cd,
             )
         )
         return body
@@ -488,6 +510,14 @@ class ModelBuilder:
         if margin is not None:
             _number("soft contact margin", margin, strict=True)
         self._soft_contact = (mode, float(restitution), float(friction), margin)
+
+    def set_air(self, *, density: float = DEFAULT_AIR_DENSITY, wind: ArrayLike = (0.0, 0.0, 0.0)):
+        """The air the bodies move through: density rho [kg/m^3] >= 0 and the wind, its
+        velocity [m/s] (``Control.wind`` overrides it per call). Faces of bodies with a
+        ``drag_coefficient`` > 0 feel quadratic drag relative to it; density 0 turns drag
+        off everywhere."""
+        self.air_density = _number("air density", density)
+        self.wind = _vec3("wind", wind)
 
     # -- finalize ------------------------------------------------------------------------
     def finalize(self) -> Model:
@@ -632,4 +662,7 @@ class ModelBuilder:
             collider_motion_vector=colliders.motion_vector,
             collider_motion_pivot=colliders.motion_pivot,
             collider_motion_frequency=colliders.motion_frequency,
+            body_drag_coefficient=np.array([b.drag_coefficient for b in bodies], dtype=np.float64),
+            air_density=float(self.air_density),
+            wind=self.wind.copy(),
         )

@@ -26,6 +26,7 @@ class ControlData(NamedTuple):
     grab_target: np.ndarray  # (3,) where the grab spring pulls it [m]
     grab_stiffness: float  # [N/m]
     grab_damping: float  # [N s/m]
+    wind: np.ndarray  # (3,) air velocity [m/s], NaN = the model's wind
 
 
 @dataclass(eq=False)
@@ -61,6 +62,9 @@ class Control:
     """Grab spring stiffness [N/m]."""
     grab_damping: float = 0.0
     """Grab spring damping [N s/m] (on the particle's absolute velocity)."""
+    wind: np.ndarray | None = None
+    """Air velocity [m/s], shape (3,), for this call's drag (a gust); None keeps the
+    model's ``wind``."""
 
     @classmethod
     def neutral(cls, model: Model) -> Control:
@@ -130,6 +134,13 @@ class Control:
                 v = float(getattr(self, name))
                 if not (np.isfinite(v) and v >= 0):
                     raise ValueError(f"Control.{name} must be finite and >= 0")
+        if self.wind is None:
+            out.wind[:] = np.nan
+        else:
+            wind = arr("wind", self.wind, (3,))
+            if not np.all(np.isfinite(wind)):
+                raise ValueError("Control.wind must be 3 finite numbers [m/s] (None = the model's)")
+            np.copyto(out.wind, wind)
         return out._replace(
             pin_active=active,
             grab_particle=grab,
@@ -151,4 +162,5 @@ def control_data(model: Model) -> ControlData:
         grab_target=np.zeros(3),
         grab_stiffness=0.0,
         grab_damping=0.0,
+        wind=np.full(3, np.nan),
     )

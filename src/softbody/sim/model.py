@@ -60,6 +60,9 @@ class ModelData(NamedTuple):
     collider_motion_vector: np.ndarray
     collider_motion_pivot: np.ndarray
     collider_motion_frequency: np.ndarray
+    body_drag_coefficient: np.ndarray
+    air_density: float
+    wind: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -173,6 +176,13 @@ class Model:
     """Pivot of rotating colliders [m], shape (C, 3)."""
     collider_motion_frequency: np.ndarray
     """Frequency of oscillating colliders [Hz], shape (C,)."""
+    body_drag_coefficient: np.ndarray
+    """Aerodynamic drag coefficient C_d [1] of each body's faces, >= 0, shape (B,); 0
+    leaves the body out of the drag term (``core/terms/drag.hpp``)."""
+    air_density: float
+    """Density rho of the air the bodies move through [kg/m^3], >= 0."""
+    wind: np.ndarray
+    """Velocity of the air [m/s], shape (3,); ``Control.wind`` overrides it per call."""
     data: ModelData = field(init=False, repr=False)
     """The same arrays bundled for the compiled kernels."""
 
@@ -219,6 +229,11 @@ class Model:
     def pin_count(self) -> int:
         """Number of pinned particles P."""
         return int(self.pin_particle.shape[0])
+
+    @property
+    def has_drag(self) -> bool:
+        """Whether any face feels air drag: some body has C_d > 0 in air of density > 0."""
+        return bool(self.air_density > 0 and np.any(self.body_drag_coefficient > 0))
 
     def body_gas_law_of(self, body: int) -> GasLaw:
         """The gas law of ``body``."""

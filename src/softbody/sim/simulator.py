@@ -53,6 +53,26 @@ def step_count(steps) -> int:
     return n
 
 
+def _refuse_drag(model: Model, integrator: Integrator, threads: int) -> None:
+    """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit and
+    projective integrators, threads > 1, surface contacts) has no drag term, and dropping
+    a force silently would be wrong."""
+    if not model.has_drag:
+        return
+    if not integrator.explicit:
+        why = f"integrator {integrator.name.lower()}"
+    elif threads > 1:
+        why = f"threads={threads}"
+    else:
+        why = "surface soft contacts"
+    raise ValueError(
+        "aerodynamic drag is stepped by the explicit integrators only for now "
+        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet, with threads=1 and no "
+        f"surface soft contacts); this simulator has {why}. Set drag_coefficient=0 on "
+        "every body or air density 0 to run it without drag"
+    )
+
+
 class Simulator:
     """Steps a :class:`Model`'s states forward in time.
 
@@ -101,6 +121,10 @@ class Simulator:
 
     A step that blows up raises :class:`SimulationError` naming the body or particle, the
     step and the time; the state is left at the last good step.
+
+    Air drag on faces (``drag_coefficient`` > 0) is stepped by the explicit integrators
+    with ``threads=1`` and no surface soft contacts; any other set-up with drag raises a
+    ``ValueError`` rather than leave the drag out.
     """
 
     def __init__(
@@ -192,6 +216,7 @@ class Simulator:
         if self.integrator.explicit and self.threads == 1 and model.soft_contact_mode != 2:
             self._core = _core.ExplicitSolver(core_model(model))
         else:
+            _refuse_drag(model, self.integrator, self.threads)
             _kernel_cache.ensure_compiled()
         self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
