@@ -130,6 +130,97 @@ def test_built_in_scenes_match_the_numba_loop(scene):
     np.testing.assert_allclose(a.particle_qd, b.particle_qd, rtol=0, atol=tol * 1e3)
 
 
+def _surface_model(cloth: bool) -> sb.Model:
+    """Surface soft contacts: two balls meeting head on at +-2 m/s from 2 cm apart, or
+    (``cloth``) a falling ball hitting a cloth pinned at its corners, at 3 m/s."""
+    b = sb.ModelBuilder(gravity=(0.0, 0.0, -9.81) if cloth else (0.0, 0.0, 0.0))
+    b.set_soft_contact("surface", restitution=0.5, friction=0.3)
+    if cloth:
+        b.add_cloth(sb.rectangle((1.0, 1.0), (8, 8)), mass=0.5, stiffness=300.0, damping=0.2,
+                    pinned=[0, 8, 72, 80])  # fmt: skip
+        centers, velocities = [(0.05, -0.03, 0.27)], [(0.0, 0.0, -3.0)]
+    else:
+        centers, velocities = [(-0.31, 0.0, 0.0), (0.31, 0.02, 0.0)], [(2, 0, 0), (-2, 0, 0)]
+    for center, velocity in zip(centers, velocities, strict=True):
+        b.add_soft_body(sb.icosphere(2, radius=0.3 if not cloth else 0.25, center=center),
+                        mass=1.0, stiffness=400.0, damping=0.5, gas=40.0,
+                        velocity=velocity)  # fmt: skip
+    return b.finalize()
+
+
+@pytest.mark.parametrize("cloth", [False, True], ids=["two-balls", "ball-on-cloth"])
+@pytest.mark.parametrize("integrator", EXPLICIT)
+def test_surface_contacts_match_the_numba_loop(integrator, cloth):
+    """Surface soft contacts (vertex against triangle, through the spatial hash), each
+    scheme: positions and velocities equal the Numba loop's over 150 steps, to round-off.
+    The contacts act: the moving ball's momentum along its motion falls (without them it
+    would stay, or grow under gravity)."""
+    model = _surface_model(cloth)
+    runs = [_run(model, integrator, 2e-4, use_core=c) for c in (True, False)]
+    (a, error_a), (b, error_b) = runs
+    assert error_a is None and error_b is None
+    tol = _tolerance(b, STEPS)
+    np.testing.assert_allclose(a.particle_q, b.particle_q, rtol=0, atol=tol)
+    np.testing.assert_allclose(a.particle_qd, b.particle_qd, rtol=0, atol=tol)
+    ball = slice(*model.body_particle_range[-1])
+    axis = 2 if cloth else 0
+    start = (model.particle_mass[ball] * model.particle_qd[ball, axis]).sum()
+    end = (model.particle_mass[ball] * b.particle_qd[ball, axis]).sum()
+    assert abs(end) < 0.9 * abs(start)
+
+
+def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
+    """A solver whose spatial hash holds 1 entry stops at the first contact step with
+    NEED_HASH (the step undone), is rebuilt with twice the entries needed and goes on: the
+    run equals one with the default room, to the last bit (no term here depends on the
+    restarted call's time origin), and the Numba loop's with the same small start."""
+    from softbody.integrators.workspace import Workspace
+
+    model = _surface_model(cloth=False)
+    runs = []
+    for use_core in (True, True, False):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sb.StabilityWarning)
+            sim = sb.Simulator(model, integrator="midpoint", dt=2e-4)
+        if use_core and runs:
+            sim._core = _core.ExplicitSolver(core_model(model), hash_capacity=1)
+        elif not use_core:
+            sim._core = None
+            sim._work = Workspace.for_model(model, hash_capacity=1)
+        state = model.state()
+        sim.run(state, STEPS)
+        runs.append((state, sim))
+    (big, big_sim), (small, small_sim), (numba, numba_sim) = runs
+    assert big_sim._core.hash_capacity == 8 * model.tri_count
+    assert small_sim._core.hash_capacity > 1
+    assert numba_sim._work.hash_entries.shape[0] == small_sim._core.hash_capacity
+    assert small.step_count == big.step_count == STEPS
+    np.testing.assert_array_equal(small.particle_q, big.particle_q)
+    np.testing.assert_array_equal(small.particle_qd, big.particle_qd)
+    tol = _tolerance(numba, STEPS)
+    np.testing.assert_allclose(small.particle_q, numba.particle_q, rtol=0, atol=tol)
+
+
+def test_a_solver_reports_the_hash_room_it_needs():
+    """One step of the balls already touching with a 1-entry hash: NEED_HASH (6), no step
+    done, the needed entry count as the value, and the state as it was."""
+    model = _surface_model(cloth=False)
+    state = model.state()
+    shift = np.zeros_like(state.particle_q)
+    shift[slice(*model.body_particle_range[0]), 0] = 0.03  # 1 cm into the other ball
+    state.particle_q += shift
+    before = state.particle_q.copy(), state.particle_qd.copy()
+    solver = _core.ExplicitSolver(core_model(model), hash_capacity=1)
+    status, done, where, needed = solver.simulate(
+        1, 5, 0.0, 2e-4, control_data(model), state.particle_q, state.particle_qd,
+        state.collider_q, state.collider_rotation, state.collider_impulse, 1e4, 1e-3, 1e3,
+    )  # fmt: skip
+    assert (status, done, where) == (6, 0, -1)
+    assert model.tri_count <= needed <= 8 * model.tri_count
+    np.testing.assert_array_equal(state.particle_q, before[0])
+    np.testing.assert_array_equal(state.particle_qd, before[1])
+
+
 def test_a_blow_up_stops_at_the_same_step_with_the_same_reason():
     """A ball far above its stable step blows up at the same step, for the same body or
     particle and reason, in the core and in the Numba loop; the state is the last good
@@ -219,6 +310,14 @@ def test_the_core_refuses_inconsistent_model_arrays():
         _core.Model(bad)
     bad = model.data._replace(tri_indices=model.tri_indices.astype(np.int32))
     with pytest.raises(ValueError, match="tri_indices must be a C-contiguous int64 array"):
+        _core.Model(bad)
+    with pytest.raises(ValueError, match="hash_capacity must be >= 0"):
+        _core.ExplicitSolver(core_model(model), hash_capacity=-1)
+    bad = model.data._replace(soft_contact_mode=2, contact_cell_size=0.0)
+    with pytest.raises(ValueError, match="contact_cell_size must be finite and > 0"):
+        _core.Model(bad)
+    bad = model.data._replace(soft_contact_mode=2, contact_margin=float("nan"))
+    with pytest.raises(ValueError, match="contact_margin must be finite and >= 0"):
         _core.Model(bad)
     solver = _core.ExplicitSolver(core_model(model))
     state = model.state()

@@ -210,10 +210,10 @@ class Simulator:
             )
         self.threads = int(threads)
         # the explicit schemes step in the compiled C++ core; the rest (implicit and
-        # projective solvers, surface contacts, threads) still in the Numba kernels, which
-        # compile on first use (softbody._kernel_cache)
+        # projective solvers, threads) still in the Numba kernels, which compile on first
+        # use (softbody._kernel_cache)
         self._core = None
-        if self.integrator.explicit and self.threads == 1 and model.soft_contact_mode != 2:
+        if self.integrator.explicit and self.threads == 1:
             self._core = _core.ExplicitSolver(core_model(model))
         else:
             _refuse_drag(model, self.integrator, self.threads)
@@ -387,9 +387,14 @@ class Simulator:
             if status == _loop.NEED_HASH:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
-                self._work = Workspace.for_model(
-                    model, hash_capacity=int(2 * value), chunk_count=self.threads
-                )
+                if self._core is not None:
+                    self._core = _core.ExplicitSolver(
+                        core_model(model), hash_capacity=int(2 * value)
+                    )
+                else:
+                    self._work = Workspace.for_model(
+                        model, hash_capacity=int(2 * value), chunk_count=self.threads
+                    )
                 self._history = None  # the undone step overwrote BDF2's previous step
                 continue
             if status != _loop.OK:
