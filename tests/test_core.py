@@ -273,12 +273,16 @@ def test_forces_and_jacobian_products_match_the_numba_kernels():
     np.testing.assert_allclose(out, out_ref, rtol=0, atol=1e-12 * np.abs(out_ref).max())
 
 
-def test_every_instruction_set_gives_the_same_run():
+@pytest.mark.parametrize("contacts", ["bounding", "surface"])
+def test_every_instruction_set_gives_the_same_run(contacts):
     """The scalar, AVX2 and AVX-512 builds of the kernels (those this CPU runs) give the
     same trajectory to round-off; the scalar path is always there."""
     paths = core.simd_paths()
     assert paths[0] == "scalar"
-    model, control = _everything_model()
+    if contacts == "bounding":
+        model, control = _everything_model()
+    else:
+        model, control = _surface_model(cloth=True), None
     before = core.simd_path()
     runs = {}
     try:
