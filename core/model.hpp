@@ -117,6 +117,13 @@ struct ContactBuffers {
     double* collider_q_start = nullptr;  // (C, 3)
     double* collider_v = nullptr;        // (C, 3)
     double* collider_w = nullptr;        // (C, 3)
+    // Surface contacts' spatial hash of triangle boxes (soft_contact_mode 2): bucket h holds
+    // hash_entries[hash_start[h] .. hash_start[h + 1]); H is a power of two >= 2 T.
+    index hash_table = 0;         // H
+    index hash_capacity = 0;      // E, the entries the buffer holds
+    index* hash_start = nullptr;  // (H + 1,)
+    index* hash_count = nullptr;  // (H,)
+    index* hash_entries = nullptr;  // (E,) triangle indices
 };
 
 /// Scratch for the explicit schemes, owned by softbody::ExplicitSolver.

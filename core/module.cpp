@@ -2,11 +2,13 @@
 // solver set-up); these objects hold views of its NumPy arrays, check them once, and step.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -200,6 +202,15 @@ private:
         check_indices(m.collider_motion, m.collider_count, 0, 4, "collider_motion");
         if (m.soft_contact_mode < 0 || m.soft_contact_mode > 2)
             fail("soft_contact_mode must be 0, 1 or 2");
+        if (m.soft_contact_mode == 2) {
+            // the surface contacts' grid: cells of a positive, finite size
+            if (!(std::isfinite(m.contact_cell_size) && m.contact_cell_size > 0.0))
+                fail("contact_cell_size must be finite and > 0, got " +
+                     std::to_string(m.contact_cell_size));
+            if (!(std::isfinite(m.contact_margin) && m.contact_margin >= 0.0))
+                fail("contact_margin must be finite and >= 0, got " +
+                     std::to_string(m.contact_margin));
+        }
         check_drag();
     }
 
@@ -271,10 +282,20 @@ F64 writable(nb::handle h, const char* name, const std::vector<Index>& shape) {
     return a;
 }
 
-/// A solver's scratch, allocated once: (N, 3) rows and per-body and per-collider arrays.
+/// Buckets of the surface contacts' spatial hash for T triangles: the smallest power of two
+/// >= 2 T, at least 16 (as softbody.integrators.workspace.Workspace.for_model sizes it).
+Index hash_table_size(Index tris) {
+    Index table = 16;
+    while (table < 2 * std::max<Index>(tris, 1)) table <<= 1;
+    return table;
+}
+
+/// A solver's scratch, allocated once: (N, 3) rows, per-body and per-collider arrays, and
+/// for surface soft contacts (soft_contact_mode 2) the spatial hash with room for
+/// `hash_capacity` entries.
 class Buffers {
 public:
-    explicit Buffers(const softbody::Model& m, int rows) {
+    explicit Buffers(const softbody::Model& m, int rows, Index hash_capacity = 0) {
         const size_t n3 = static_cast<size_t>(3 * m.particle_count);
         const size_t b = static_cast<size_t>(m.body_count), c = static_cast<size_t>(m.collider_count);
         rows_.assign(static_cast<size_t>(rows), std::vector<double>(n3, 0.0));
@@ -296,6 +317,17 @@ public:
         contact.collider_q_start = per_collider_[0].data();
         contact.collider_v = per_collider_[1].data();
         contact.collider_w = per_collider_[2].data();
+        if (m.soft_contact_mode == 2) {
+            const Index table = hash_table_size(m.tri_count);
+            hash_start_.assign(static_cast<size_t>(table + 1), 0);
+            hash_count_.assign(static_cast<size_t>(table), 0);
+            hash_entries_.assign(static_cast<size_t>(hash_capacity), 0);
+            contact.hash_table = table;
+            contact.hash_capacity = hash_capacity;
+            contact.hash_start = hash_start_.data();
+            contact.hash_count = hash_count_.data();
+            contact.hash_entries = hash_entries_.data();
+        }
     }
     double* row(int k) { return rows_[static_cast<size_t>(k)].data(); }
     softbody::BodyGas gas;
@@ -304,13 +336,16 @@ public:
 private:
     std::vector<std::vector<double>> rows_, per_body_, per_collider_;
     std::vector<double> gradient_;
+    std::vector<Index> hash_start_, hash_count_, hash_entries_;
 };
 
 /// softbody._core.ExplicitSolver: the explicit schemes' time loop and its scratch.
 class ExplicitSolver {
 public:
-    explicit ExplicitSolver(nb::object model)
-        : handle_(model), model_(nb::cast<const CoreModel&>(model)), buffers_(model_.model(), 7) {
+    ExplicitSolver(nb::object model, std::optional<Index> hash_capacity)
+        : handle_(model),
+          model_(nb::cast<const CoreModel&>(model)),
+          buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)) {
         w_.f = buffers_.row(0);
         w_.q0 = buffers_.row(1);
         w_.v0 = buffers_.row(2);
@@ -332,7 +367,6 @@ public:
         if (scheme < 0 || scheme > 4) fail("scheme must be an explicit Integrator (0-4)");
         if (steps < 0) fail("steps must be >= 0");
         if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
-        if (m.soft_contact_mode == 2) fail("surface soft contacts are not in the C++ core yet");
         CoreControl c(m, control);
         F64 aq = writable(q, "q", {m.particle_count, 3});
         F64 aqd = writable(qd, "qd", {m.particle_count, 3});
@@ -356,7 +390,18 @@ public:
         return {r.status, r.steps_done, r.where, r.value};
     }
 
+    Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+
 private:
+    /// Entries of the surface contacts' hash: as asked, by default 8 per triangle (room for
+    /// triangles up to a cell across); 0 without surface contacts.
+    static Index checked_capacity(const softbody::Model& m, std::optional<Index> asked) {
+        if (asked && *asked < 0)
+            fail("hash_capacity must be >= 0, got " + std::to_string(*asked));
+        if (m.soft_contact_mode != 2) return 0;
+        return asked ? *asked : 8 * m.tri_count;
+    }
+
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
     const CoreModel& model_;
     Buffers buffers_;
@@ -500,7 +545,12 @@ NB_MODULE(_core, mod) {
 
     nb::class_<ExplicitSolver>(mod, "ExplicitSolver",
                                "The explicit schemes' time loop with its scratch buffers.")
-        .def(nb::init<nb::object>(), nb::arg("model"))
+        .def(nb::init<nb::object, std::optional<Index>>(), nb::arg("model"),
+             nb::arg("hash_capacity") = nb::none(),
+             "hash_capacity: entries of the surface contacts' spatial hash (default 8 per "
+             "triangle); a run that needs more returns NEED_HASH with the count needed.")
+        .def_prop_ro("hash_capacity", &ExplicitSolver::hash_capacity,
+                     "Entries the surface contacts' spatial hash holds (0 without them).")
         .def("simulate", &ExplicitSolver::simulate, nb::arg("scheme"), nb::arg("steps"),
              nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
              nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),

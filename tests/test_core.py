@@ -130,6 +130,112 @@ def test_built_in_scenes_match_the_numba_loop(scene):
     np.testing.assert_allclose(a.particle_qd, b.particle_qd, rtol=0, atol=tol * 1e3)
 
 
+def _surface_model(cloth: bool) -> sb.Model:
+    """Surface soft contacts: two balls meeting head on at +-2 m/s from 2 cm apart, or
+    (``cloth``) a falling ball hitting a cloth pinned at its corners, at 3 m/s."""
+    b = sb.ModelBuilder(gravity=(0.0, 0.0, -9.81) if cloth else (0.0, 0.0, 0.0))
+    b.set_soft_contact("surface", restitution=0.5, friction=0.3)
+    if cloth:
+        b.add_cloth(sb.rectangle((1.0, 1.0), (8, 8)), mass=2.0, stiffness=2000.0, damping=0.5,
+                    pinned=[0, 8, 72, 80])  # fmt: skip
+        centers, velocities = [(0.05, -0.03, 0.27)], [(0.0, 0.0, -3.0)]
+    else:
+        centers, velocities = [(-0.31, 0.0, 0.0), (0.31, 0.02, 0.0)], [(2, 0, 0), (-2, 0, 0)]
+    for center, velocity in zip(centers, velocities, strict=True):
+        b.add_soft_body(sb.icosphere(2, radius=0.3 if not cloth else 0.25, center=center),
+                        mass=1.0, stiffness=400.0, damping=0.5, gas=40.0,
+                        velocity=velocity)  # fmt: skip
+    return b.finalize()
+
+
+@pytest.mark.parametrize("cloth", [False, True], ids=["two-balls", "ball-on-cloth"])
+@pytest.mark.parametrize("integrator", EXPLICIT)
+def test_surface_contacts_match_the_numba_loop(integrator, cloth):
+    """Surface soft contacts (vertex against triangle, through the spatial hash), each
+    scheme: positions and velocities equal the Numba loop's over 150 steps, to round-off.
+    The contacts act: the last ball's momentum along its motion ends at least 10 % away
+    from the free fall's p0 + M g t."""
+    model = _surface_model(cloth)
+    runs = [_run(model, integrator, 2e-4, use_core=c) for c in (True, False)]
+    (a, error_a), (b, error_b) = runs
+    assert error_a is None and error_b is None
+    tol = _tolerance(b, STEPS)
+    np.testing.assert_allclose(a.particle_q, b.particle_q, rtol=0, atol=tol)
+    np.testing.assert_allclose(a.particle_qd, b.particle_qd, rtol=0, atol=tol)
+    ball = slice(*model.body_particle_range[-1])
+    axis = 2 if cloth else 0
+    mass = model.particle_mass[ball]
+    start = (mass * model.particle_qd[ball, axis]).sum()
+    free = start + mass.sum() * model.gravity[axis] * b.time
+    end = (mass * b.particle_qd[ball, axis]).sum()
+    assert abs(end - free) > 0.1 * abs(start)
+
+
+def _surface_run(small_hash: bool, use_core: bool) -> tuple[sb.State, sb.Simulator]:
+    """150 midpoint steps of the two balls, the hash starting at 1 entry or at its default."""
+    from softbody.integrators.workspace import Workspace
+
+    model = _surface_model(cloth=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sb.StabilityWarning)
+        sim = sb.Simulator(model, integrator="midpoint", dt=2e-4)
+    if not use_core:
+        sim._core = None
+        if small_hash:
+            sim._work = Workspace.for_model(model, hash_capacity=1)
+    elif small_hash:
+        sim._core = _core.ExplicitSolver(core_model(model), hash_capacity=1)
+    state = model.state()
+    sim.run(state, STEPS)
+    return state, sim
+
+
+def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
+    """A solver whose spatial hash holds 1 entry stops at the first contact step with
+    NEED_HASH (the step undone), is rebuilt with twice the entries needed and goes on: the
+    run equals one with the default room (8 entries per triangle) to the last bit (no term
+    here depends on the restarted call's time origin)."""
+    (big, big_sim), (small, small_sim) = _surface_run(False, True), _surface_run(True, True)
+    assert big_sim._core.hash_capacity == 8 * big_sim.model.tri_count
+    assert small_sim._core.hash_capacity > 1
+    assert small.step_count == big.step_count == STEPS
+    np.testing.assert_array_equal(small.particle_q, big.particle_q)
+    np.testing.assert_array_equal(small.particle_qd, big.particle_qd)
+
+
+def test_a_too_small_contact_hash_grows_as_in_the_numba_loop():
+    """From a 1-entry hash the core and the Numba loop grow to the same room and end at
+    the same state, to round-off."""
+    (core_state, core_sim), (numba_state, numba_sim) = (
+        _surface_run(True, True),
+        _surface_run(True, False),
+    )
+    assert numba_sim._work.hash_entries.shape[0] == core_sim._core.hash_capacity
+    tol = _tolerance(numba_state, STEPS)
+    np.testing.assert_allclose(core_state.particle_q, numba_state.particle_q, rtol=0, atol=tol)
+    np.testing.assert_allclose(core_state.particle_qd, numba_state.particle_qd, rtol=0, atol=tol)
+
+
+def test_a_solver_reports_the_hash_room_it_needs():
+    """One step of the balls already touching with a 1-entry hash: NEED_HASH (6), no step
+    done, the needed entry count as the value, and the state as it was."""
+    model = _surface_model(cloth=False)
+    state = model.state()
+    shift = np.zeros_like(state.particle_q)
+    shift[slice(*model.body_particle_range[0]), 0] = 0.03  # 1 cm into the other ball
+    state.particle_q += shift
+    before = state.particle_q.copy(), state.particle_qd.copy()
+    solver = _core.ExplicitSolver(core_model(model), hash_capacity=1)
+    status, done, where, needed = solver.simulate(
+        1, 5, 0.0, 2e-4, control_data(model), state.particle_q, state.particle_qd,
+        state.collider_q, state.collider_rotation, state.collider_impulse, 1e4, 1e-3, 1e3,
+    )  # fmt: skip
+    assert (status, done, where) == (6, 0, -1)
+    assert model.tri_count <= needed <= 8 * model.tri_count
+    np.testing.assert_array_equal(state.particle_q, before[0])
+    np.testing.assert_array_equal(state.particle_qd, before[1])
+
+
 def test_a_blow_up_stops_at_the_same_step_with_the_same_reason():
     """A ball far above its stable step blows up at the same step, for the same body or
     particle and reason, in the core and in the Numba loop; the state is the last good
@@ -180,12 +286,16 @@ def test_forces_and_jacobian_products_match_the_numba_kernels():
     np.testing.assert_allclose(out, out_ref, rtol=0, atol=1e-12 * np.abs(out_ref).max())
 
 
-def test_every_instruction_set_gives_the_same_run():
+@pytest.mark.parametrize("contacts", ["bounding", "surface"])
+def test_every_instruction_set_gives_the_same_run(contacts):
     """The scalar, AVX2 and AVX-512 builds of the kernels (those this CPU runs) give the
     same trajectory to round-off; the scalar path is always there."""
     paths = core.simd_paths()
     assert paths[0] == "scalar"
-    model, control = _everything_model()
+    if contacts == "bounding":
+        model, control = _everything_model()
+    else:
+        model, control = _surface_model(cloth=True), None
     before = core.simd_path()
     runs = {}
     try:
@@ -219,6 +329,14 @@ def test_the_core_refuses_inconsistent_model_arrays():
         _core.Model(bad)
     bad = model.data._replace(tri_indices=model.tri_indices.astype(np.int32))
     with pytest.raises(ValueError, match="tri_indices must be a C-contiguous int64 array"):
+        _core.Model(bad)
+    with pytest.raises(ValueError, match="hash_capacity must be >= 0"):
+        _core.ExplicitSolver(core_model(model), hash_capacity=-1)
+    bad = model.data._replace(soft_contact_mode=2, contact_cell_size=0.0)
+    with pytest.raises(ValueError, match="contact_cell_size must be finite and > 0"):
+        _core.Model(bad)
+    bad = model.data._replace(soft_contact_mode=2, contact_margin=float("nan"))
+    with pytest.raises(ValueError, match="contact_margin must be finite and >= 0"):
         _core.Model(bad)
     solver = _core.ExplicitSolver(core_model(model))
     state = model.state()

@@ -1,9 +1,14 @@
-// Soft body against soft body with the paper's bounding objects (section 3.5): bodies whose
-// bounding boxes overlap are tested vertex by vertex against the other body's bounding box,
-// sphere or ellipsoid, fitted each step. A vertex inside moves out to the surface; its
-// velocity relative to the other body's mean velocity is reflected (restitution, friction),
-// and the opposite impulse goes to the other body, spread over its particles by mass, so
-// momentum is conserved. Port of softbody.collision.soft (the ``bounding`` mode).
+// Soft body against soft body, port of softbody.collision.soft. Two modes:
+// - bounding (the paper, section 3.5): bodies whose bounding boxes overlap are tested vertex
+//   by vertex against the other body's bounding box, sphere or ellipsoid, fitted each step.
+//   A vertex inside moves out to the surface; its velocity relative to the other body's mean
+//   velocity is reflected (restitution, friction), and the opposite impulse goes to the other
+//   body, spread over its particles by mass, so momentum is conserved.
+// - surface (beyond the paper): vertices against the other body's triangles, found through a
+//   spatial hash of triangle boxes. A vertex behind the nearest triangle (within the contact
+//   margin) is separated from it by a mass-weighted correction shared with the triangle's
+//   corners by barycentric weight, and the same weighting applies the normal (restitution)
+//   and tangential (friction) impulses: momentum is conserved.
 #pragma once
 
 #include "model.hpp"
@@ -154,6 +159,212 @@ inline void contacts_bounding(const Model& m, double* q, double* qd, const Conta
         for (index i = m.body_particle_range[2 * b]; i < m.body_particle_range[2 * b + 1]; ++i)
             if (m.particle_inv_mass[i] > 0.0) add_to(qd, i, dv);
     }
+}
+
+/// Closest point on triangle (a, b, c) to p, with its barycentric weights (wa, wb, wc).
+struct TrianglePoint {
+    V3 x;
+    double wa, wb, wc;
+};
+
+/// The closest point to p on triangle (a, b, c) by Voronoi regions (Ericson, Real-Time
+/// Collision Detection, 5.1.5).
+inline TrianglePoint closest_point_on_triangle(V3 p, V3 a, V3 b, V3 c) {
+    const V3 ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0.0 && d2 <= 0.0) return {a, 1.0, 0.0, 0.0};
+    const V3 bp = p - b;
+    const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0.0 && d4 <= d3) return {b, 0.0, 1.0, 0.0};
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {  // on edge ab
+        const double v = d1 / (d1 - d3);
+        return {a + v * ab, 1.0 - v, v, 0.0};
+    }
+    const V3 cp = p - c;
+    const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0.0 && d5 <= d6) return {c, 0.0, 0.0, 1.0};
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {  // on edge ac
+        const double w = d2 / (d2 - d6);
+        return {a + w * ac, 1.0 - w, 0.0, w};
+    }
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {  // on edge bc
+        const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return {b + w * (c - b), 0.0, 1.0 - w, w};
+    }
+    const double denom = 1.0 / (va + vb + vc);  // inside the face
+    const double v = vb * denom, w = vc * denom;
+    return {a + v * ab + w * ac, 1.0 - v - w, v, w};
+}
+
+/// floor(v) as a grid cell index. NaN and values outside int64 give INT64_MIN, what the
+/// x86 conversion the Numba kernels compile to gives (a plain cast would be undefined).
+inline index cell_of(double v) {
+    const double f = std::floor(v);
+    if (!(f >= -9223372036854775808.0 && f < 9223372036854775808.0))
+        return std::numeric_limits<index>::min();
+    return static_cast<index>(f);
+}
+
+/// Bucket in [0, table) of grid cell (ix, iy, iz): the usual three-prime hash with
+/// wrap-around int64 products (as the Numba kernels compute them), then a non-negative
+/// modulo (Python's).
+inline index cell_hash(index ix, index iy, index iz, index table) {
+    auto times = [](index a, std::uint64_t prime) {
+        return static_cast<index>(static_cast<std::uint64_t>(a) * prime);
+    };
+    const index h = times(ix, 73856093u) ^ times(iy, 19349663u) ^ times(iz, 83492791u);
+    const index r = h % table;
+    return r < 0 ? r + table : r;
+}
+
+/// First and last grid cell covered by [min(a, b, c) - margin, max(a, b, c) + margin]
+/// (inv = 1 / cell size).
+inline void cell_range(double a, double b, double c, double margin, double inv, index& lo,
+                       index& hi) {
+    lo = cell_of((std::min(std::min(a, b), c) - margin) * inv);
+    hi = cell_of((std::max(std::max(a, b), c) + margin) * inv);
+}
+
+/// Spatial hash of the triangles' boxes (grown by the contact margin) on the contact grid
+/// into w.hash_*. Counts the entries first; returns that count, and stores nothing when it
+/// exceeds w.hash_capacity (the caller grows the buffer). Every bucket index is reduced
+/// modulo w.hash_table and every entry index is below the count, so nothing is written
+/// outside the buffers.
+inline index build_triangle_hash(const Model& m, const double* q, const ContactBuffers& w) {
+    const index table = w.hash_table;
+    for (index h = 0; h < table; ++h) w.hash_count[h] = 0;
+    const double inv = 1.0 / m.contact_cell_size, margin = m.contact_margin;
+    index total = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+        if (pass == 1) {
+            if (total > w.hash_capacity) return total;
+            w.hash_start[0] = 0;
+            for (index h = 0; h < table; ++h) {
+                w.hash_start[h + 1] = w.hash_start[h] + w.hash_count[h];
+                w.hash_count[h] = 0;
+            }
+        }
+        for (index t = 0; t < m.tri_count; ++t) {
+            const index* tri = m.tri_indices + 3 * t;
+            const V3 a = load(q, tri[0]), b = load(q, tri[1]), c = load(q, tri[2]);
+            index x0, x1, y0, y1, z0, z1;
+            cell_range(a.x, b.x, c.x, margin, inv, x0, x1);
+            cell_range(a.y, b.y, c.y, margin, inv, y0, y1);
+            cell_range(a.z, b.z, c.z, margin, inv, z0, z1);
+            for (index ix = x0; ix <= x1; ++ix)
+                for (index iy = y0; iy <= y1; ++iy)
+                    for (index iz = z0; iz <= z1; ++iz) {
+                        const index h = cell_hash(ix, iy, iz, table);
+                        if (pass == 0) {
+                            ++w.hash_count[h];
+                            ++total;
+                        } else {
+                            w.hash_entries[w.hash_start[h] + w.hash_count[h]] = t;
+                            ++w.hash_count[h];
+                        }
+                    }
+        }
+    }
+    return total;
+}
+
+/// Whether any two bodies' bounds, grown by the margin, overlap (w.body_lo, body_hi).
+inline bool any_bodies_near(const Model& m, const ContactBuffers& w) {
+    bool any = false;
+    for (index a = 0; a < m.body_count; ++a)
+        for (index b = a + 1; b < m.body_count; ++b) {
+            bool near = true;
+            for (int k = 0; k < 3; ++k)
+                if (w.body_hi[3 * a + k] + m.contact_margin < w.body_lo[3 * b + k] ||
+                    w.body_hi[3 * b + k] + m.contact_margin < w.body_lo[3 * a + k])
+                    near = false;
+            any = any || near;
+        }
+    return any;
+}
+
+/// The nearest triangle of another body than `body` within the contact margin of p, from
+/// p's hash bucket; -1 if none. Fills `point` with the closest point on it.
+inline index nearest_triangle(const Model& m, const double* q, const ContactBuffers& w, V3 p,
+                              index body, double inv, TrianglePoint& point) {
+    const double margin = m.contact_margin;
+    const index h = cell_hash(cell_of(p.x * inv), cell_of(p.y * inv), cell_of(p.z * inv),
+                              w.hash_table);
+    double best = margin * margin;
+    index best_t = -1;
+    for (index e = w.hash_start[h]; e < w.hash_start[h + 1]; ++e) {
+        const index t = w.hash_entries[e];
+        const index b = m.tri_body[t];
+        if (b == body) continue;
+        const double* lo = w.body_lo + 3 * b;
+        const double* hi = w.body_hi + 3 * b;
+        const bool inside_box = lo[0] - margin <= p.x && p.x <= hi[0] + margin &&
+                                lo[1] - margin <= p.y && p.y <= hi[1] + margin &&
+                                lo[2] - margin <= p.z && p.z <= hi[2] + margin;
+        if (!inside_box) continue;
+        const index* tri = m.tri_indices + 3 * t;
+        const TrianglePoint c =
+            closest_point_on_triangle(p, load(q, tri[0]), load(q, tri[1]), load(q, tri[2]));
+        const V3 d = p - c.x;
+        const double d2 = d.x * d.x + d.y * d.y + d.z * d.z;
+        if (d2 < best) {
+            best = d2;
+            best_t = t;
+            point = c;
+        }
+    }
+    return best_t;
+}
+
+/// The surface contacts of the whole model; q, qd (N, 3) change in place. Returns 0, or the
+/// hash entries needed when w.hash_capacity is too small (then nothing was resolved).
+inline index contacts_surface(const Model& m, double* q, double* qd, const ContactBuffers& w) {
+    body_motion(m, q, qd, w);
+    if (!any_bodies_near(m, w)) return 0;
+    const index needed = build_triangle_hash(m, q, w);
+    if (needed > w.hash_capacity) return needed;
+    const double inv = 1.0 / m.contact_cell_size;
+    const double keep = 1.0 - m.soft_contact_friction;
+    for (index a = 0; a < m.body_count; ++a)
+        for (index i = m.body_particle_range[2 * a]; i < m.body_particle_range[2 * a + 1]; ++i) {
+            const V3 p = load(q, i);
+            TrianglePoint c{{0.0, 0.0, 0.0}, 0.0, 0.0, 0.0};
+            const index t = nearest_triangle(m, q, w, p, a, inv, c);
+            if (t < 0) continue;
+            const index i0 = m.tri_indices[3 * t], i1 = m.tri_indices[3 * t + 1],
+                        i2 = m.tri_indices[3 * t + 2];
+            V3 n = cross(load(q, i1) - load(q, i0), load(q, i2) - load(q, i0));
+            const double nn = std::sqrt(dot(n, n));
+            if (nn == 0.0) continue;  // a degenerate triangle has no normal
+            n = {n.x / nn, n.y / nn, n.z / nn};
+            const double depth = dot(p - c.x, n);
+            if (depth >= 0.0) continue;  // outside the other body
+            const double w0 = m.particle_inv_mass[i0], w1 = m.particle_inv_mass[i1],
+                         w2 = m.particle_inv_mass[i2], wp = m.particle_inv_mass[i];
+            const double weight = wp + c.wa * c.wa * w0 + c.wb * c.wb * w1 + c.wc * c.wc * w2;
+            if (weight == 0.0) continue;  // all pinned
+            const index corner[3] = {i0, i1, i2};
+            const double corner_w[3] = {w0, w1, w2}, bary[3] = {c.wa, c.wb, c.wc};
+            // positions: separate along the triangle normal, shared by inverse mass
+            const double lam = -depth / weight;
+            add_to(q, i, (lam * wp) * n);
+            for (int k = 0; k < 3; ++k) add_to(q, corner[k], -((lam * corner_w[k] * bary[k]) * n));
+            // velocities: normal impulse (restitution) and tangential (friction)
+            const V3 rv = load(qd, i) - (c.wa * load(qd, i0) + c.wb * load(qd, i1) +
+                                         c.wc * load(qd, i2));
+            const double vn = dot(rv, n);
+            if (vn >= 0.0) continue;  // separating already
+            const V3 tangent = rv - vn * n;
+            const double jn = -(1.0 + m.soft_contact_restitution) * vn / weight;
+            const double jt = -(1.0 - keep) / weight;
+            const V3 j = jn * n + jt * tangent;
+            add_to(qd, i, wp * j);
+            for (int k = 0; k < 3; ++k) add_to(qd, corner[k], -((corner_w[k] * bary[k]) * j));
+        }
+    return 0;
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::soft

@@ -61,21 +61,27 @@ inline void begin_run(const Model& m, const Control& c, const RunParams& p, cons
 }
 
 /// Contacts at the end of step `step` (of p.steps, ending at time t [s]); q_start (N, 3) is
-/// the step's start positions (continuous collider detection). Surface soft contacts
-/// (soft_contact_mode 2) are not in this core yet: the Python side keeps such models on the
-/// Numba loop.
-inline void contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
-                     const StateView& s, const double* q_start, const ContactBuffers& w) {
+/// the step's start positions (continuous collider detection). Returns 0, or the spatial-hash
+/// entries surface soft contacts need when w.hash_capacity is too small: then the colliders
+/// have moved but no contact was resolved, and the caller undoes the step.
+inline index contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
+                      const StateView& s, const double* q_start, const ContactBuffers& w) {
     if (m.collider_count > 0) {
         const double fraction = (static_cast<double>(step) + 1.0) / static_cast<double>(p.steps);
         colliders::poses(m, c, fraction, static_cast<double>(p.steps) * p.dt, t,
                          w.collider_q_start, s.collider_q, s.collider_rot, w.collider_v,
                          w.collider_w);
     }
-    if (m.soft_contact_mode == 1) soft::contacts_bounding(m, s.q, s.qd, w);
+    if (m.soft_contact_mode == 1) {
+        soft::contacts_bounding(m, s.q, s.qd, w);
+    } else if (m.soft_contact_mode == 2) {
+        const index needed = soft::contacts_surface(m, s.q, s.qd, w);
+        if (needed > 0) return needed;
+    }
     if (m.collider_count > 0)
         colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
                             s.q, s.qd, s.collider_impulse);
+    return 0;
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::loop

@@ -112,6 +112,7 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
 
 /// Advance s.q, s.qd by p.steps steps of p.dt from p.t0. On a particle failure the state goes
 /// back to the failing step's start; on a volume failure it is the state whose volume failed.
+/// NEED_HASH (value: the entries needed) also leaves the state at the failing step's start.
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const ExplicitBuffers& w) {
     const index n3 = 3 * m.particle_count;
@@ -127,7 +128,12 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
             return r;
         }
         step(m, c, p.scheme, t, p.dt, s.q, s.qd, w);
-        loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact);
+        const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact);
+        if (needed > 0) {  // the hash is too small: undo the step, the caller grows it
+            loop::copy(w.q0, s.q, n3);
+            loop::copy(w.v0, s.qd, n3);
+            return {NEED_HASH, step_index, -1, static_cast<double>(needed)};
+        }
         r = loop::check_particles(m, s.q, s.qd, p.max_speed);
         if (r.status != OK) {
             loop::copy(w.q0, s.q, n3);

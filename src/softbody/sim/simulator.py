@@ -55,21 +55,16 @@ def step_count(steps) -> int:
 
 def _refuse_drag(model: Model, integrator: Integrator, threads: int) -> None:
     """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit and
-    projective integrators, threads > 1, surface contacts) has no drag term, and dropping
-    a force silently would be wrong."""
+    projective integrators, threads > 1) has no drag term, and dropping a force silently
+    would be wrong."""
     if not model.has_drag:
         return
-    if not integrator.explicit:
-        why = f"integrator {integrator.name.lower()}"
-    elif threads > 1:
-        why = f"threads={threads}"
-    else:
-        why = "surface soft contacts"
+    why = f"threads={threads}" if integrator.explicit else f"integrator {integrator.name.lower()}"
     raise ValueError(
         "aerodynamic drag is stepped by the explicit integrators only for now "
-        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet, with threads=1 and no "
-        f"surface soft contacts); this simulator has {why}. Set drag_coefficient=0 on "
-        "every body or air density 0 to run it without drag"
+        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet, with threads=1); this "
+        f"simulator has {why}. Set drag_coefficient=0 on every body or air density 0 to "
+        "run it without drag"
     )
 
 
@@ -123,8 +118,8 @@ class Simulator:
     step and the time; the state is left at the last good step.
 
     Air drag on faces (``drag_coefficient`` > 0) is stepped by the explicit integrators
-    with ``threads=1`` and no surface soft contacts; any other set-up with drag raises a
-    ``ValueError`` rather than leave the drag out.
+    with ``threads=1``; any other set-up with drag raises a ``ValueError`` rather than
+    leave the drag out.
     """
 
     def __init__(
@@ -210,10 +205,10 @@ class Simulator:
             )
         self.threads = int(threads)
         # the explicit schemes step in the compiled C++ core; the rest (implicit and
-        # projective solvers, surface contacts, threads) still in the Numba kernels, which
-        # compile on first use (softbody._kernel_cache)
+        # projective solvers, threads) still in the Numba kernels, which compile on first
+        # use (softbody._kernel_cache)
         self._core = None
-        if self.integrator.explicit and self.threads == 1 and model.soft_contact_mode != 2:
+        if self.integrator.explicit and self.threads == 1:
             self._core = _core.ExplicitSolver(core_model(model))
         else:
             _refuse_drag(model, self.integrator, self.threads)
@@ -387,9 +382,14 @@ class Simulator:
             if status == _loop.NEED_HASH:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
-                self._work = Workspace.for_model(
-                    model, hash_capacity=int(2 * value), chunk_count=self.threads
-                )
+                if self._core is not None:
+                    self._core = _core.ExplicitSolver(
+                        core_model(model), hash_capacity=int(2 * value)
+                    )
+                else:
+                    self._work = Workspace.for_model(
+                        model, hash_capacity=int(2 * value), chunk_count=self.threads
+                    )
                 self._history = None  # the undone step overwrote BDF2's previous step
                 continue
             if status != _loop.OK:
