@@ -18,8 +18,8 @@ RunResult simulate_explicit(const Model& m, const Control& c, const RunParams& p
 }
 
 void eval_forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
-                 const BodyGas& gas, double* f) {
-    explicit_solver::eval_forces(m, c, t, q, qd, gas, f);
+                 const BodyGas& gas, const LaneBuffers& lanes, double* f) {
+    explicit_solver::eval_forces(m, c, t, q, qd, gas, lanes, f);
 }
 
 void eval_gas(const Model& m, const Control& c, double t, const double* q, const BodyGas& gas) {

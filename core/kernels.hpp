@@ -16,7 +16,8 @@ struct KernelTable {
                                    const StateView&, const ExplicitBuffers&);
     /// All forces f (N, 3) [N] at time t for q, qd (N, 3); refreshes gas.
     void (*eval_forces)(const Model&, const Control&, double t, const double* q,
-                        const double* qd, const BodyGas& gas, double* f);
+                        const double* qd, const BodyGas& gas, const LaneBuffers& lanes,
+                        double* f);
     /// Volumes (and, with gas.volume_gradient set, dV/dx) and pressures at time t.
     void (*eval_gas)(const Model&, const Control&, double t, const double* q,
                      const BodyGas& gas);

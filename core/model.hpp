@@ -56,6 +56,35 @@ struct Model {
     double wind[3] = {0.0, 0.0, 0.0};               // [m/s], Control.wind may override it
     bool drag_active = false;  // rho > 0 and some C_d > 0 (else the drag term is skipped)
 
+    // Vertex-major neighbour tables (module.cpp derives them from the springs and triangles):
+    // particles in groups of 8 lanes; group g's slots are [start[g], start[g + 1]), and slot
+    // s holds, for lane l, entry 8 s + l. Each particle lists everything it belongs to, so a
+    // pass over particles computes its own forces and writes nothing else's.
+    //
+    // The ring: a particle's neighbours in fan order j_0, j_1, ..., so that consecutive ones
+    // make its faces (i, j_{s-1}, j_s) and each neighbour's row serves its edge spring and
+    // two faces. A closed fan's slot 0 closes the ring (face (i, j_last, j_0)); a shorter
+    // ring is padded with j_0 (no spring, faces of no area).
+    index group_count = 0;                           // ceil(N / 8)
+    const double* lane_mass = nullptr;               // (8 G,) particle masses, 0 past N [kg]
+    const index* lane_reference = nullptr;           // (8 G,) first particle of its body
+    const index* ring_slot_start = nullptr;          // (G + 1,)
+    const index* ring_slot_other = nullptr;          // (slots, 8) neighbour j_s
+    const double* ring_slot_rest_length = nullptr;   // (slots, 8) spring on (i, j_s) [m], or 0
+    const double* ring_slot_stiffness = nullptr;     // (slots, 8) [N/m], 0 without a spring
+    const double* ring_slot_damping = nullptr;       // (slots, 8) [N s/m]
+    const double* ring_slot_face = nullptr;          // (slots, 8) 1 where (j_{s-1}, j_s) is a face
+    // springs off the rings (bending and user springs), with padding pointing at itself
+    const index* spring_slot_start = nullptr;        // (G + 1,)
+    const index* spring_slot_other = nullptr;        // (slots, 8)
+    const double* spring_slot_rest_length = nullptr; // (slots, 8) [m]
+    const double* spring_slot_stiffness = nullptr;   // (slots, 8) [N/m]
+    const double* spring_slot_damping = nullptr;     // (slots, 8) [N s/m]
+    // faces of particles whose faces make no single fan (not met on a validated mesh)
+    const index* face_slot_start = nullptr;          // (G + 1,)
+    const index* face_slot_next = nullptr;           // (slots, 8) face (i, j, k) seen from i: j
+    const index* face_slot_last = nullptr;           // (slots, 8) and k
+
     int soft_contact_mode = 0;  // 0 none, 1 bounding objects, 2 surfaces
     double soft_contact_restitution = 0.0, soft_contact_friction = 0.0;
     double contact_margin = 0.0, contact_cell_size = 1.0;  // [m]
@@ -126,8 +155,15 @@ struct ContactBuffers {
     index* hash_entries = nullptr;  // (E,) triangle indices
 };
 
+/// Scratch of the vertex-major force pass.
+struct LaneBuffers {
+    double* rows = nullptr;       // (8 G, 8) x, y, z, vx, vy, vz, 0, 0 per particle
+    double* lane_pnet = nullptr;  // (8 G,) P - P_ambient of each particle's body [Pa], 0 free
+};
+
 /// Scratch for the explicit schemes, owned by softbody::ExplicitSolver.
 struct ExplicitBuffers {
+    LaneBuffers lanes;
     double* f = nullptr;      // (N, 3) force accumulator [N]
     double* q0 = nullptr;     // (N, 3) start-of-step positions
     double* v0 = nullptr;     // (N, 3) start-of-step velocities

@@ -12,22 +12,95 @@
 #include "terms/gas.hpp"
 #include "terms/gravity.hpp"
 #include "terms/springs.hpp"
+#include "simd.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::explicit_solver {
 
-/// All forces at time t [s] for q, qd (N, 3) into f (N, 3) [N]: the list of physics terms in
-/// the paper's order. The gas's volumes, gradients and pressures are refreshed on the way.
+/// The vertex-major pass: for every particle, kLanes at a time, its weight, its springs and
+/// dV/dx from its faces, with each body's exact volume (6 V, three times over, summed from
+/// the corners). The ring's neighbour rows serve a spring and two faces each. Writes f and
+/// gas.volume_gradient (N, 3) and the exact bodies' gas.volume; scatters nothing.
+inline void vertex_pass(const Model& m, const double* rows, const BodyGas& gas, double* f) {
+    const index n = m.particle_count;
+    for (index b = 0; b < m.body_count; ++b) gas.volume[b] = 0.0;
+    for (index g = 0; g < m.group_count; ++g)
+        for (int lane0 = 0; lane0 < kGroup; lane0 += kLanes) {
+            const index first = kGroup * g + lane0;
+            if (first >= n) break;
+            index own[kLanes];
+            for (int l = 0; l < kLanes; ++l) own[l] = first + l;
+            const Rows self = load_rows(rows, own);
+            const Rows ref = load_rows(rows, m.lane_reference + first);
+            const vd rx = self.x - ref.x, ry = self.y - ref.y, rz = self.z - ref.z;
+            vd fx, fy, fz, gx{}, gy{}, gz{}, six_v{};
+            gravity::lane_force(m, first, fx, fy, fz);  // weight m g
+            // the ring: damped edge springs, and the faces between consecutive neighbours
+            vd ux0{}, uy0{}, uz0{}, ux{}, uy{}, uz{};
+            for (index s = m.ring_slot_start[g]; s < m.ring_slot_start[g + 1]; ++s) {
+                const index e = kGroup * s + lane0;
+                const Rows o = load_rows(rows, m.ring_slot_other + e);
+                const vd dx = o.x - self.x, dy = o.y - self.y, dz = o.z - self.z;
+                springs::lane_pair(self, o, dx, dy, dz, load_lanes(m.ring_slot_rest_length + e),
+                                   load_lanes(m.ring_slot_stiffness + e),
+                                   load_lanes(m.ring_slot_damping + e), fx, fy, fz);
+                if (s == m.ring_slot_start[g]) {
+                    ux0 = dx, uy0 = dy, uz0 = dz;  // the face closing the ring comes last
+                } else {
+                    gas::lane_face(ux, uy, uz, dx, dy, dz, load_lanes(m.ring_slot_face + e), rx,
+                                   ry, rz, gx, gy, gz, six_v);
+                }
+                ux = dx, uy = dy, uz = dz;
+            }
+            if (m.ring_slot_start[g + 1] > m.ring_slot_start[g])
+                gas::lane_face(ux, uy, uz, ux0, uy0, uz0,
+                               load_lanes(m.ring_slot_face + kGroup * m.ring_slot_start[g] + lane0),
+                               rx, ry, rz, gx, gy, gz, six_v);
+            springs::lane_force(m, rows, g, lane0, self, fx, fy, fz);  // springs off the rings
+            gas::lane_faces(m, rows, g, lane0, self, rx, ry, rz, gx, gy, gz, six_v);  // odd fans
+            for (int l = 0; l < kLanes && first + l < n; ++l) {
+                const index i = first + l;
+                store(f, i, {fx[l], fy[l], fz[l]});
+                store(gas.volume_gradient, i, {gx[l], gy[l], gz[l]});
+                const index body = m.particle_body[i];
+                if (body >= 0) gas.volume[body] += six_v[l];
+            }
+        }
+    for (index b = 0; b < m.body_count; ++b) gas.volume[b] /= 18.0;  // each face thrice: 3 x 6 V
+}
+
+/// The packed rows (8 G, 8) of the vertex-major pass: x, v of each particle on one line.
+inline void pack_rows(const Model& m, const double* q, const double* qd, double* rows) {
+    for (index i = 0; i < m.particle_count; ++i)
+        for (int k = 0; k < 3; ++k) {
+            rows[kRow * i + k] = q[3 * i + k];
+            rows[kRow * i + 3 + k] = qd[3 * i + k];
+        }
+}
+
+/// All forces at time t [s] for q, qd (N, 3) into f (N, 3) [N]: the list of physics terms.
+/// With SIMD lanes the weight, springs and dV/dx come from the vertex-major pass; on the
+/// scalar path, term by term over springs and faces (half the arithmetic: each spring and
+/// face once, which is what pays without lanes). The same terms either way; the sums run
+/// in another order, so the paths agree to round-off.
 inline void eval_forces(const Model& m, const Control& c, double t, const double* q,
-                        const double* qd, const BodyGas& gas, double* f) {
-    gravity::force(m, f);                   // weight m g (initialises the accumulator)
-    springs::force(m, q, qd, f);            // damped Hooke springs: edges, bending, user
-    attachments::force(m, c, q, qd, f);     // springs to anchor points
-    external::force(m, c, f);               // per-step forces from Control
-    external::grab_force(c, q, qd, f);      // a grabbed particle pulled to a target
-    gas::evaluate(m, c, t, q, gas);         // volumes, dV/dx and the gas law's P(V, t)
-    gas::force(m, gas, f);                  // (P - P_ambient) dV/dx
-    drag::force(m, c, q, qd, f);            // air drag on faces (skipped when off)
+                        const double* qd, const BodyGas& gas, const LaneBuffers& lanes,
+                        double* f) {
+    if constexpr (kLanes > 1) {
+        pack_rows(m, q, qd, lanes.rows);
+        vertex_pass(m, lanes.rows, gas, f);  // weight, springs, dV/dx, exact volumes
+        volume::evaluate(m, q, gas, true);   // bounding and Monte Carlo volumes
+    } else {
+        gravity::force(m, f);           // weight m g (initialises the accumulator)
+        springs::force(m, q, qd, f);    // damped Hooke springs: edges, bending, user
+        volume::evaluate(m, q, gas);    // volumes and dV/dx
+    }
+    gas::pressures(m, c, t, gas);        // the gas law's P(V, t)
+    gas::force(m, gas, f);               // (P - P_ambient) dV/dx
+    attachments::force(m, c, q, qd, f);  // springs to anchor points
+    external::force(m, c, f);            // per-step forces from Control
+    external::grab_force(c, q, qd, f);   // a grabbed particle pulled to a target
+    drag::force(m, c, q, qd, f);         // air drag on faces (skipped when off)
 }
 
 /// q_out = q0 + h slope_q; v_out = v0 + h f / m (safe when slope_q is v_out).
@@ -63,19 +136,19 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
         stage(m, w.q0, w.v0, dt, w.v0, w.f, q, qd);
     } else if (scheme == 1) {  // midpoint: slopes at the half step (second order)
         stage(m, w.q0, w.v0, 0.5 * dt, w.v0, w.f, w.qs, w.vs);
-        eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.f);
+        eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.lanes, w.f);
         stage(m, w.q0, w.v0, dt, w.vs, w.f, q, qd);
     } else if (scheme == 2) {  // classical RK4
         for (index k = 0; k < 3 * n; ++k) w.acc_q[k] = w.acc_v[k] = 0.0;
         accumulate(m, 1.0, w.v0, w.f, w.acc_q, w.acc_v);
         stage(m, w.q0, w.v0, 0.5 * dt, w.v0, w.f, w.qs, w.vs);
-        eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.f);
+        eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.lanes, w.f);
         accumulate(m, 2.0, w.vs, w.f, w.acc_q, w.acc_v);
         stage(m, w.q0, w.v0, 0.5 * dt, w.vs, w.f, w.qs, w.vs);
-        eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.f);
+        eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.lanes, w.f);
         accumulate(m, 2.0, w.vs, w.f, w.acc_q, w.acc_v);
         stage(m, w.q0, w.v0, dt, w.vs, w.f, w.qs, w.vs);
-        eval_forces(m, c, t + dt, w.qs, w.vs, w.gas, w.f);
+        eval_forces(m, c, t + dt, w.qs, w.vs, w.gas, w.lanes, w.f);
         accumulate(m, 1.0, w.vs, w.f, w.acc_q, w.acc_v);
         const double h = dt / 6.0;
         for (index k = 0; k < 3 * n; ++k) {
@@ -102,7 +175,7 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
                 q[r] = w.q0[r] + dt * v;
             }
         }
-        eval_forces(m, c, t + dt, q, w.vs, w.gas, w.f);
+        eval_forces(m, c, t + dt, q, w.vs, w.gas, w.lanes, w.f);
         for (index i = 0; i < n; ++i) {
             const double h = 0.5 * dt * m.particle_inv_mass[i];
             for (int k = 0; k < 3; ++k) qd[3 * i + k] = w.vs[3 * i + k] + h * w.f[3 * i + k];
@@ -121,7 +194,7 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);
-        eval_forces(m, c, t, s.q, s.qd, w.gas, w.f);
+        eval_forces(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);
         RunResult r = loop::check_volumes(m, w.gas.volume, p.ratio_min, p.ratio_max);
         if (r.status != OK) {
             r.steps_done = step_index;

@@ -10,6 +10,7 @@
 #pragma once
 
 #include "model.hpp"
+#include "simd.hpp"
 #include "terms/volume.hpp"
 #include "vec.hpp"
 
@@ -40,13 +41,19 @@ inline double pressure(index law, double value, double gamma, double reference_v
     return value * std::pow(reference_volume, gamma - 1.0) / std::pow(v, gamma);
 }
 
-/// Volumes, their gradients and the pressures of every body at time t, into gas.
-inline void evaluate(const Model& m, const Control& c, double t, const double* q,
-                     const BodyGas& gas) {
-    volume::evaluate(m, q, gas);
+/// The pressure of every body at time t from the volumes in gas.
+inline void pressures(const Model& m, const Control& c, double t, const BodyGas& gas) {
     for (index b = 0; b < m.body_count; ++b)
         gas.pressure[b] = pressure(m.body_gas_law[b], value_at(m, c, b, t), m.body_gas_gamma[b],
                                    m.body_gas_reference_volume[b], gas.volume[b]);
+}
+
+/// Volumes (with gas.volume_gradient set, their gradients too) and the pressures of every
+/// body at time t, into gas.
+inline void evaluate(const Model& m, const Control& c, double t, const double* q,
+                     const BodyGas& gas) {
+    volume::evaluate(m, q, gas);
+    pressures(m, c, t, gas);
 }
 
 /// f_i += (P_b - P_ambient,b) dV/dx_i for the particles of every body.
@@ -56,6 +63,35 @@ inline void force(const Model& m, const BodyGas& gas, double* f) {
         for (index k = 3 * m.body_particle_range[2 * b]; k < 3 * m.body_particle_range[2 * b + 1];
              ++k)
             f[k] += p * gas.volume_gradient[k];
+    }
+}
+
+/// Vertex-major: a face (i, j, k) at the kLanes particles i, from u = x_j - x_i and
+/// w = x_k - x_i, times `weight` (1, or 0 for no face): its n / 6 = (u x w) / 6 added to
+/// dV/dx (gx, gy, gz) [m^2], and its (x_i - r) . n to six_v, a third of the face's share of
+/// 6 V seen from each corner (r: the body's reference point; sum over corners is exact).
+inline void lane_face(vd ux, vd uy, vd uz, vd wx, vd wy, vd wz, vd weight, vd rx, vd ry, vd rz,
+                      vd& gx, vd& gy, vd& gz, vd& six_v) {
+    const vd nx = weight * (uy * wz - uz * wy);
+    const vd ny = weight * (uz * wx - ux * wz);
+    const vd nz = weight * (ux * wy - uy * wx);
+    const vd sixth = splat(volume::kSixth);
+    gx += sixth * nx;
+    gy += sixth * ny;
+    gz += sixth * nz;
+    six_v += rx * nx + ry * ny + rz * nz;
+}
+
+/// Vertex-major: the faces of particles whose faces make no single fan (model.hpp), slots of
+/// group g from lane0; r = x_i - reference per lane.
+inline void lane_faces(const Model& m, const double* rows, index g, int lane0, const Rows& self,
+                       vd rx, vd ry, vd rz, vd& gx, vd& gy, vd& gz, vd& six_v) {
+    for (index s = m.face_slot_start[g]; s < m.face_slot_start[g + 1]; ++s) {
+        const index e = kGroup * s + lane0;
+        const Rows b = load_rows(rows, m.face_slot_next + e);
+        const Rows c = load_rows(rows, m.face_slot_last + e);
+        lane_face(b.x - self.x, b.y - self.y, b.z - self.z, c.x - self.x, c.y - self.y,
+                  c.z - self.z, splat(1.0), rx, ry, rz, gx, gy, gz, six_v);
     }
 }
 

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "model.hpp"
+#include "simd.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::gravity {
@@ -15,6 +16,14 @@ inline void force(const Model& m, double* f) {
         f[3 * i + 1] = mass * gy;
         f[3 * i + 2] = mass * gz;
     }
+}
+
+/// Vertex-major: m g for kLanes particles from `first` [N] (initialises the lanes).
+inline void lane_force(const Model& m, index first, vd& fx, vd& fy, vd& fz) {
+    const vd mass = load_lanes(m.lane_mass + first);
+    fx = mass * m.gravity[0];
+    fy = mass * m.gravity[1];
+    fz = mass * m.gravity[2];
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::gravity

@@ -8,6 +8,7 @@
 #pragma once
 
 #include "model.hpp"
+#include "simd.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::springs {
@@ -27,6 +28,38 @@ inline void force(const Model& m, const double* q, const double* qd, double* f) 
         const V3 fi = mag * u;
         add_to(f, i, fi);
         add_to(f, j, -fi);
+    }
+}
+
+/// Vertex-major: the damped force at kLanes particles `self` of springs to `o` (rest length,
+/// stiffness, damping per lane), added to fx, fy, fz [N]. Each spring is met at both ends,
+/// with d, u and the magnitude negated exactly at the other end, so its two forces are equal
+/// and opposite. d = o - self is passed in (the ring pass shares it with the faces). Lanes
+/// with d = 0 (padding that points at the particle itself) get nothing.
+inline void lane_pair(const Rows& self, const Rows& o, vd dx, vd dy, vd dz, vd rest,
+                      vd stiffness, vd damping, vd& fx, vd& fy, vd& fz) {
+    const vd length2 = dx * dx + dy * dy + dz * dz;
+    const vd inv = vrsqrt(length2);
+    const vd length = length2 * inv;
+    const vd ux = inv * dx, uy = inv * dy, uz = inv * dz;
+    const vd rel = (o.vx - self.vx) * ux + (o.vy - self.vy) * uy + (o.vz - self.vz) * uz;
+    const vd mag = stiffness * (length - rest) + damping * rel;
+    const vi live = length2 != 0.0;
+    fx += select(live, mag * ux);
+    fy += select(live, mag * uy);
+    fz += select(live, mag * uz);
+}
+
+/// Vertex-major: the springs off the particles' rings (bending and user springs), slots of
+/// group g from lane0, added to fx, fy, fz [N].
+inline void lane_force(const Model& m, const double* rows, index g, int lane0, const Rows& self,
+                       vd& fx, vd& fy, vd& fz) {
+    for (index s = m.spring_slot_start[g]; s < m.spring_slot_start[g + 1]; ++s) {
+        const index e = kGroup * s + lane0;
+        const Rows o = load_rows(rows, m.spring_slot_other + e);
+        lane_pair(self, o, o.x - self.x, o.y - self.y, o.z - self.z,
+                  load_lanes(m.spring_slot_rest_length + e), load_lanes(m.spring_slot_stiffness + e),
+                  load_lanes(m.spring_slot_damping + e), fx, fy, fz);
     }
 }
 

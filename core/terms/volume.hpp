@@ -117,10 +117,13 @@ inline double monte_carlo(const Model& m, const double* q, index t_begin, index 
 
 /// Every body's volume by its own method into gas.volume (B,) [m^3]; with gas.volume_gradient
 /// non-null also the exact gradients (N, 3) [m^2] (whatever the method: the pressure force
-/// acts through the faces). Bodies with a bounding or Monte Carlo volume get gas.lo/hi.
-inline void evaluate(const Model& m, const double* q, const BodyGas& gas) {
+/// acts through the faces). Bodies with a bounding or Monte Carlo volume get gas.lo/hi. With
+/// exact_done, bodies of the exact method keep the volume already in gas.volume.
+inline void evaluate(const Model& m, const double* q, const BodyGas& gas,
+                     bool exact_done = false) {
     for (index b = 0; b < m.body_count; ++b) {
         const index method = m.body_volume_method[b];
+        if (exact_done && method == 0) continue;  // the vertex-major pass measured it
         const bool need_exact = method == 0 || gas.volume_gradient != nullptr;
         double v = need_exact ? exact(m, b, q, gas.volume_gradient) : 0.0;
         if (method != 0) {
