@@ -3,6 +3,8 @@
 #include "kernels.hpp"
 
 #include "solvers/explicit.hpp"
+#include "solvers/implicit.hpp"
+#include "solvers/multigrid.hpp"
 #include "terms/gas.hpp"
 
 #define SOFTBODY_STRING2(x) #x
@@ -15,6 +17,16 @@ namespace {
 RunResult simulate_explicit(const Model& m, const Control& c, const RunParams& p,
                             const StateView& s, const ExplicitBuffers& w) {
     return explicit_solver::simulate(m, c, p, s, w);
+}
+
+RunResult simulate_implicit(const Model& m, const Control& c, const RunParams& p,
+                            const ImplicitParams& ip, const StateView& s,
+                            const ImplicitBuffers& w, const MultigridView* mg) {
+    return implicit_solver::simulate(m, c, p, ip, s, w, mg);
+}
+
+void apply_multigrid(const MultigridView& mg, const double* r, double* z) {
+    multigrid::apply(mg, r, z);
 }
 
 void eval_forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
@@ -47,7 +59,8 @@ void apply_jacobians(const Model& m, const Control& c, const double* q, const do
 }  // namespace
 
 const KernelTable& kernel_table() {
-    static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), simulate_explicit, eval_forces,
+    static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), simulate_explicit,
+                                   simulate_implicit, apply_multigrid, eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians};
     return table;

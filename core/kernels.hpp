@@ -14,6 +14,13 @@ struct KernelTable {
     /// Advance a state by an explicit scheme (RunParams.scheme 0-4).
     RunResult (*simulate_explicit)(const Model&, const Control&, const RunParams&,
                                    const StateView&, const ExplicitBuffers&);
+    /// Advance a state by backward Euler or BDF2; mg is the multigrid hierarchy, or null
+    /// for the Jacobi preconditioner.
+    RunResult (*simulate_implicit)(const Model&, const Control&, const RunParams&,
+                                   const ImplicitParams&, const StateView&,
+                                   const ImplicitBuffers&, const MultigridView* mg);
+    /// z = V(r) for r, z (N, 3): one V-cycle of the Laplacian hierarchy from z = 0.
+    void (*apply_multigrid)(const MultigridView& mg, const double* r, double* z);
     /// All forces f (N, 3) [N] at time t for q, qd (N, 3); refreshes gas.
     void (*eval_forces)(const Model&, const Control&, double t, const double* q,
                         const double* qd, const BodyGas& gas, const LaneBuffers& lanes,

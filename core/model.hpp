@@ -175,6 +175,70 @@ struct ExplicitBuffers {
     ContactBuffers contact;
 };
 
+/// The implicit schemes' multigrid hierarchy (softbody.integrators.multigrid.Multigrid):
+/// views of the arrays Python built (module.cpp checks every offset and index once), and
+/// the V-cycle's scratch, owned by the solver. Level l has level_size[l] unknowns; its
+/// matrix A_l is CSR at rows a_row_offset[l] of a_indptr and entries a_nz_offset[l] of
+/// a_indices / a_data; P_l (level l to l + 1) likewise in p_*; its vectors sit at rows
+/// vec_offset[l] of x, b, r.
+struct MultigridView {
+    index level_count = 0;     // L: sparse levels (prolongators)
+    bool coarse_dense = false; // the coarsest level is solved by its Cholesky factor
+    const index* level_size = nullptr;    // (L + 1,)
+    const index* vec_offset = nullptr;    // (L + 2,)
+    const index* a_row_offset = nullptr;  // (L + 1,)
+    const index* a_nz_offset = nullptr;   // (L + 1,)
+    const index* a_indptr = nullptr;
+    const index* a_indices = nullptr;
+    const double* a_data = nullptr;  // A_l at the current step (set_multigrid_step)
+    const double* a_diag = nullptr;  // (sum n_l,) diagonal of each A_l
+    const index* p_row_offset = nullptr;  // (max(L, 1),)
+    const index* p_nz_offset = nullptr;
+    const index* p_indptr = nullptr;
+    const index* p_indices = nullptr;
+    const double* p_data = nullptr;
+    const double* coarse_cholesky = nullptr;  // (n_L, n_L) lower factor when coarse_dense
+    // each particle's springs ("entries"), sorted by the particle at the other end
+    const index* vertex_spring_ptr = nullptr;  // (N + 1,)
+    const index* vertex_spring = nullptr;      // (2 S,)
+    const index* vertex_neighbor = nullptr;    // (2 S,)
+    // scratch
+    double* block = nullptr;       // (N, 3, 3) diagonal blocks of the true spring matrix
+    double* block_inv = nullptr;   // (N, 3, 3) inverse diagonal blocks of the true matrix
+    double* entry_coef = nullptr;  // (2 S, 5) u (3,), alpha, beta of each entry's spring
+    double* x = nullptr;           // (sum n_l, 3) level solutions
+    double* b = nullptr;           // (sum n_l, 3) level right-hand sides
+    double* r = nullptr;           // (sum n_l, 3) level residuals
+};
+
+/// Scratch and history of the implicit schemes, owned by softbody::ImplicitSolver.
+struct ImplicitBuffers {
+    LaneBuffers lanes;
+    double* f = nullptr;      // (N, 3) forces at the step's start [N]
+    double* q0 = nullptr;     // (N, 3) start-of-step positions
+    double* v0 = nullptr;     // (N, 3) start-of-step velocities
+    double* qs = nullptr;     // (N, 3) y, the position change before dv; BDF2's contact check
+    double* vs = nullptr;     // (N, 3) BDF2's contact check
+    double* ky = nullptr;     // (N, 3) K y
+    double* spring_u = nullptr;  // (S, 3) spring directions
+    double* spring_a = nullptr;  // (S,) axial stiffness [N/m]
+    double* spring_b = nullptr;  // (S,) transverse stiffness [N/m]
+    double* body_dpdv = nullptr; // (B,) dP/dV [Pa/m^3]
+    double* body_pnet = nullptr; // (B,) P - P_ambient [Pa]
+    double* cg_diag = nullptr;   // (N,) Jacobi preconditioner [kg]
+    double* cg_r = nullptr;      // (N, 3) residual
+    double* cg_z = nullptr;      // (N, 3) preconditioned residual
+    double* cg_p = nullptr;      // (N, 3) search direction
+    double* cg_ap = nullptr;     // (N, 3) system matrix times p
+    double* cg_x = nullptr;      // (N, 3) dv [m/s]; kept between steps (the warm start)
+    double* q_prev = nullptr;    // (N, 3) BDF2: the previous step's start
+    double* v_prev = nullptr;    // (N, 3)
+    index* contacts_acted = nullptr;  // (1,) BDF2: the last step's contacts acted
+    index* cg_stats = nullptr;        // (3,) steps, CG iterations in all, most in one
+    BodyGas gas;
+    ContactBuffers contact;
+};
+
 /// Outcome of a run of steps (the codes of softbody.integrators.loop).
 enum Status : int {
     OK = 0,
@@ -191,6 +255,14 @@ struct RunResult {
     index steps_done = 0;
     index where = -1;    // body or particle at fault
     double value = 0.0;  // the offending quantity
+};
+
+/// The implicit schemes' settings for one run.
+struct ImplicitParams {
+    bool bdf2 = false;          // BDF2, else backward Euler
+    double tolerance = 1e-6;    // CG's relative residual
+    index max_iterations = 200; // CG iterations per step at most
+    bool history = false;       // the buffers hold the step before the state (BDF2)
 };
 
 /// The run's limits and its step.

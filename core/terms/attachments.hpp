@@ -48,4 +48,26 @@ inline void jacobian_product(const Model& m, const Control& c, const double* q, 
     }
 }
 
+/// The attachments' share of the implicit system's diagonal blocks (N, 3, 3) at q for step
+/// h [s]: per attachment h^2 (k_iso I + (k - k_iso) u u^T) + h c u u^T, added to its particle's.
+inline void add_smoother_blocks(const Model& m, const Control& c, double h, const double* q,
+                                double* block) {
+    for (index a = 0; a < m.attachment_count; ++a) {
+        const index i = m.attachment_particle[a];
+        const V3 dv = load(c.attachment_anchor, a) - load(q, i);
+        const double d[3] = {dv.x, dv.y, dv.z};
+        const double length = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        const double k = m.attachment_stiffness[a];
+        const double iso =
+            length == 0.0 ? k : k * std::max(0.0, 1.0 - m.attachment_rest_length[a] / length);
+        const double alpha = h * m.attachment_damping[a] + h * h * (k - iso);
+        double* b = block + 9 * i;
+        for (int r = 0; r < 3; ++r) {
+            for (int col = 0; col < 3; ++col)
+                if (length > 0.0) b[3 * r + col] += alpha * d[r] * d[col] / (length * length);
+            b[4 * r] += h * h * iso;
+        }
+    }
+}
+
 }  // namespace softbody::SOFTBODY_KERNELS::attachments

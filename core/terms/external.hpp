@@ -31,4 +31,12 @@ inline void grab_jacobian_product(const Control& c, double alpha_c, double alpha
         out[3 * g + k] -= (alpha_k * c.grab_stiffness + alpha_c * c.grab_damping) * p[3 * g + k];
 }
 
+/// The grab spring's share of the implicit system's diagonal blocks (N, 3, 3) for step
+/// h [s]: (h^2 k + h c) I on the grabbed particle.
+inline void add_grab_block(const Control& c, double h, double* block) {
+    const index g = c.grab_particle;
+    if (g < 0) return;
+    for (int r = 0; r < 3; ++r) block[9 * g + 4 * r] += h * h * c.grab_stiffness + h * c.grab_damping;
+}
+
 }  // namespace softbody::SOFTBODY_KERNELS::external

@@ -100,6 +100,38 @@ inline void jacobian_product(const Model& m, const double* u, const double* a, c
     }
 }
 
+/// The springs' share of the implicit system M - h C - h^2 K for its finest-level smoother:
+/// per spring the block alpha u u^T + beta I with alpha = h c + h^2 (a - b), beta = h^2 b,
+/// packed per particle entry (entry_ptr (N + 1,), entry_spring (2 S,)) into coef (2 S, 5)
+/// as u, alpha, beta, and each particle's diagonal block m I + the sum of its springs'
+/// blocks into block (N, 3, 3). u, a, b from prepare; h [s].
+inline void smoother_blocks(const Model& m, double h, const double* u, const double* a,
+                            const double* b, const index* entry_ptr, const index* entry_spring,
+                            double* coef, double* block) {
+    for (index i = 0; i < m.particle_count; ++i) {
+        double b00 = m.particle_mass[i], b11 = b00, b22 = b00, b01 = 0.0, b02 = 0.0, b12 = 0.0;
+        for (index e = entry_ptr[i]; e < entry_ptr[i + 1]; ++e) {
+            const index s = entry_spring[e];
+            const V3 us = load(u, s);
+            const double alpha = h * m.spring_damping[s] + h * h * (a[s] - b[s]);
+            const double beta = h * h * b[s];
+            double* c = coef + 5 * e;
+            c[0] = us.x, c[1] = us.y, c[2] = us.z, c[3] = alpha, c[4] = beta;
+            b00 += alpha * us.x * us.x + beta;
+            b11 += alpha * us.y * us.y + beta;
+            b22 += alpha * us.z * us.z + beta;
+            b01 += alpha * us.x * us.y;
+            b02 += alpha * us.x * us.z;
+            b12 += alpha * us.y * us.z;
+        }
+        double* d = block + 9 * i;
+        d[0] = b00, d[4] = b11, d[8] = b22;
+        d[1] = d[3] = b01;
+        d[2] = d[6] = b02;
+        d[5] = d[7] = b12;
+    }
+}
+
 /// Elastic energy sum 1/2 k (L - L0)^2 [J].
 inline double energy(const Model& m, const double* q) {
     double e = 0.0;

@@ -187,6 +187,7 @@ class Simulator:
         use_mg = self.integrator.implicit and implicit_preconditioner == "multigrid"
         self._multigrid = build_multigrid(model) if use_mg else empty_multigrid()
         self._multigrid_dt = None
+        self._cg_stats_total = [0, 0, 0]
         # BDF2: which state, at which step and dt, the workspace's previous step belongs to
         self._history: tuple | None = None
         # implicit schemes have no step limit: the Gershgorin bounds describe the model
@@ -204,12 +205,15 @@ class Simulator:
                 f"got {threads!r}"
             )
         self.threads = int(threads)
-        # the explicit schemes step in the compiled C++ core; the rest (implicit and
-        # projective solvers, threads) still in the Numba kernels, which compile on first
-        # use (softbody._kernel_cache)
+        # the explicit and implicit schemes step in the compiled C++ core; projective
+        # dynamics and threads still in the Numba kernels, which compile on first use
+        # (softbody._kernel_cache)
         self._core = None
         if self.integrator.explicit and self.threads == 1:
             self._core = _core.ExplicitSolver(core_model(model))
+        elif self.integrator.implicit and self.threads == 1:
+            _refuse_drag(model, self.integrator, self.threads)
+            self._core = self._implicit_solver()
         else:
             _refuse_drag(model, self.integrator, self.threads)
             _kernel_cache.ensure_compiled()
@@ -241,8 +245,22 @@ class Simulator:
     def solver_iterations(self) -> tuple[float, int]:
         """``implicit_euler``, ``bdf2``: (mean, most) CG iterations per step over the
         last :meth:`run` call; (0, 0) for explicit integrators."""
-        steps, total, most = (int(x) for x in self._work.cg_stats)
+        stats = self._cg_stats_total if self._implicit_core else self._work.cg_stats
+        steps, total, most = (int(x) for x in stats)
         return (total / steps if steps else 0.0, most)
+
+    @property
+    def _implicit_core(self) -> bool:
+        """Whether the compiled core steps this implicit simulator."""
+        return self._core is not None and not self.integrator.explicit
+
+    def _implicit_solver(self, hash_capacity: int | None = None):
+        """The core's backward Euler / BDF2 solver with this simulator's preconditioner
+        (the multigrid hierarchy's arrays are checked once and read at every step)."""
+        mg = self._multigrid if self._multigrid.level_size[0] == self.model.particle_count else None
+        return _core.ImplicitSolver(
+            core_model(self.model), multigrid=mg, hash_capacity=hash_capacity
+        )
 
     def stability_note(self) -> str:
         """One line comparing ``dt`` with the stability estimate, with advice."""
@@ -331,6 +349,9 @@ class Simulator:
         lo, hi = self.volume_limits
         state.collider_impulse[:] = 0.0
         self._work.cg_stats[:] = 0
+        self._cg_stats_total = [0, 0, 0]  # the core's, over solvers rebuilt during the run
+        if self._implicit_core:
+            self._core.clear_stats()
         # the system matrix's step: dt for backward Euler, 2/3 dt for BDF2
         h = self.dt * (2.0 / 3.0 if self.integrator == Integrator.BDF2 else 1.0)
         if self._multigrid.level_size[0] == model.particle_count and self._multigrid_dt != h:
@@ -345,8 +366,8 @@ class Simulator:
                 ref is not None
                 and ref[0]() is state
                 and ref[1:] == (state.step_count, self.dt)
-                and _loop.same_values(state.particle_q, self._work.q_end)
-                and _loop.same_values(state.particle_qd, self._work.v_end)
+                and np.array_equal(state.particle_q, self._work.q_end)
+                and np.array_equal(state.particle_qd, self._work.v_end)
             )
             status, done, index, value = self._simulate(
                 int(self.integrator),
@@ -382,7 +403,10 @@ class Simulator:
             if status == _loop.NEED_HASH:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
-                if self._core is not None:
+                if self._implicit_core:
+                    self._collect_cg_stats()
+                    self._core = self._implicit_solver(hash_capacity=int(2 * value))
+                elif self._core is not None:
                     self._core = _core.ExplicitSolver(
                         core_model(model), hash_capacity=int(2 * value)
                     )
@@ -393,8 +417,19 @@ class Simulator:
                 self._history = None  # the undone step overwrote BDF2's previous step
                 continue
             if status != _loop.OK:
+                if self._implicit_core:
+                    self._collect_cg_stats()
                 raise self._blow_up(status, start_step + done, state.time, index, value)
+        if self._implicit_core:
+            self._collect_cg_stats()
         return state
+
+    def _collect_cg_stats(self) -> None:
+        """Add the core solver's CG statistics to this run's, and clear them there."""
+        steps, total, most = self._core.cg_stats
+        acc = self._cg_stats_total
+        acc[0], acc[1], acc[2] = acc[0] + steps, acc[1] + total, max(acc[2], most)
+        self._core.clear_stats()
 
     def _projective_factor(self, dt: float):
         """Projective dynamics' matrix factored for step ``dt``: built once per step size
@@ -410,6 +445,13 @@ class Simulator:
     def _simulate(self, *args):
         """``loop.simulate`` on this simulator's thread count (restored afterwards), or the
         compiled core's loop for the schemes it has."""
+        if self._implicit_core:
+            scheme, steps, t0, dt, _, control, q, qd, _, max_speed, lo, hi, cq, crot, ci = args[:15]
+            tolerance, max_iterations, history = args[16:19]
+            return self._core.simulate(
+                scheme == Integrator.BDF2, steps, t0, dt, control, q, qd, cq, crot, ci,
+                max_speed, lo, hi, tolerance, max_iterations, history,
+            )  # fmt: skip
         if self._core is not None:
             scheme, steps, t0, dt, _, control, q, qd, _, max_speed, lo, hi, cq, crot, ci = args[:15]
             return self._core.simulate(

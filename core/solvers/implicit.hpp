@@ -1,0 +1,331 @@
+// Backward Euler and BDF2 (softbody.integrators.implicit), one Newton step each, solved
+// matrix-free by preconditioned CG, and their time loop.
+//
+// Backward Euler on M v' = f(x, v), linearised at the step's start:
+//     (M - h C - h^2 K) dv = h (f0 + K y) [+ M (v0 - v_-1) / 3 for BDF2],   v1 = v0 + dv,
+// with C = df/dv, K = df/dx at the start, h = dt and y = dt v0 (backward Euler) or
+// h = 2/3 dt and y = (x0 - x_-1) / 3 + h v0 (BDF2, Choi & Ko 2002); then x1 = x0 + dt v1,
+// or x1 = (4 x0 - x_-1) / 3 + h v1. The products C p and K p come term by term (springs,
+// attachments, grab, gas); the preconditioner is one multigrid V-cycle (the true spring
+// blocks smoothed on the finest level, the Laplacian hierarchy below) or Jacobi. Same
+// operation order as the Numba kernels; only the start forces (vertex-major on SIMD paths)
+// differ in their last bits.
+#pragma once
+
+#include "model.hpp"
+#include "solvers/common.hpp"
+#include "solvers/explicit.hpp"
+#include "solvers/multigrid.hpp"
+#include "terms/attachments.hpp"
+#include "terms/external.hpp"
+#include "terms/gas.hpp"
+#include "terms/springs.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::implicit_solver {
+
+/// out = alpha_m M p + alpha_c C p + alpha_k K p at the step's start (the prepared spring
+/// and pressure data in w): the system matrix's product, term by term.
+inline void apply_at_start(const Model& m, const Control& c, const ImplicitBuffers& w,
+                           double alpha_m, double alpha_c, double alpha_k, const double* p,
+                           double* out) {
+    for (index i = 0; i < m.particle_count; ++i) {
+        const double wm = alpha_m * m.particle_mass[i];
+        for (int k = 0; k < 3; ++k) out[3 * i + k] = wm * p[3 * i + k];
+    }
+    springs::jacobian_product(m, w.spring_u, w.spring_a, w.spring_b, alpha_c, alpha_k, p, out);
+    attachments::jacobian_product(m, c, w.q0, alpha_c, alpha_k, p, out);
+    external::grab_jacobian_product(c, alpha_c, alpha_k, p, out);
+    gas::jacobian_product(m, w.q0, w.gas.volume_gradient, w.body_dpdv, w.body_pnet, alpha_k, p,
+                          out);
+}
+
+/// sum over free particles of a_i . b_i (pinned rows are not unknowns).
+inline double dot_free(const Model& m, const double* a, const double* b) {
+    double s = 0.0;
+    for (index i = 0; i < m.particle_count; ++i)
+        if (m.particle_inv_mass[i] > 0.0) s += dot(load(a, i), load(b, i));
+    return s;
+}
+
+/// out = a^-1 for a 3 x 3 block (row-major) by the adjugate.
+inline void invert_3x3(const double* a, double* out) {
+    const double c00 = a[4] * a[8] - a[5] * a[7];
+    const double c01 = a[5] * a[6] - a[3] * a[8];
+    const double c02 = a[3] * a[7] - a[4] * a[6];
+    const double inv_det = 1.0 / (a[0] * c00 + a[1] * c01 + a[2] * c02);
+    out[0] = c00 * inv_det;
+    out[3] = c01 * inv_det;
+    out[6] = c02 * inv_det;
+    out[1] = (a[2] * a[7] - a[1] * a[8]) * inv_det;
+    out[4] = (a[0] * a[8] - a[2] * a[6]) * inv_det;
+    out[7] = (a[1] * a[6] - a[0] * a[7]) * inv_det;
+    out[2] = (a[1] * a[5] - a[2] * a[4]) * inv_det;
+    out[5] = (a[2] * a[3] - a[0] * a[5]) * inv_det;
+    out[8] = (a[0] * a[4] - a[1] * a[3]) * inv_det;
+}
+
+/// The finest-level smoother's blocks for step h: each term's share, then the inverses.
+inline void prepare_blocks(const Model& m, const Control& c, double h, const ImplicitBuffers& w,
+                           const MultigridView& mg) {
+    springs::smoother_blocks(m, h, w.spring_u, w.spring_a, w.spring_b, mg.vertex_spring_ptr,
+                             mg.vertex_spring, mg.entry_coef, mg.block);
+    attachments::add_smoother_blocks(m, c, h, w.q0, mg.block);
+    external::add_grab_block(c, h, mg.block);
+    for (index i = 0; i < m.particle_count; ++i) invert_3x3(mg.block + 9 * i, mg.block_inv + 9 * i);
+}
+
+/// Sum over entries first..last-1 of their spring block (alpha u u^T + beta I) times x_j.
+inline V3 entries_sum(const MultigridView& mg, const double* x, index first, index last) {
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0;
+    for (index e = first; e < last; ++e) {
+        const index j = mg.vertex_neighbor[e];
+        const double* c = mg.entry_coef + 5 * e;
+        const double ux = c[0], uy = c[1], uz = c[2], beta = c[4];
+        const double xj0 = x[3 * j], xj1 = x[3 * j + 1], xj2 = x[3 * j + 2];
+        const double ax = c[3] * (ux * xj0 + uy * xj1 + uz * xj2);
+        s0 += ax * ux + beta * xj0;
+        s1 += ax * uy + beta * xj1;
+        s2 += ax * uz + beta * xj2;
+    }
+    return {s0, s1, s2};
+}
+
+/// Particle i's first entry to a particle j > i (entries are sorted by j).
+inline index first_later_entry(const MultigridView& mg, index i) {
+    index e = mg.vertex_spring_ptr[i];
+    const index end = mg.vertex_spring_ptr[i + 1];
+    while (e < end && mg.vertex_neighbor[e] < i) ++e;
+    return e;
+}
+
+/// x_i = D_i^-1 (s + b_i), D_i particle i's diagonal block.
+inline void solve_row(const MultigridView& mg, index i, V3 s, const double* b) {
+    const double* d = mg.block_inv + 9 * i;
+    const double s0 = s.x + b[3 * i], s1 = s.y + b[3 * i + 1], s2 = s.z + b[3 * i + 2];
+    mg.x[3 * i] = d[0] * s0 + d[1] * s1 + d[2] * s2;
+    mg.x[3 * i + 1] = d[3] * s0 + d[4] * s1 + d[5] * s2;
+    mg.x[3 * i + 2] = d[6] * s0 + d[7] * s1 + d[8] * s2;
+}
+
+/// z = P^-1 r for r, z (N, 3), pinned rows 0: with a hierarchy, one V-cycle whose finest
+/// level smooths with block Gauss-Seidel on the true spring blocks (forward from 0 down,
+/// backward up) around the Laplacian hierarchy's correction; otherwise Jacobi with diag.
+inline void precondition(const Model& m, const MultigridView* hierarchy, const double* diag,
+                         const double* r, double* z) {
+    const index n = m.particle_count;
+    const double* inv_mass = m.particle_inv_mass;
+    if (hierarchy == nullptr) {
+        for (index i = 0; i < n; ++i)
+            for (int k = 0; k < 3; ++k) z[3 * i + k] = r[3 * i + k] / diag[i];
+        return;
+    }
+    const MultigridView& mg = *hierarchy;
+    // forward sweep from x = 0: row i reads only its springs to earlier particles
+    for (index i = 0; i < n; ++i) {
+        if (inv_mass[i] == 0.0) {
+            store(mg.x, i, {0.0, 0.0, 0.0});
+            continue;
+        }
+        solve_row(mg, i, entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], first_later_entry(mg, i)), r);
+    }
+    // its residual: row i's equation held when x_i was set, with x_j = 0 for j > i, so what
+    // is left is those springs' blocks times their new x_j
+    for (index i = 0; i < n; ++i) {
+        if (inv_mass[i] == 0.0) {
+            store(mg.r, i, {0.0, 0.0, 0.0});
+            continue;
+        }
+        store(mg.r, i, entries_sum(mg, mg.x, first_later_entry(mg, i), mg.vertex_spring_ptr[i + 1]));
+    }
+    if (mg.level_count > 0) {  // coarse correction with the Laplacian hierarchy
+        multigrid::restrict_to(mg, 0, mg.r);
+        multigrid::cycle_from(mg, 1);
+        multigrid::prolong(mg, 0);
+    } else {  // one level: the dense solve on the residual, keeping the smoothed x
+        for (index k = 0; k < 3 * n; ++k) {
+            mg.b[k] = mg.r[k];
+            mg.r[k] = mg.x[k];
+        }
+        multigrid::coarse_solve(mg);
+        for (index k = 0; k < 3 * n; ++k) mg.x[k] += mg.r[k];
+    }
+    for (index i = 0; i < n; ++i)
+        if (inv_mass[i] == 0.0) store(mg.x, i, {0.0, 0.0, 0.0});
+    for (index i = n - 1; i >= 0; --i) {  // backward sweep; pinned rows stay 0
+        if (inv_mass[i] == 0.0) continue;
+        solve_row(mg, i, entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]),
+                  r);
+    }
+    for (index k = 0; k < 3 * n; ++k) z[k] = mg.x[k];
+}
+
+/// Everything the step's matrix needs at its start (x0 in w.q0, the gas in w.gas): spring
+/// blocks, pressure slopes, the smoother's blocks or the Jacobi diagonal, for step h.
+inline void prepare(const Model& m, const Control& c, double h, const ImplicitBuffers& w,
+                    const MultigridView* mg) {
+    springs::prepare(m, w.q0, w.spring_u, w.spring_a, w.spring_b);
+    gas::pressure_slopes(m, w.gas, w.body_dpdv, w.body_pnet);
+    if (mg != nullptr) prepare_blocks(m, c, h, w, *mg);
+}
+
+/// Jacobi's diagonal: mass + h (damping) + h^2 (axial stiffness) of each particle's springs.
+inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) {
+    for (index i = 0; i < m.particle_count; ++i) w.cg_diag[i] = m.particle_mass[i];
+    for (index s = 0; s < m.spring_count; ++s) {
+        const double d = h * m.spring_damping[s] + h * h * w.spring_a[s];
+        w.cg_diag[m.spring_indices[2 * s]] += d;
+        w.cg_diag[m.spring_indices[2 * s + 1]] += d;
+    }
+}
+
+/// One backward Euler step, or with bdf2 one BDF2 step, from w.q0, w.v0 with w.f = f(x0, v0)
+/// into q, qd; BDF2 reads the previous step's start in w.q_prev, w.v_prev, and both leave
+/// this step's start there. dv is solved from the last step's dv (w.cg_x) when that is
+/// closer. Returns the CG iterations used.
+inline index step(const Model& m, const Control& c, double dt, double* q, double* qd,
+                  const ImplicitBuffers& w, const MultigridView* mg, double tolerance,
+                  index max_iterations, bool bdf2) {
+    const index n = m.particle_count;
+    const double* inv_mass = m.particle_inv_mass;
+    const double h = bdf2 ? dt * (2.0 / 3.0) : dt;
+    for (index k = 0; k < 3 * n; ++k)  // y, the position change before dv
+        w.qs[k] = bdf2 ? (w.q0[k] - w.q_prev[k]) / 3.0 + h * w.v0[k] : h * w.v0[k];
+    prepare(m, c, h, w, mg);
+    apply_at_start(m, c, w, 0.0, 0.0, 1.0, w.qs, w.ky);  // K y for the right-hand side
+    if (mg == nullptr) jacobi_diagonal(m, h, w);
+    double rhs_norm = 0.0;
+    for (index i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) {
+            const index r = 3 * i + k;
+            double b = 0.0;
+            if (inv_mass[i] > 0.0) {
+                b = h * (w.f[r] + w.ky[r]);
+                if (bdf2) b += m.particle_mass[i] * (w.v0[r] - w.v_prev[r]) / 3.0;
+            }
+            w.cg_r[r] = b;
+            rhs_norm += b * b;
+            if (inv_mass[i] == 0.0) w.cg_x[r] = 0.0;
+        }
+    rhs_norm = std::sqrt(rhs_norm);
+    // warm start from the previous dv, kept only if its residual b - A dv_prev is smaller
+    apply_at_start(m, c, w, 1.0, -h, -h * h, w.cg_x, w.cg_ap);
+    double warm = 0.0;
+    for (index i = 0; i < n; ++i)
+        if (inv_mass[i] > 0.0)
+            for (int k = 0; k < 3; ++k) {
+                const double d = w.cg_r[3 * i + k] - w.cg_ap[3 * i + k];
+                warm += d * d;
+            }
+    if (std::isfinite(warm) && warm < rhs_norm * rhs_norm) {
+        for (index i = 0; i < n; ++i)
+            if (inv_mass[i] > 0.0)
+                for (int k = 0; k < 3; ++k) w.cg_r[3 * i + k] -= w.cg_ap[3 * i + k];
+    } else {
+        for (index k = 0; k < 3 * n; ++k) w.cg_x[k] = 0.0;
+        warm = rhs_norm * rhs_norm;
+    }
+    index iterations = 0;
+    if (std::sqrt(warm) > tolerance * rhs_norm) {
+        precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z);
+        for (index k = 0; k < 3 * n; ++k) w.cg_p[k] = w.cg_z[k];
+        double rz = dot_free(m, w.cg_r, w.cg_z);
+        while (iterations < max_iterations) {
+            apply_at_start(m, c, w, 1.0, -h, -h * h, w.cg_p, w.cg_ap);
+            const double pap = dot_free(m, w.cg_p, w.cg_ap);
+            // pap < 0 (the pressure Hessian made the matrix indefinite at a large step) is
+            // no breakdown: CG's recurrences hold for any symmetric matrix
+            if (pap == 0.0 || !std::isfinite(pap)) break;  // breakdown: keep the last iterate
+            const double alpha = rz / pap;
+            double res = 0.0;
+            for (index i = 0; i < n; ++i) {
+                if (inv_mass[i] == 0.0) continue;
+                for (int k = 0; k < 3; ++k) {
+                    const index r = 3 * i + k;
+                    w.cg_x[r] += alpha * w.cg_p[r];
+                    w.cg_r[r] -= alpha * w.cg_ap[r];
+                    res += w.cg_r[r] * w.cg_r[r];
+                }
+            }
+            ++iterations;
+            if (std::sqrt(res) <= tolerance * rhs_norm) break;
+            precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z);
+            const double rz_new = dot_free(m, w.cg_r, w.cg_z);
+            const double beta = rz_new / rz;
+            rz = rz_new;
+            for (index k = 0; k < 3 * n; ++k) w.cg_p[k] = w.cg_z[k] + beta * w.cg_p[k];
+        }
+    }
+    for (index i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) {
+            const index r = 3 * i + k;
+            const double v = w.v0[r] + w.cg_x[r];
+            qd[r] = v;
+            if (bdf2 && inv_mass[i] > 0.0)
+                q[r] = (4.0 * w.q0[r] - w.q_prev[r]) / 3.0 + h * v;
+            else
+                q[r] = w.q0[r] + dt * v;  // pinned particles keep their set velocity
+            w.q_prev[r] = w.q0[r];
+            w.v_prev[r] = w.v0[r];
+        }
+    return iterations;
+}
+
+/// Whether contacts moved a particle or changed its velocity (q, qd against their values
+/// before contacts). BDF2 then takes its next step as backward Euler: it would read a
+/// projection and a reflection as motion and carry them on (a dropped ball bounced higher
+/// each time).
+inline bool contacts_acted(index n3, const double* q, const double* qd, const double* q_before,
+                           const double* qd_before) {
+    for (index k = 0; k < n3; ++k)
+        if (q[k] != q_before[k] || qd[k] != qd_before[k]) return true;
+    return false;
+}
+
+/// Advance s.q, s.qd by p.steps implicit steps (ip.bdf2: BDF2, else backward Euler). BDF2
+/// steps as backward Euler when it has no previous step (the run's first step without
+/// ip.history) or the last step's contacts acted. Failures as explicit_solver::simulate.
+inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
+                          const ImplicitParams& ip, const StateView& s, const ImplicitBuffers& w,
+                          const MultigridView* mg) {
+    const index n3 = 3 * m.particle_count;
+    loop::begin_run(m, c, p, s, w.contact);
+    for (index step_index = 0; step_index < p.steps; ++step_index) {
+        const double t = p.t0 + static_cast<double>(step_index) * p.dt;
+        loop::copy(s.q, w.q0, n3);
+        loop::copy(s.qd, w.v0, n3);
+        explicit_solver::eval_forces(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);
+        RunResult r = loop::check_volumes(m, w.gas.volume, p.ratio_min, p.ratio_max);
+        if (r.status != OK) {
+            r.steps_done = step_index;
+            return r;
+        }
+        const bool two_step = ip.bdf2 && (step_index > 0 || ip.history) && w.contacts_acted[0] == 0;
+        const index its = step(m, c, p.dt, s.q, s.qd, w, mg, ip.tolerance, ip.max_iterations,
+                               two_step);
+        w.cg_stats[0] += 1;
+        w.cg_stats[1] += its;
+        w.cg_stats[2] = std::max(w.cg_stats[2], its);
+        if (ip.bdf2) {  // contacts may move particles
+            loop::copy(s.q, w.qs, n3);
+            loop::copy(s.qd, w.vs, n3);
+        }
+        const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact);
+        if (needed > 0) {  // the hash is too small: undo the step, the caller grows it
+            loop::copy(w.q0, s.q, n3);
+            loop::copy(w.v0, s.qd, n3);
+            return {NEED_HASH, step_index, -1, static_cast<double>(needed)};
+        }
+        r = loop::check_particles(m, s.q, s.qd, p.max_speed);
+        if (r.status != OK) {
+            loop::copy(w.q0, s.q, n3);
+            loop::copy(w.v0, s.qd, n3);
+            r.steps_done = step_index;
+            return r;
+        }
+        if (ip.bdf2) w.contacts_acted[0] = contacts_acted(n3, s.q, s.qd, w.qs, w.vs) ? 1 : 0;
+    }
+    return {OK, p.steps, -1, 0.0};
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::implicit_solver
