@@ -349,15 +349,17 @@ def test_the_core_refuses_inconsistent_model_arrays():
                         state.collider_impulse, 1e4, 1e-3, 1e3)  # fmt: skip
 
 
-def test_an_explicit_run_starts_without_compiling_anything(tmp_path):
-    """On an empty kernel cache, building a scene, an explicit run, its stability
-    estimate and the diagnostics use the compiled core only: the Numba kernels'
-    warm-up never starts (it would print and write its files into the cache folder)."""
+@pytest.mark.parametrize("integrator", ["midpoint", "implicit_euler", "bdf2"])
+def test_an_explicit_run_starts_without_compiling_anything(tmp_path, integrator):
+    """On an empty kernel cache, building a scene, an explicit or implicit run (with its
+    multigrid hierarchy), its stability estimate and the diagnostics use the compiled core
+    only: the Numba kernels' warm-up never starts (it would print and write its files into
+    the cache folder)."""
     code = (
         "import softbody as sb\n"
         "from softbody.scenes.loader import load_scene\n"
         "s = load_scene('bouncing-balls')\n"
-        "sim = sb.Simulator(s.model, integrator='midpoint', dt=s.dt)\n"
+        f"sim = sb.Simulator(s.model, integrator='{integrator}', dt=s.dt)\n"
         "st = s.model.state(); sim.run(st, 20)\n"
         "print(sb.body_volume(s.model, st).sum(), sb.energies(s.model, st).total)\n"
     )

@@ -1,5 +1,6 @@
 """The engine core built with AddressSanitizer and UndefinedBehaviorSanitizer
-(``tools/build_core.py --sanitize``) running the core's fast tests. Reference: the
+(``tools/build_core.py --sanitize``) running the core's fast tests
+(test_core.py, test_core_implicit.py). Reference: the
 sanitizers' own checks; a read or write outside an array, a use after free or undefined
 behaviour (overflow, misalignment, a bad shift) in the C++ aborts the run with its
 report, so this passes only when none fired on any instruction-set path."""
@@ -19,6 +20,8 @@ from conftest import package_copy
 ROOT = Path(__file__).resolve().parent.parent
 #: the core's tests that do not run the Numba kernels (Numba runs as Python here)
 FAST = "not numba and not blow_up and not without_compiling"
+#: the files of the core's tests
+CORE_TESTS = ("test_core.py", "test_core_implicit.py")
 
 
 def _runtime(name: str) -> str | None:
@@ -70,7 +73,7 @@ def test_core_tests_pass_under_address_and_undefined_behaviour_sanitizers(tmp_pa
     assert which.stdout.strip() == str(package / module.name)
     command = [sys.executable, "-S", "-m", "pytest", "-q", "-p", "no:cacheprovider"]
     tests = subprocess.run(
-        [*command, str(ROOT / "tests" / "test_core.py"), "-k", FAST],
+        [*command, *(str(ROOT / "tests" / name) for name in CORE_TESTS), "-k", FAST],
         env=env,
         cwd=ROOT,
         capture_output=True,

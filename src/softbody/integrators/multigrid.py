@@ -315,9 +315,7 @@ def _diagonals(mg):
         entries = slice(z0 + indptr[0], z0 + indptr[-1])
         rows = np.repeat(np.arange(n), np.diff(indptr))
         on = mg.a_indices[entries] == rows
-        mg.a_diag[v0 : v0 + n] = np.bincount(
-            rows[on], weights=mg.a_data[entries][on], minlength=n
-        )
+        mg.a_diag[v0 : v0 + n] = np.bincount(rows[on], weights=mg.a_data[entries][on], minlength=n)
 
 
 # inlined, as are restrict, prolong and cycle_from: their callers pass constants (a

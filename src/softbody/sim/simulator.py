@@ -457,6 +457,7 @@ class Simulator:
             return self._core.simulate(
                 scheme, steps, t0, dt, control, q, qd, cq, crot, ci, max_speed, lo, hi
             )
+        _kernel_cache.ensure_compiled()  # (cheap once done) before any Numba kernel runs
         if self.threads == 1:
             return _loop.simulate(*args)
         before = numba.get_num_threads()
