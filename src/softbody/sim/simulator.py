@@ -54,17 +54,16 @@ def step_count(steps) -> int:
 
 
 def _refuse_drag(model: Model, integrator: Integrator, threads: int) -> None:
-    """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit and
-    projective integrators, threads > 1) has no drag term, and dropping a force silently
-    would be wrong."""
+    """A ``ValueError`` when ``model`` has air drag: the Numba loop (projective dynamics,
+    threads > 1) has no drag term, and dropping a force silently would be wrong."""
     if not model.has_drag:
         return
-    why = f"threads={threads}" if integrator.explicit else f"integrator {integrator.name.lower()}"
+    why = f"threads={threads}" if threads > 1 else f"integrator {integrator.name.lower()}"
     raise ValueError(
-        "aerodynamic drag is stepped by the explicit integrators only for now "
-        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet, with threads=1); this "
-        f"simulator has {why}. Set drag_coefficient=0 on every body or air density 0 to "
-        "run it without drag"
+        "aerodynamic drag is stepped by the compiled core's integrators only for now "
+        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet, implicit_euler, bdf2, "
+        f"with threads=1); this simulator has {why}. Set drag_coefficient=0 on every body "
+        "or air density 0 to run it without drag"
     )
 
 
@@ -118,8 +117,10 @@ class Simulator:
     step and the time; the state is left at the last good step.
 
     Air drag on faces (``drag_coefficient`` > 0) is stepped by the explicit integrators
-    with ``threads=1``; any other set-up with drag raises a ``ValueError`` rather than
-    leave the drag out.
+    and by ``implicit_euler`` and ``bdf2`` (explicitly: its force at the step's start
+    enters the solve, its Jacobian does not, which is stable while dt < 2 m / (dF/dv),
+    v_t / g for a body falling at its terminal speed v_t) with ``threads=1``;
+    any other set-up with drag raises a ``ValueError`` rather than leave the drag out.
     """
 
     def __init__(
@@ -212,7 +213,8 @@ class Simulator:
         if self.integrator.explicit and self.threads == 1:
             self._core = _core.ExplicitSolver(core_model(model))
         elif self.integrator.implicit and self.threads == 1:
-            _refuse_drag(model, self.integrator, self.threads)
+            # drag enters the implicit step explicitly: its force at the step's start is in
+            # the right-hand side, its Jacobian left out of the matrix
             self._core = self._implicit_solver()
         else:
             _refuse_drag(model, self.integrator, self.threads)
