@@ -5,6 +5,7 @@
 #pragma once
 
 #include "config.hpp"
+#include "parallel.hpp"
 
 namespace softbody {
 
@@ -159,6 +160,8 @@ struct ContactBuffers {
 struct LaneBuffers {
     double* rows = nullptr;       // (8 G, 8) x, y, z, vx, vy, vz, 0, 0 per particle
     double* lane_pnet = nullptr;  // (8 G,) P - P_ambient of each particle's body [Pa], 0 free
+    const Parallel* parallel = nullptr;  // opt-in threads (null: serial)
+    double* chunk_volume = nullptr;      // (chunks, B) each chunk's share of the volumes
 };
 
 /// Scratch for the explicit schemes, owned by softbody::ExplicitSolver.

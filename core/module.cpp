@@ -9,6 +9,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <thread>
 #include <limits>
 #include <optional>
 #include <stdexcept>
@@ -567,13 +571,101 @@ private:
     std::vector<Index> hash_start_, hash_count_, hash_entries_;
 };
 
+/// A fixed set of worker threads for softbody::Parallel: run() hands chunk 0 to the caller
+/// and chunk w to worker w, and returns when every chunk is done. Workers wait on a
+/// condition variable between calls, so an idle pool costs nothing.
+class ThreadPool {
+public:
+    static constexpr int kMostThreads = 256;
+
+    explicit ThreadPool(int threads) : threads_(threads) {
+        for (int w = 1; w < threads; ++w) workers_.emplace_back([this, w] { work(w); });
+    }
+    ~ThreadPool() {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            stop_ = true;
+        }
+        start_.notify_all();
+        for (std::thread& t : workers_) t.join();
+    }
+    ThreadPool(const ThreadPool&) = delete;
+    ThreadPool& operator=(const ThreadPool&) = delete;
+
+    softbody::Parallel interface() {
+        softbody::Parallel p;
+        p.chunks = threads_;
+        p.pool = this;
+        p.run = [](const softbody::Parallel& self, void (*task)(void*, int), void* context) {
+            static_cast<ThreadPool*>(self.pool)->run(task, context);
+        };
+        return p;
+    }
+
+private:
+    void run(void (*task)(void*, int), void* context) {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            task_ = task;
+            context_ = context;
+            pending_ = threads_ - 1;
+            ++generation_;
+        }
+        start_.notify_all();
+        task(context, 0);
+        std::unique_lock<std::mutex> lock(mutex_);
+        done_.wait(lock, [this] { return pending_ == 0; });
+    }
+
+    void work(int chunk) {
+        std::uint64_t seen = 0;
+        for (;;) {
+            void (*task)(void*, int);
+            void* context;
+            {
+                std::unique_lock<std::mutex> lock(mutex_);
+                start_.wait(lock, [&] { return stop_ || generation_ != seen; });
+                if (stop_) return;
+                seen = generation_;
+                task = task_;
+                context = context_;
+            }
+            task(context, chunk);
+            {
+                std::lock_guard<std::mutex> lock(mutex_);
+                --pending_;
+            }
+            done_.notify_one();
+        }
+    }
+
+    int threads_;
+    std::vector<std::thread> workers_;
+    std::mutex mutex_;
+    std::condition_variable start_, done_;
+    std::uint64_t generation_ = 0;
+    int pending_ = 0;
+    bool stop_ = false;
+    void (*task_)(void*, int) = nullptr;
+    void* context_ = nullptr;
+};
+
 /// softbody._core.ExplicitSolver: the explicit schemes' time loop and its scratch.
 class ExplicitSolver {
 public:
-    ExplicitSolver(nb::object model, std::optional<Index> hash_capacity)
+    ExplicitSolver(nb::object model, std::optional<Index> hash_capacity, int threads)
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
           buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)) {
+        if (threads < 1 || threads > ThreadPool::kMostThreads)
+            fail("threads must be from 1 to " + std::to_string(ThreadPool::kMostThreads));
+        if (threads > 1) {
+            pool_ = std::make_unique<ThreadPool>(threads);
+            parallel_ = pool_->interface();
+            chunk_volume_.assign(static_cast<size_t>(threads * model_.model().body_count), 0.0);
+            buffers_.lanes_view.parallel = &parallel_;
+            buffers_.lanes_view.chunk_volume = chunk_volume_.data();
+        }
         w_.f = buffers_.row(0);
         w_.q0 = buffers_.row(1);
         w_.v0 = buffers_.row(2);
@@ -620,6 +712,7 @@ public:
     }
 
     Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+    int threads() const { return parallel_.chunks; }
 
 private:
     /// Entries of the surface contacts' hash: as asked, by default 8 per triangle (room for
@@ -634,6 +727,9 @@ private:
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
     const CoreModel& model_;
     Buffers buffers_;
+    std::unique_ptr<ThreadPool> pool_;
+    softbody::Parallel parallel_;
+    std::vector<double> chunk_volume_;
     softbody::ExplicitBuffers w_;
 };
 
@@ -775,17 +871,19 @@ NB_MODULE(_core, mod) {
 
     nb::class_<ExplicitSolver>(mod, "ExplicitSolver",
                                "The explicit schemes' time loop with its scratch buffers.")
-        .def(nb::init<nb::object, std::optional<Index>>(), nb::arg("model"),
-             nb::arg("hash_capacity") = nb::none(),
+        .def(nb::init<nb::object, std::optional<Index>, int>(), nb::arg("model"),
+             nb::arg("hash_capacity") = nb::none(), nb::arg("threads") = 1,
              "hash_capacity: entries of the surface contacts' spatial hash (default 8 per "
-             "triangle); a run that needs more returns NEED_HASH with the count needed.")
+             "triangle); a run that needs more returns NEED_HASH with the count needed. "
+             "threads: > 1 runs the force pass on that many threads, deterministically.")
+        .def_prop_ro("threads", &ExplicitSolver::threads, "Threads of the force pass.")
         .def_prop_ro("hash_capacity", &ExplicitSolver::hash_capacity,
                      "Entries the surface contacts' spatial hash holds (0 without them).")
         .def("simulate", &ExplicitSolver::simulate, nb::arg("scheme"), nb::arg("steps"),
              nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
              nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
              nb::arg("max_speed"), nb::arg("ratio_min"), nb::arg("ratio_max"),
-             "Advance q, qd in place; returns (status, steps_done, Index, value).");
+             "Advance q, qd in place; returns (status, steps_done, index, value).");
 
     mod.def("eval_forces", &eval_forces, nb::arg("model"), nb::arg("control"), nb::arg("t"),
             nb::arg("q").noconvert(), nb::arg("qd").noconvert(),

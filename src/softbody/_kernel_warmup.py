@@ -79,6 +79,7 @@ def exercise_internals() -> None:
     """The internal kernels the test suite calls on their own from Python (the multigrid
     V-cycle, the smoother's sums), with the argument kinds it passes: compiled here, so
     that no process compiles a kernel into the cache after this one."""
+    import numba
     import numpy as np
 
     import softbody as sb
@@ -88,6 +89,14 @@ def exercise_internals() -> None:
     builder = sb.ModelBuilder()
     builder.add_soft_body(sb.icosphere(2), mass=1.0, stiffness=100.0, damping=0.1, gas=10.0)
     model = builder.finalize()
+    # the Numba explicit loop, which the compiled core replaced: the tests compare the core
+    # with it (Simulator._core = None), on one thread and on two
+    threads = min(2, numba.config.NUMBA_NUM_THREADS)
+    for integrator in ("midpoint", "rk4", "euler", "symplectic_euler", "velocity_verlet"):
+        for count in sorted({1, threads}):
+            sim = sb.Simulator(model, integrator=integrator, dt=1e-4, threads=count)
+            sim._core = None
+            sim.run(model.state(), 2, model.control())
     sim = sb.Simulator(model, integrator="implicit_euler", dt=1e-2)
     sim.run(model.state(), 1)
     mg, n = sim._multigrid, model.particle_count

@@ -53,18 +53,17 @@ def step_count(steps) -> int:
     return n
 
 
-def _refuse_drag(model: Model, integrator: Integrator, threads: int) -> None:
+def _refuse_drag(model: Model, integrator: Integrator) -> None:
     """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit and
-    projective integrators, threads > 1) has no drag term, and dropping a force silently
-    would be wrong."""
+    projective integrators) has no drag term, and dropping a force silently would be
+    wrong."""
     if not model.has_drag:
         return
-    why = f"threads={threads}" if integrator.explicit else f"integrator {integrator.name.lower()}"
     raise ValueError(
         "aerodynamic drag is stepped by the explicit integrators only for now "
-        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet, with threads=1); this "
-        f"simulator has {why}. Set drag_coefficient=0 on every body or air density 0 to "
-        "run it without drag"
+        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet); this simulator has "
+        f"integrator {integrator.name.lower()}. Set drag_coefficient=0 on every body or air "
+        "density 0 to run it without drag"
     )
 
 
@@ -100,11 +99,13 @@ class Simulator:
         ``implicit_euler`` and ``bdf2``: most CG iterations per step (a step that reaches it keeps
         the last iterate; :attr:`solver_iterations` tells).
     threads : int
-        Threads for the force terms (springs and the exact volume pass), >= 1 and at most
-        ``numba.config.NUMBA_NUM_THREADS``. Default 1: serial. More threads cut the
-        particles into that many chunks (``softbody.partition``); results agree with the
-        serial ones to round-off and are the same in every run. Opt-in because a thread
-        that loses its core to another process stalls the whole step.
+        Threads for the force terms, >= 1 and at most ``numba.config.NUMBA_NUM_THREADS``
+        (the machine's cores unless set). Default 1: serial. The explicit schemes run the
+        compiled core's force pass on that many threads, each on a fixed run of particles;
+        the implicit and projective solvers cut springs and faces into chunks
+        (``softbody.partition``). Results agree with the serial ones to round-off and are
+        the same in every run. Opt-in because a thread that loses its core to another
+        process stalls the whole step.
     implicit_preconditioner : str
         ``implicit_euler`` and ``bdf2``: ``"multigrid"`` (default; one algebraic-multigrid V-cycle
         of the spring Laplacian, built once, so the iteration count barely grows with mesh
@@ -204,14 +205,14 @@ class Simulator:
                 f"got {threads!r}"
             )
         self.threads = int(threads)
-        # the explicit schemes step in the compiled C++ core; the rest (implicit and
-        # projective solvers, threads) still in the Numba kernels, which compile on first
-        # use (softbody._kernel_cache)
+        # the explicit schemes step in the compiled C++ core (threads too); the implicit
+        # and projective solvers still in the Numba kernels, which compile on first use
+        # (softbody._kernel_cache)
         self._core = None
-        if self.integrator.explicit and self.threads == 1:
-            self._core = _core.ExplicitSolver(core_model(model))
+        if self.integrator.explicit:
+            self._core = _core.ExplicitSolver(core_model(model), threads=self.threads)
         else:
-            _refuse_drag(model, self.integrator, self.threads)
+            _refuse_drag(model, self.integrator)
             _kernel_cache.ensure_compiled()
         self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
@@ -384,7 +385,7 @@ class Simulator:
                 # (pin and collider targets are re-aimed over the remaining steps)
                 if self._core is not None:
                     self._core = _core.ExplicitSolver(
-                        core_model(model), hash_capacity=int(2 * value)
+                        core_model(model), hash_capacity=int(2 * value), threads=self.threads
                     )
                 else:
                     self._work = Workspace.for_model(
