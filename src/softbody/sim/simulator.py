@@ -54,17 +54,17 @@ def step_count(steps) -> int:
 
 
 def _refuse_drag(model: Model, integrator: Integrator, threads: int) -> None:
-    """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit and
-    projective integrators, threads > 1) has no drag term, and dropping a force silently
-    would be wrong."""
+    """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit integrators,
+    threads > 1) has no drag term, and dropping a force silently would be wrong."""
     if not model.has_drag:
         return
-    why = f"threads={threads}" if integrator.explicit else f"integrator {integrator.name.lower()}"
+    stepped = integrator.explicit or integrator == Integrator.PROJECTIVE
+    why = f"threads={threads}" if stepped else f"integrator {integrator.name.lower()}"
     raise ValueError(
-        "aerodynamic drag is stepped by the explicit integrators only for now "
-        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet, with threads=1); this "
-        f"simulator has {why}. Set drag_coefficient=0 on every body or air density 0 to "
-        "run it without drag"
+        "aerodynamic drag is stepped by the explicit integrators and projective only for "
+        "now (euler, midpoint, rk4, symplectic_euler, velocity_verlet, projective, with "
+        f"threads=1); this simulator has {why}. Set drag_coefficient=0 on every body or air "
+        "density 0 to run it without drag"
     )
 
 
@@ -118,8 +118,9 @@ class Simulator:
     step and the time; the state is left at the last good step.
 
     Air drag on faces (``drag_coefficient`` > 0) is stepped by the explicit integrators
-    with ``threads=1``; any other set-up with drag raises a ``ValueError`` rather than
-    leave the drag out.
+    and projective with ``threads=1`` (projective takes it, like the pressure, as a force
+    at each iterate); any other set-up with drag raises a ``ValueError`` rather than leave
+    the drag out.
     """
 
     def __init__(
@@ -204,14 +205,16 @@ class Simulator:
                 f"got {threads!r}"
             )
         self.threads = int(threads)
-        # the explicit schemes step in the compiled C++ core; the rest (implicit and
-        # projective solvers, threads) still in the Numba kernels, which compile on first
-        # use (softbody._kernel_cache)
+        # the explicit schemes and projective dynamics step in the compiled C++ core; the
+        # rest (implicit solvers, threads) still in the Numba kernels, which compile on
+        # first use (softbody._kernel_cache). Projective dynamics' set-up (the dissection
+        # order, the factor's supernodes) is Numba code too, so it needs the cache as well.
         self._core = None
-        if self.integrator.explicit and self.threads == 1:
-            self._core = _core.ExplicitSolver(core_model(model))
+        if self.threads == 1 and (self.integrator.explicit or self._projective_core):
+            self._core = self._core_solver()
         else:
             _refuse_drag(model, self.integrator, self.threads)
+        if not self.integrator.explicit or self.threads > 1:
             _kernel_cache.ensure_compiled()
         self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
@@ -383,9 +386,7 @@ class Simulator:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
                 if self._core is not None:
-                    self._core = _core.ExplicitSolver(
-                        core_model(model), hash_capacity=int(2 * value)
-                    )
+                    self._core = self._core_solver(hash_capacity=int(2 * value))
                 else:
                     self._work = Workspace.for_model(
                         model, hash_capacity=int(2 * value), chunk_count=self.threads
@@ -407,11 +408,28 @@ class Simulator:
             cache[dt] = build_projective(self.model, dt)
         return cache[dt]
 
+    @property
+    def _projective_core(self) -> bool:
+        return self.integrator == Integrator.PROJECTIVE
+
+    def _core_solver(self, hash_capacity: int | None = None):
+        """The compiled core's solver for this integrator: the explicit schemes' loop, or
+        projective dynamics' (given its factor for the current dt before each run)."""
+        kind = _core.ProjectiveSolver if self._projective_core else _core.ExplicitSolver
+        return kind(core_model(self.model), hash_capacity=hash_capacity)
+
     def _simulate(self, *args):
         """``loop.simulate`` on this simulator's thread count (restored afterwards), or the
         compiled core's loop for the schemes it has."""
         if self._core is not None:
             scheme, steps, t0, dt, _, control, q, qd, _, max_speed, lo, hi, cq, crot, ci = args[:15]
+            if self._projective_core:
+                factor, iterations = args[19:21]
+                if self._core.factor is not factor:  # checked once per factor (per dt)
+                    self._core.set_factor(factor)
+                return self._core.simulate(
+                    steps, t0, dt, iterations, control, q, qd, cq, crot, ci, max_speed, lo, hi
+                )
             return self._core.simulate(
                 scheme, steps, t0, dt, control, q, qd, cq, crot, ci, max_speed, lo, hi
             )
