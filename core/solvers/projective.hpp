@@ -28,6 +28,11 @@
 
 namespace softbody::SOFTBODY_KERNELS::projective {
 
+/// Rows of a supernode taken together in the solves below its triangle: their sums are
+/// independent, so interleaving them keeps several additions in flight, each row summed in
+/// its own order (the results do not change).
+constexpr index kSolveRows = 4;
+
 /// out = A^-1 b for b (N, 3) with the factor a (two triangular solves on the three columns
 /// at once); x (N, 3) is scratch in factor order; out may be b.
 inline void solve(const Factor& a, const double* b, double* x, double* out) {
@@ -38,11 +43,39 @@ inline void solve(const Factor& a, const double* b, double* x, double* out) {
     for (index s = 0; s < a.node_count; ++s) {  // L z = b, node by node: each row a dot product
         const index c0 = a.node_col[s], width = a.node_col[s + 1] - c0;
         const index r0 = a.node_row_ptr[s], height = a.node_row_ptr[s + 1] - r0;
-        const index v0 = a.node_value_ptr[s];
-        for (index p = 1; p < height; ++p) {
-            const double* row = values + v0 + p * width;
+        const double* block = values + a.node_value_ptr[s];
+        for (index p = 1; p < width; ++p) {  // the triangle: row c0 + p reads rows c0.. c0 + p - 1
+            const double* row = block + p * width;
             double a0 = 0.0, a1 = 0.0, a2 = 0.0;
-            for (index jj = 0; jj < std::min(p, width); ++jj) {
+            for (index jj = 0; jj < p; ++jj) {
+                const double v = row[jj];
+                a0 += v * x[3 * (c0 + jj)];
+                a1 += v * x[3 * (c0 + jj) + 1];
+                a2 += v * x[3 * (c0 + jj) + 2];
+            }
+            add_to(x, c0 + p, -V3{a0, a1, a2});
+        }
+        // the rows below read only the node's columns (done) and write rows past them
+        index p = width;
+        for (; p + kSolveRows <= height; p += kSolveRows) {
+            double acc[kSolveRows][3] = {};
+            const double* row = block + p * width;
+            for (index jj = 0; jj < width; ++jj) {
+                const V3 xj = load(x, c0 + jj);
+                for (index k = 0; k < kSolveRows; ++k) {
+                    const double v = row[k * width + jj];
+                    acc[k][0] += v * xj.x;
+                    acc[k][1] += v * xj.y;
+                    acc[k][2] += v * xj.z;
+                }
+            }
+            for (index k = 0; k < kSolveRows; ++k)
+                add_to(x, rows[r0 + p + k], -V3{acc[k][0], acc[k][1], acc[k][2]});
+        }
+        for (; p < height; ++p) {
+            const double* row = block + p * width;
+            double a0 = 0.0, a1 = 0.0, a2 = 0.0;
+            for (index jj = 0; jj < width; ++jj) {
                 const double v = row[jj];
                 a0 += v * x[3 * (c0 + jj)];
                 a1 += v * x[3 * (c0 + jj) + 1];
@@ -55,10 +88,23 @@ inline void solve(const Factor& a, const double* b, double* x, double* out) {
     for (index s = a.node_count - 1; s >= 0; --s) {  // D L^T x = z: rows below, then the block
         const index c0 = a.node_col[s], width = a.node_col[s + 1] - c0;
         const index r0 = a.node_row_ptr[s], height = a.node_row_ptr[s + 1] - r0;
-        const index v0 = a.node_value_ptr[s];
-        for (index p = height - 1; p > 0; --p) {
+        const double* block = values + a.node_value_ptr[s];
+        // rows below, last first, kSolveRows at a time: each column entry takes their
+        // products in the same order, with one load and store of it per group
+        index p = height - 1;
+        for (; p - kSolveRows + 1 >= width; p -= kSolveRows) {
+            V3 xr[kSolveRows];
+            for (index k = 0; k < kSolveRows; ++k) xr[k] = load(x, rows[r0 + p - k]);
+            for (index jj = 0; jj < width; ++jj) {
+                V3 xj = load(x, c0 + jj);
+                for (index k = 0; k < kSolveRows; ++k)
+                    xj = xj - block[(p - k) * width + jj] * xr[k];
+                store(x, c0 + jj, xj);
+            }
+        }
+        for (; p > 0; --p) {
             const V3 xr = load(x, rows[r0 + p]);
-            const double* row = values + v0 + p * width;
+            const double* row = block + p * width;
             for (index jj = 0; jj < std::min(p, width); ++jj) add_to(x, c0 + jj, -(row[jj] * xr));
         }
     }
