@@ -3,6 +3,7 @@
 #include "kernels.hpp"
 
 #include "solvers/explicit.hpp"
+#include "solvers/projective.hpp"
 #include "terms/gas.hpp"
 
 #define SOFTBODY_STRING2(x) #x
@@ -15,6 +16,11 @@ namespace {
 RunResult simulate_explicit(const Model& m, const Control& c, const RunParams& p,
                             const StateView& s, const ExplicitBuffers& w) {
     return explicit_solver::simulate(m, c, p, s, w);
+}
+
+RunResult simulate_projective(const Model& m, const Control& c, const RunParams& p,
+                              const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
+    return projective::simulate(m, c, p, s, a, w);
 }
 
 void eval_forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
@@ -47,7 +53,8 @@ void apply_jacobians(const Model& m, const Control& c, const double* q, const do
 }  // namespace
 
 const KernelTable& kernel_table() {
-    static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), simulate_explicit, eval_forces,
+    static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), simulate_explicit,
+                                   simulate_projective, eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians};
     return table;

@@ -14,6 +14,11 @@ struct KernelTable {
     /// Advance a state by an explicit scheme (RunParams.scheme 0-4).
     RunResult (*simulate_explicit)(const Model&, const Control&, const RunParams&,
                                    const StateView&, const ExplicitBuffers&);
+    /// Advance a state by projective dynamics (p.iterations per step) on factor `a`,
+    /// built for p.dt.
+    RunResult (*simulate_projective)(const Model&, const Control&, const RunParams&,
+                                     const StateView&, const Factor& a,
+                                     const ProjectiveBuffers&);
     /// All forces f (N, 3) [N] at time t for q, qd (N, 3); refreshes gas.
     void (*eval_forces)(const Model&, const Control&, double t, const double* q,
                         const double* qd, const BodyGas& gas, const LaneBuffers& lanes,

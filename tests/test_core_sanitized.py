@@ -17,7 +17,9 @@ import pytest
 from conftest import package_copy
 
 ROOT = Path(__file__).resolve().parent.parent
-#: the core's tests that do not run the Numba kernels (Numba runs as Python here)
+#: the core's test files, and among their tests those that do not run the Numba kernels
+#: (Numba runs as Python here)
+CORE_TESTS = ("test_core.py", "test_core_projective.py")
 FAST = "not numba and not blow_up and not without_compiling"
 
 
@@ -70,7 +72,7 @@ def test_core_tests_pass_under_address_and_undefined_behaviour_sanitizers(tmp_pa
     assert which.stdout.strip() == str(package / module.name)
     command = [sys.executable, "-S", "-m", "pytest", "-q", "-p", "no:cacheprovider"]
     tests = subprocess.run(
-        [*command, str(ROOT / "tests" / "test_core.py"), "-k", FAST],
+        [*command, *(str(ROOT / "tests" / name) for name in CORE_TESTS), "-k", FAST],
         env=env,
         cwd=ROOT,
         capture_output=True,

@@ -53,16 +53,21 @@ def step_count(steps) -> int:
     return n
 
 
-def _refuse_drag(model: Model, integrator: Integrator) -> None:
-    """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit and
-    projective integrators) has no drag term, and dropping a force silently would be
-    wrong."""
+def _refuse_drag(model: Model, integrator: Integrator, threads: int) -> None:
+    """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit integrators,
+    projective dynamics on threads) has no drag term, and dropping a force silently would
+    be wrong."""
     if not model.has_drag:
         return
+    why = (
+        f"projective with threads={threads}"
+        if integrator == Integrator.PROJECTIVE
+        else f"integrator {integrator.name.lower()}"
+    )
     raise ValueError(
-        "aerodynamic drag is stepped by the explicit integrators only for now "
-        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet); this simulator has "
-        f"integrator {integrator.name.lower()}. Set drag_coefficient=0 on every body or air "
+        "aerodynamic drag is stepped by the explicit integrators and projective only for "
+        "now (euler, midpoint, rk4, symplectic_euler, velocity_verlet, and projective with "
+        f"threads=1); this simulator has {why}. Set drag_coefficient=0 on every body or air "
         "density 0 to run it without drag"
     )
 
@@ -119,8 +124,9 @@ class Simulator:
     step and the time; the state is left at the last good step.
 
     Air drag on faces (``drag_coefficient`` > 0) is stepped by the explicit integrators
-    with ``threads=1``; any other set-up with drag raises a ``ValueError`` rather than
-    leave the drag out.
+    and projective with ``threads=1`` (projective takes it, like the pressure, as a force
+    at each iterate); any other set-up with drag raises a ``ValueError`` rather than leave
+    the drag out.
     """
 
     def __init__(
@@ -205,14 +211,17 @@ class Simulator:
                 f"got {threads!r}"
             )
         self.threads = int(threads)
-        # the explicit schemes step in the compiled C++ core (threads too); the implicit
-        # and projective solvers still in the Numba kernels, which compile on first use
-        # (softbody._kernel_cache)
+        # the explicit schemes (threads too) and projective dynamics (one thread) step in
+        # the compiled C++ core; the rest (implicit solvers, projective on threads) still
+        # in the Numba kernels, which compile on first use (softbody._kernel_cache).
+        # Projective dynamics' set-up (the dissection order, the factor's supernodes) is
+        # Numba code too, so it needs the cache as well.
         self._core = None
-        if self.integrator.explicit:
-            self._core = _core.ExplicitSolver(core_model(model), threads=self.threads)
+        if self.integrator.explicit or (self._projective_core and self.threads == 1):
+            self._core = self._core_solver()
         else:
-            _refuse_drag(model, self.integrator)
+            _refuse_drag(model, self.integrator, self.threads)
+        if not self.integrator.explicit:
             _kernel_cache.ensure_compiled()
         self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
@@ -384,9 +393,7 @@ class Simulator:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
                 if self._core is not None:
-                    self._core = _core.ExplicitSolver(
-                        core_model(model), hash_capacity=int(2 * value), threads=self.threads
-                    )
+                    self._core = self._core_solver(hash_capacity=int(2 * value))
                 else:
                     self._work = Workspace.for_model(
                         model, hash_capacity=int(2 * value), chunk_count=self.threads
@@ -408,11 +415,31 @@ class Simulator:
             cache[dt] = build_projective(self.model, dt)
         return cache[dt]
 
+    @property
+    def _projective_core(self) -> bool:
+        return self.integrator == Integrator.PROJECTIVE
+
+    def _core_solver(self, hash_capacity: int | None = None):
+        """The compiled core's solver for this integrator: the explicit schemes' loop, or
+        projective dynamics' (given its factor for the current dt before each run)."""
+        if self._projective_core:
+            return _core.ProjectiveSolver(core_model(self.model), hash_capacity=hash_capacity)
+        return _core.ExplicitSolver(
+            core_model(self.model), hash_capacity=hash_capacity, threads=self.threads
+        )
+
     def _simulate(self, *args):
         """``loop.simulate`` on this simulator's thread count (restored afterwards), or the
         compiled core's loop for the schemes it has."""
         if self._core is not None:
             scheme, steps, t0, dt, _, control, q, qd, _, max_speed, lo, hi, cq, crot, ci = args[:15]
+            if self._projective_core:
+                factor, iterations = args[19:21]
+                if self._core.factor is not factor:  # checked once per factor (per dt)
+                    self._core.set_factor(factor)
+                return self._core.simulate(
+                    steps, t0, dt, iterations, control, q, qd, cq, crot, ci, max_speed, lo, hi
+                )
             return self._core.simulate(
                 scheme, steps, t0, dt, control, q, qd, cq, crot, ci, max_speed, lo, hi
             )
