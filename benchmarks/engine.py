@@ -140,6 +140,8 @@ def _plot(results: list[dict], engines: list[str]) -> None:
             style = "k--o" if e == "numba" else "-o"
             ax.plot(x, [r["mvps"][e] for r in rows], style, label=e)
         ax.set_xscale("log")
+        ax.set_xticks(x, [f"{v:,}" for v in x])
+        ax.minorticks_off()
         ax.set_title(f"{scheme}, dt = {DT:g} s, one thread")
         ax.set_xlabel("vertices")
         ax.grid(True, alpha=0.3)
