@@ -17,11 +17,11 @@
 
 namespace softbody::SOFTBODY_KERNELS::explicit_solver {
 
-/// The vertex-major pass: for every particle, kLanes at a time, its weight, its springs and
-/// dV/dx from its faces, with each body's exact volume (6 V, three times over, summed from
-/// the corners). The ring's neighbour rows serve a spring and two faces each. Writes f and
-/// gas.volume_gradient (N, 3) and the exact bodies' gas.volume; scatters nothing.
-/// Groups [g0, g1) of the vertex-major pass; their shares of 6 V (times 3) go to six_v (B,).
+/// The vertex-major pass over groups [g0, g1): for every particle, kLanes at a time, its
+/// weight, its springs and dV/dx from its faces, with its share of its body's exact volume
+/// (each face seen from its three corners: 3 x 6 V in all, added to body_six_v (B,)). The
+/// ring's neighbour rows serve a spring and two faces each. Writes the particles' rows of f
+/// and gas.volume_gradient (N, 3) and nothing else's.
 inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas& gas, double* f,
                                index g0, index g1, double* body_six_v) {
     const index n = m.particle_count;
@@ -126,8 +126,8 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
 /// All forces at time t [s] for q, qd (N, 3) into f (N, 3) [N]: the list of physics terms.
 /// With SIMD lanes (or threads) the weight, springs and dV/dx come from the vertex-major
 /// pass; on the scalar path, term by term over springs and faces (half the arithmetic: each
-/// spring and face once, which is what pays without lanes). The same terms either way; the sums run
-/// in another order, so the paths agree to round-off.
+/// spring and face once, which is what pays without lanes). The same terms either way; the
+/// sums run in another order, so the paths agree to round-off.
 inline void eval_forces(const Model& m, const Control& c, double t, const double* q,
                         const double* qd, const BodyGas& gas, const LaneBuffers& lanes,
                         double* f) {
