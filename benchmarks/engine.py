@@ -106,6 +106,24 @@ def main() -> None:
         ),
     )
     _plot(results, engines)
+    print(markdown_table(results, engines))
+
+
+def markdown_table(results: list[dict], engines: list[str]) -> str:
+    """The results as the README's table: rate per path, and the range of each core path's
+    ratio to Numba over the rounds."""
+    head = (
+        "| vertices | scheme | "
+        + " | ".join(engines)
+        + " | "
+        + " | ".join(f"{e} / numba" for e in engines if e != "numba")
+    )
+    lines = [head + " |", "|" + "---|" * (2 + len(engines) + len(engines) - 1)]
+    for r in results:
+        rates = " | ".join(f"{r['mvps'][e]:.1f}" for e in engines)
+        ratios = " | ".join(f"{lo:.2f}-{hi:.2f}" for lo, hi in r["speedup_over_numba"].values())
+        lines.append(f"| {r['vertices']:,} | {r['scheme']} | {rates} | {ratios} |")
+    return "\n".join(lines)
 
 
 def _plot(results: list[dict], engines: list[str]) -> None:
@@ -122,6 +140,8 @@ def _plot(results: list[dict], engines: list[str]) -> None:
             style = "k--o" if e == "numba" else "-o"
             ax.plot(x, [r["mvps"][e] for r in rows], style, label=e)
         ax.set_xscale("log")
+        ax.set_xticks(x, [f"{v:,}" for v in x])
+        ax.minorticks_off()
         ax.set_title(f"{scheme}, dt = {DT:g} s, one thread")
         ax.set_xlabel("vertices")
         ax.grid(True, alpha=0.3)

@@ -5,6 +5,7 @@
 #include "solvers/explicit.hpp"
 #include "solvers/implicit.hpp"
 #include "solvers/multigrid.hpp"
+#include "solvers/projective.hpp"
 #include "terms/gas.hpp"
 
 #define SOFTBODY_STRING2(x) #x
@@ -27,6 +28,11 @@ RunResult simulate_implicit(const Model& m, const Control& c, const RunParams& p
 
 void apply_multigrid(const MultigridView& mg, const double* r, double* z) {
     multigrid::apply(mg, r, z);
+}
+
+RunResult simulate_projective(const Model& m, const Control& c, const RunParams& p,
+                              const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
+    return projective::simulate(m, c, p, s, a, w);
 }
 
 void eval_forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
@@ -60,7 +66,8 @@ void apply_jacobians(const Model& m, const Control& c, const double* q, const do
 
 const KernelTable& kernel_table() {
     static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), simulate_explicit,
-                                   simulate_implicit, apply_multigrid, eval_forces,
+                                   simulate_implicit, apply_multigrid, simulate_projective,
+                                   eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians};
     return table;

@@ -21,6 +21,11 @@ struct KernelTable {
                                    const ImplicitBuffers&, const MultigridView* mg);
     /// z = V(r) for r, z (N, 3): one V-cycle of the Laplacian hierarchy from z = 0.
     void (*apply_multigrid)(const MultigridView& mg, const double* r, double* z);
+    /// Advance a state by projective dynamics (p.iterations per step) on factor `a`,
+    /// built for p.dt.
+    RunResult (*simulate_projective)(const Model&, const Control&, const RunParams&,
+                                     const StateView&, const Factor& a,
+                                     const ProjectiveBuffers&);
     /// All forces f (N, 3) [N] at time t for q, qd (N, 3); refreshes gas.
     void (*eval_forces)(const Model&, const Control&, double t, const double* q,
                         const double* qd, const BodyGas& gas, const LaneBuffers& lanes,

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "config.hpp"
+#include "parallel.hpp"
 
 namespace softbody {
 
@@ -159,6 +160,8 @@ struct ContactBuffers {
 struct LaneBuffers {
     double* rows = nullptr;       // (8 G, 8) x, y, z, vx, vy, vz, 0, 0 per particle
     double* lane_pnet = nullptr;  // (8 G,) P - P_ambient of each particle's body [Pa], 0 free
+    const Parallel* parallel = nullptr;  // opt-in threads (null: serial)
+    double* chunk_volume = nullptr;      // (chunks, B) each chunk's share of the volumes
 };
 
 /// Scratch for the explicit schemes, owned by softbody::ExplicitSolver.
@@ -239,6 +242,37 @@ struct ImplicitBuffers {
     ContactBuffers contact;
 };
 
+/// Projective dynamics' factored global matrix A = P^T L D L^T P (softbody.integrators.
+/// projective.Projective; module.cpp checks its structure once). perm[r] is the particle at
+/// row r; inv_diag = 1 / diag(D). L (unit lower triangular) is stored by supernodes: node s
+/// holds columns [node_col[s], node_col[s + 1]), its rows node_row[node_row_ptr[s] ..
+/// node_row_ptr[s + 1]) (its own columns first, then those below), and its values a dense
+/// row-major (rows, columns) block from node_value[node_value_ptr[s]].
+struct Factor {
+    index size = 0;        // N, 0 when no factor is set
+    index node_count = 0;  // S
+    double dt = 0.0;       // [s] the step the matrix was built for
+    const index* perm = nullptr;            // (N,)
+    const double* inv_diag = nullptr;       // (N,) [s^2/kg]
+    const index* node_col = nullptr;        // (S + 1,)
+    const index* node_row_ptr = nullptr;    // (S + 1,)
+    const index* node_row = nullptr;        // (R,)
+    const index* node_value_ptr = nullptr;  // (S + 1,)
+    const double* node_value = nullptr;     // (V,)
+};
+
+/// Scratch for projective dynamics, owned by softbody::ProjectiveSolver.
+struct ProjectiveBuffers {
+    double* f = nullptr;    // (N, 3) the non-spring forces at the iterate [N]
+    double* q0 = nullptr;   // (N, 3) start-of-step positions
+    double* v0 = nullptr;   // (N, 3) start-of-step velocities
+    double* y = nullptr;    // (N, 3) inertial target x0 + dt v0
+    double* rhs = nullptr;  // (N, 3) the global step's right-hand side, particle order
+    double* x = nullptr;    // (N, 3) the triangular solves' vector, factor order
+    BodyGas gas;
+    ContactBuffers contact;
+};
+
 /// Outcome of a run of steps (the codes of softbody.integrators.loop).
 enum Status : int {
     OK = 0,
@@ -267,7 +301,8 @@ struct ImplicitParams {
 
 /// The run's limits and its step.
 struct RunParams {
-    int scheme = 3;  // Integrator value 0-4
+    int scheme = 3;  // Integrator value 0-4 (explicit schemes)
+    index iterations = 0;  // projective dynamics: local-global iterations per step
     index steps = 0;
     double t0 = 0.0, dt = 0.0;
     double max_speed = 1e4;

@@ -9,6 +9,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <thread>
 #include <limits>
 #include <optional>
 #include <stdexcept>
@@ -570,19 +574,106 @@ private:
 /// Entries of the surface contacts' hash: as asked, by default 8 per triangle (room for
 /// triangles up to a cell across); 0 without surface contacts.
 Index checked_capacity(const softbody::Model& m, std::optional<Index> asked) {
-    if (asked && *asked < 0)
-        fail("hash_capacity must be >= 0, got " + std::to_string(*asked));
+    if (asked && *asked < 0) fail("hash_capacity must be >= 0, got " + std::to_string(*asked));
     if (m.soft_contact_mode != 2) return 0;
     return asked ? *asked : 8 * m.tri_count;
 }
 
+/// A fixed set of worker threads for softbody::Parallel: run() hands chunk 0 to the caller
+/// and chunk w to worker w, and returns when every chunk is done. Workers wait on a
+/// condition variable between calls, so an idle pool costs nothing.
+class ThreadPool {
+public:
+    static constexpr int kMostThreads = 256;
+
+    explicit ThreadPool(int threads) : threads_(threads) {
+        for (int w = 1; w < threads; ++w) workers_.emplace_back([this, w] { work(w); });
+    }
+    ~ThreadPool() {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            stop_ = true;
+        }
+        start_.notify_all();
+        for (std::thread& t : workers_) t.join();
+    }
+    ThreadPool(const ThreadPool&) = delete;
+    ThreadPool& operator=(const ThreadPool&) = delete;
+
+    softbody::Parallel interface() {
+        softbody::Parallel p;
+        p.chunks = threads_;
+        p.pool = this;
+        p.run = [](const softbody::Parallel& self, void (*task)(void*, int), void* context) {
+            static_cast<ThreadPool*>(self.pool)->run(task, context);
+        };
+        return p;
+    }
+
+private:
+    void run(void (*task)(void*, int), void* context) {
+        {
+            std::lock_guard<std::mutex> lock(mutex_);
+            task_ = task;
+            context_ = context;
+            pending_ = threads_ - 1;
+            ++generation_;
+        }
+        start_.notify_all();
+        task(context, 0);
+        std::unique_lock<std::mutex> lock(mutex_);
+        done_.wait(lock, [this] { return pending_ == 0; });
+    }
+
+    void work(int chunk) {
+        std::uint64_t seen = 0;
+        for (;;) {
+            void (*task)(void*, int);
+            void* context;
+            {
+                std::unique_lock<std::mutex> lock(mutex_);
+                start_.wait(lock, [&] { return stop_ || generation_ != seen; });
+                if (stop_) return;
+                seen = generation_;
+                task = task_;
+                context = context_;
+            }
+            task(context, chunk);
+            {
+                std::lock_guard<std::mutex> lock(mutex_);
+                --pending_;
+            }
+            done_.notify_one();
+        }
+    }
+
+    int threads_;
+    std::vector<std::thread> workers_;
+    std::mutex mutex_;
+    std::condition_variable start_, done_;
+    std::uint64_t generation_ = 0;
+    int pending_ = 0;
+    bool stop_ = false;
+    void (*task_)(void*, int) = nullptr;
+    void* context_ = nullptr;
+};
+
 /// softbody._core.ExplicitSolver: the explicit schemes' time loop and its scratch.
 class ExplicitSolver {
 public:
-    ExplicitSolver(nb::object model, std::optional<Index> hash_capacity)
+    ExplicitSolver(nb::object model, std::optional<Index> hash_capacity, int threads)
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
           buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)) {
+        if (threads < 1 || threads > ThreadPool::kMostThreads)
+            fail("threads must be from 1 to " + std::to_string(ThreadPool::kMostThreads));
+        if (threads > 1) {
+            pool_ = std::make_unique<ThreadPool>(threads);
+            parallel_ = pool_->interface();
+            chunk_volume_.assign(static_cast<size_t>(threads * model_.model().body_count), 0.0);
+            buffers_.lanes_view.parallel = &parallel_;
+            buffers_.lanes_view.chunk_volume = chunk_volume_.data();
+        }
         w_.f = buffers_.row(0);
         w_.q0 = buffers_.row(1);
         w_.v0 = buffers_.row(2);
@@ -629,12 +720,169 @@ public:
     }
 
     Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+    int threads() const { return parallel_.chunks; }
 
 private:
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
     const CoreModel& model_;
     Buffers buffers_;
+    std::unique_ptr<ThreadPool> pool_;
+    softbody::Parallel parallel_;
+    std::vector<double> chunk_volume_;
     softbody::ExplicitBuffers w_;
+};
+
+/// A Projective bundle's factor (softbody.integrators.projective.Projective), checked once
+/// against a model of N particles: shapes, the supernodes' column, row and value ranges
+/// nested and in bounds, each node's rows its own columns then rows below them, and perm a
+/// permutation, so the triangular solves read and write only inside the arrays.
+class CoreFactor {
+public:
+    CoreFactor(nb::handle d, Index n) : handle_(nb::borrow(d)) {
+        softbody::Factor& a = factor_;
+        const Index size = nb::cast<Index>(d.attr("size"));
+        if (size != n)
+            fail("the projective factor has size " + std::to_string(size) + " for a model of " +
+                 std::to_string(n) + " particles");
+        a.size = n;
+        a.dt = nb::cast<double>(d.attr("dt"));
+        if (!(std::isfinite(a.dt) && a.dt > 0.0)) fail("the projective factor's dt must be > 0");
+        perm_ = attribute<ConstI64>(d, "perm", {n});
+        inv_diag_ = attribute<ConstF64>(d, "inv_diag", {n});
+        col_ = attribute<ConstI64>(d, "node_col", {-1});
+        const Index count = static_cast<Index>(col_.shape(0)) - 1;
+        if (count < 0) fail("node_col must hold at least one entry");
+        row_ptr_ = attribute<ConstI64>(d, "node_row_ptr", {count + 1});
+        rows_ = attribute<ConstI64>(d, "node_row", {-1});
+        value_ptr_ = attribute<ConstI64>(d, "node_value_ptr", {count + 1});
+        values_ = attribute<ConstF64>(d, "node_value", {-1});
+        a.node_count = count;
+        a.perm = perm_.data();
+        a.inv_diag = inv_diag_.data();
+        a.node_col = col_.data();
+        a.node_row_ptr = row_ptr_.data();
+        a.node_row = rows_.data();
+        a.node_value_ptr = value_ptr_.data();
+        a.node_value = values_.data();
+        validate(static_cast<Index>(rows_.shape(0)), static_cast<Index>(values_.shape(0)));
+    }
+
+    const softbody::Factor& factor() const { return factor_; }
+    nb::object handle() const { return handle_; }
+
+private:
+    void validate(Index row_count, Index value_count) {
+        const softbody::Factor& a = factor_;
+        const Index n = a.size;
+        check_indices(a.perm, n, 0, n, "perm");
+        std::vector<char> seen(static_cast<size_t>(n), 0);
+        for (Index r = 0; r < n; ++r) {
+            if (seen[static_cast<size_t>(a.perm[r])]) fail("perm is not a permutation");
+            seen[static_cast<size_t>(a.perm[r])] = 1;
+        }
+        if (a.node_col[0] != 0 || a.node_col[a.node_count] != n)
+            fail("node_col must run from 0 to " + std::to_string(n));
+        if (a.node_row_ptr[0] != 0 || a.node_row_ptr[a.node_count] != row_count)
+            fail("node_row_ptr must run from 0 to the length of node_row");
+        if (a.node_value_ptr[0] != 0 || a.node_value_ptr[a.node_count] > value_count)
+            fail("node_value_ptr must run from 0 to at most the length of node_value");
+        for (Index s = 0; s < a.node_count; ++s) {
+            const Index c0 = a.node_col[s], c1 = a.node_col[s + 1];
+            const Index r0 = a.node_row_ptr[s], r1 = a.node_row_ptr[s + 1];
+            const Index width = c1 - c0, height = r1 - r0;
+            const std::string node = "supernode " + std::to_string(s);
+            if (width < 1) fail("node_col must increase: " + node + " has no columns");
+            if (height < width) fail(node + " has fewer rows than columns");
+            // height <= len(node_row) and width <= N, arrays in memory: the product fits
+            if (a.node_value_ptr[s] < 0 || a.node_value_ptr[s + 1] - a.node_value_ptr[s] != height * width)
+                fail(node + "'s values are not a (rows, columns) block");
+            for (Index p = 0; p < height; ++p) {
+                const Index r = a.node_row[r0 + p];
+                const bool ok = p < width ? r == c0 + p : r >= c1 && r < n;
+                if (!ok) fail(node + "'s rows must be its columns, then rows below them in [" +
+                              std::to_string(c1) + ", " + std::to_string(n) + ")");
+            }
+        }
+    }
+
+    nb::object handle_;  // keeps the Projective bundle (and so its arrays) alive
+    softbody::Factor factor_;
+    ConstI64 perm_, col_, row_ptr_, rows_, value_ptr_;
+    ConstF64 inv_diag_, values_;
+};
+
+/// softbody._core.ProjectiveSolver: projective dynamics' time loop, its scratch, and the
+/// factor it solves with (set for each step size by the caller, which builds it).
+class ProjectiveSolver {
+public:
+    ProjectiveSolver(nb::object model, std::optional<Index> hash_capacity)
+        : handle_(model),
+          model_(nb::cast<const CoreModel&>(model)),
+          buffers_(model_.model(), 6, checked_capacity(model_.model(), hash_capacity)) {
+        w_.f = buffers_.row(0);
+        w_.q0 = buffers_.row(1);
+        w_.v0 = buffers_.row(2);
+        w_.y = buffers_.row(3);
+        w_.rhs = buffers_.row(4);
+        w_.x = buffers_.row(5);
+        w_.gas = buffers_.gas;
+        w_.contact = buffers_.contact;
+    }
+
+    /// Checked first: a refused factor leaves the one set before.
+    void set_factor(nb::handle factor) {
+        CoreFactor checked(factor, model_.model().particle_count);
+        factor_.reset();
+        factor_.emplace(std::move(checked));
+    }
+
+    nb::object factor() const { return factor_ ? factor_->handle() : nb::none(); }
+
+    std::tuple<int, Index, Index, double> simulate(Index steps, double t0, double dt,
+                                                   Index iterations, nb::handle control,
+                                                   nb::handle q, nb::handle qd,
+                                                   nb::handle collider_q, nb::handle collider_rot,
+                                                   nb::handle collider_impulse, double max_speed,
+                                                   double ratio_min, double ratio_max) {
+        const softbody::Model& m = model_.model();
+        if (steps < 0) fail("steps must be >= 0");
+        if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
+        if (iterations < 1) fail("iterations must be >= 1");
+        if (!factor_) fail("no projective factor set (set_factor)");
+        if (factor_->factor().dt != dt)
+            fail("the projective factor was built for dt = " + std::to_string(factor_->factor().dt) +
+                 " s, not " + std::to_string(dt) + " s");
+        CoreControl c(m, control);
+        F64 aq = writable(q, "q", {m.particle_count, 3});
+        F64 aqd = writable(qd, "qd", {m.particle_count, 3});
+        F64 acq = writable(collider_q, "collider_q", {m.collider_count, 3});
+        F64 arot = writable(collider_rot, "collider_rot", {m.collider_count, 3, 3});
+        F64 aimp = writable(collider_impulse, "collider_impulse", {m.collider_count, 3});
+        softbody::StateView s{aq.data(), aqd.data(), acq.data(), arot.data(), aimp.data()};
+        softbody::RunParams p;
+        p.steps = steps;
+        p.iterations = iterations;
+        p.t0 = t0;
+        p.dt = dt;
+        p.max_speed = max_speed;
+        p.ratio_min = ratio_min;
+        p.ratio_max = ratio_max;
+        softbody::RunResult r;
+        {
+            nb::gil_scoped_release release;
+            r = softbody::kernels().simulate_projective(m, c.view, p, s, factor_->factor(), w_);
+        }
+        return {r.status, r.steps_done, r.where, r.value};
+    }
+
+    Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+
+private:
+    nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
+    const CoreModel& model_;
+    Buffers buffers_;
+    softbody::ProjectiveBuffers w_;
+    std::optional<CoreFactor> factor_;
 };
 
 /// Checked views of a multigrid hierarchy (softbody.integrators.multigrid.Multigrid) for a
@@ -987,21 +1235,53 @@ NB_MODULE(_core, mod) {
 
     nb::class_<CoreModel>(mod, "Model", "Checked views of a Model's arrays (ModelData).")
         .def(nb::init<nb::handle>(), nb::arg("data"))
-        .def_prop_ro("particle_count", [](const CoreModel& c) { return c.model().particle_count; });
+        .def_prop_ro("particle_count", [](const CoreModel& c) { return c.model().particle_count; })
+        .def_prop_ro(
+            "lane_slots",
+            [](const CoreModel& c) {
+                const softbody::Model& m = c.model();
+                const Index g = m.group_count;
+                return std::make_tuple(m.ring_slot_start[g], m.spring_slot_start[g],
+                                       m.face_slot_start[g]);
+            },
+            "Slots of the vertex-major tables, over all groups of 8 particles: (ring, springs "
+            "off the rings, faces outside a fan).");
 
     nb::class_<ExplicitSolver>(mod, "ExplicitSolver",
                                "The explicit schemes' time loop with its scratch buffers.")
-        .def(nb::init<nb::object, std::optional<Index>>(), nb::arg("model"),
-             nb::arg("hash_capacity") = nb::none(),
+        .def(nb::init<nb::object, std::optional<Index>, int>(), nb::arg("model"),
+             nb::arg("hash_capacity") = nb::none(), nb::arg("threads") = 1,
              "hash_capacity: entries of the surface contacts' spatial hash (default 8 per "
-             "triangle); a run that needs more returns NEED_HASH with the count needed.")
+             "triangle); a run that needs more returns NEED_HASH with the count needed. "
+             "threads: > 1 runs the force pass on that many threads, deterministically.")
+        .def_prop_ro("threads", &ExplicitSolver::threads, "Threads of the force pass.")
         .def_prop_ro("hash_capacity", &ExplicitSolver::hash_capacity,
                      "Entries the surface contacts' spatial hash holds (0 without them).")
         .def("simulate", &ExplicitSolver::simulate, nb::arg("scheme"), nb::arg("steps"),
              nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
              nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
              nb::arg("max_speed"), nb::arg("ratio_min"), nb::arg("ratio_max"),
-             "Advance q, qd in place; returns (status, steps_done, Index, value).");
+             "Advance q, qd in place; returns (status, steps_done, index, value).");
+
+    nb::class_<ProjectiveSolver>(mod, "ProjectiveSolver",
+                                 "Projective dynamics' time loop with its scratch buffers and "
+                                 "the factored matrix it solves with.")
+        .def(nb::init<nb::object, std::optional<Index>>(), nb::arg("model"),
+             nb::arg("hash_capacity") = nb::none(),
+             "hash_capacity: as for ExplicitSolver.")
+        .def("set_factor", &ProjectiveSolver::set_factor, nb::arg("factor"),
+             "Solve with this Projective factor (integrators.projective.build_projective for "
+             "the model and the step); checked once here and kept alive.")
+        .def_prop_ro("factor", &ProjectiveSolver::factor, "The factor set, or None.")
+        .def_prop_ro("hash_capacity", &ProjectiveSolver::hash_capacity,
+                     "Entries the surface contacts' spatial hash holds (0 without them).")
+        .def("simulate", &ProjectiveSolver::simulate, nb::arg("steps"), nb::arg("t0"),
+             nb::arg("dt"), nb::arg("iterations"), nb::arg("control"), nb::arg("q"),
+             nb::arg("qd"), nb::arg("collider_q"), nb::arg("collider_rot"),
+             nb::arg("collider_impulse"), nb::arg("max_speed"), nb::arg("ratio_min"),
+             nb::arg("ratio_max"),
+             "Advance q, qd in place by steps steps of dt (the factor's), iterations "
+             "local-global iterations each; returns (status, steps_done, index, value).");
 
     nb::class_<ImplicitSolver>(mod, "ImplicitSolver",
                                "Backward Euler and BDF2 with their scratch, BDF2's previous "

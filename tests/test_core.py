@@ -57,7 +57,8 @@ def _everything_model() -> tuple[sb.Model, sb.Control]:
     collider kind with each motion, and bounding soft contacts."""
     b = sb.ModelBuilder(gravity=(0.0, -9.81, 0.0))
     b.add_soft_body(sb.icosphere(2, radius=0.3, center=(-0.5, 0.5, 0.0)), mass=1.0,
-                    stiffness=400.0, damping=0.5, gas=sb.Gas.isothermal(40.0))  # fmt: skip
+                    stiffness=400.0, damping=0.5, gas=sb.Gas.isothermal(40.0),
+                    bend_stiffness=20.0, bend_damping=0.1)  # fmt: skip
     b.add_soft_body(
         sb.icosphere(2, radius=0.3, center=(0.2, 0.55, 0.0)), mass=1.0, stiffness=400.0,
         damping=0.5, volume_method="bounding_ellipsoid",
@@ -76,6 +77,7 @@ def _everything_model() -> tuple[sb.Model, sb.Control]:
         damping=0.3, volume_method="bounding_sphere", gas=15.0,
     )  # fmt: skip
     b.add_attachment(5, anchor=(-0.5, 1.0, 0.0), stiffness=50.0, damping=1.0)
+    b.add_spring(0, 170, stiffness=30.0, damping=0.2)  # between two bodies, off any ring
     b.add_collider(sb.ColliderPlane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0),
                                     restitution=0.5, friction=0.2))  # fmt: skip
     b.add_collider(sb.ColliderSphere(center=(0.2, 0.1, 0.0), radius=0.2,

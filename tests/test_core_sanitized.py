@@ -1,6 +1,6 @@
 """The engine core built with AddressSanitizer and UndefinedBehaviorSanitizer
 (``tools/build_core.py --sanitize``) running the core's fast tests
-(test_core.py, test_core_implicit.py). Reference: the
+(test_core.py, test_core_projective.py, test_core_implicit.py). Reference: the
 sanitizers' own checks; a read or write outside an array, a use after free or undefined
 behaviour (overflow, misalignment, a bad shift) in the C++ aborts the run with its
 report, so this passes only when none fired on any instruction-set path."""
@@ -18,10 +18,10 @@ import pytest
 from conftest import package_copy
 
 ROOT = Path(__file__).resolve().parent.parent
-#: the core's tests that do not run the Numba kernels (Numba runs as Python here)
+#: the core's test files, and among their tests those that do not run the Numba kernels
+#: (Numba runs as Python here)
+CORE_TESTS = ("test_core.py", "test_core_projective.py", "test_core_implicit.py")
 FAST = "not numba and not blow_up and not without_compiling"
-#: the files of the core's tests
-CORE_TESTS = ("test_core.py", "test_core_implicit.py")
 
 
 def _runtime(name: str) -> str | None:

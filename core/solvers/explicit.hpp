@@ -17,14 +17,15 @@
 
 namespace softbody::SOFTBODY_KERNELS::explicit_solver {
 
-/// The vertex-major pass: for every particle, kLanes at a time, its weight, its springs and
-/// dV/dx from its faces, with each body's exact volume (6 V, three times over, summed from
-/// the corners). The ring's neighbour rows serve a spring and two faces each. Writes f and
-/// gas.volume_gradient (N, 3) and the exact bodies' gas.volume; scatters nothing.
-inline void vertex_pass(const Model& m, const double* rows, const BodyGas& gas, double* f) {
+/// The vertex-major pass over groups [g0, g1): for every particle, kLanes at a time, its
+/// weight, its springs and dV/dx from its faces, with its share of its body's exact volume
+/// (each face seen from its three corners: 3 x 6 V in all, added to body_six_v (B,)). The
+/// ring's neighbour rows serve a spring and two faces each. Writes the particles' rows of f
+/// and gas.volume_gradient (N, 3) and nothing else's.
+inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas& gas, double* f,
+                               index g0, index g1, double* body_six_v) {
     const index n = m.particle_count;
-    for (index b = 0; b < m.body_count; ++b) gas.volume[b] = 0.0;
-    for (index g = 0; g < m.group_count; ++g)
+    for (index g = g0; g < g1; ++g)
         for (int lane0 = 0; lane0 < kGroup; lane0 += kLanes) {
             const index first = kGroup * g + lane0;
             if (first >= n) break;
@@ -63,33 +64,77 @@ inline void vertex_pass(const Model& m, const double* rows, const BodyGas& gas, 
                 store(f, i, {fx[l], fy[l], fz[l]});
                 store(gas.volume_gradient, i, {gx[l], gy[l], gz[l]});
                 const index body = m.particle_body[i];
-                if (body >= 0) gas.volume[body] += six_v[l];
+                if (body >= 0) body_six_v[body] += six_v[l];
             }
         }
-    for (index b = 0; b < m.body_count; ++b) gas.volume[b] /= 18.0;  // each face thrice: 3 x 6 V
 }
 
-/// The packed rows (8 G, 8) of the vertex-major pass: x, v of each particle on one line.
-inline void pack_rows(const Model& m, const double* q, const double* qd, double* rows) {
-    for (index i = 0; i < m.particle_count; ++i)
+/// The packed rows (8 G, 8) of the vertex-major pass: x, v of particles [i0, i1) on one line
+/// each.
+inline void pack_rows(const double* q, const double* qd, double* rows, index i0, index i1) {
+    for (index i = i0; i < i1; ++i)
         for (int k = 0; k < 3; ++k) {
             rows[kRow * i + k] = q[3 * i + k];
             rows[kRow * i + 3 + k] = qd[3 * i + k];
         }
 }
 
+/// The vertex-major pass over every particle (see vertex_pass_groups), on the opt-in threads
+/// when there are: chunk c takes a fixed run of groups and keeps its own volume sums, added
+/// in chunk order, so a run repeats to the bit whatever the threads' timing.
+inline void vertex_pass(const Model& m, const double* q, const double* qd, const BodyGas& gas,
+                        const LaneBuffers& lanes, double* f) {
+    const int chunks = lanes.parallel != nullptr ? lanes.parallel->chunks : 1;
+    const index bodies = m.body_count, groups = m.group_count;
+    if (chunks <= 1) {
+        pack_rows(q, qd, lanes.rows, 0, m.particle_count);
+        for (index b = 0; b < bodies; ++b) gas.volume[b] = 0.0;
+        vertex_pass_groups(m, lanes.rows, gas, f, 0, groups, gas.volume);
+    } else {
+        struct Work {
+            const Model* m;
+            const double *q, *qd;
+            const BodyGas* gas;
+            const LaneBuffers* lanes;
+            double* f;
+            int chunks;
+        } work{&m, q, qd, &gas, &lanes, f, chunks};
+        lanes.parallel->run(*lanes.parallel, [](void* context, int c) {
+            const Work& w = *static_cast<const Work*>(context);
+            // chunk c's groups: a fixed share of them, whatever the timing
+            const index g0 = w.m->group_count * c / w.chunks;
+            const index g1 = w.m->group_count * (c + 1) / w.chunks;
+            pack_rows(w.q, w.qd, w.lanes->rows, std::min(kGroup * g0, w.m->particle_count),
+                      std::min(kGroup * g1, w.m->particle_count));
+        }, &work);
+        lanes.parallel->run(*lanes.parallel, [](void* context, int c) {
+            const Work& w = *static_cast<const Work*>(context);
+            double* six_v = w.lanes->chunk_volume + c * w.m->body_count;
+            for (index b = 0; b < w.m->body_count; ++b) six_v[b] = 0.0;
+            vertex_pass_groups(*w.m, w.lanes->rows, *w.gas, w.f, w.m->group_count * c / w.chunks,
+                               w.m->group_count * (c + 1) / w.chunks, six_v);
+        }, &work);
+        for (index b = 0; b < bodies; ++b) {
+            double six_v = 0.0;
+            for (int c = 0; c < chunks; ++c) six_v += lanes.chunk_volume[c * bodies + b];
+            gas.volume[b] = six_v;
+        }
+    }
+    for (index b = 0; b < bodies; ++b) gas.volume[b] /= 18.0;  // each face thrice: 3 x 6 V
+}
+
 /// All forces at time t [s] for q, qd (N, 3) into f (N, 3) [N]: the list of physics terms.
-/// With SIMD lanes the weight, springs and dV/dx come from the vertex-major pass; on the
-/// scalar path, term by term over springs and faces (half the arithmetic: each spring and
-/// face once, which is what pays without lanes). The same terms either way; the sums run
-/// in another order, so the paths agree to round-off.
+/// With SIMD lanes (or threads) the weight, springs and dV/dx come from the vertex-major
+/// pass; on the scalar path, term by term over springs and faces (half the arithmetic: each
+/// spring and face once, which is what pays without lanes). The same terms either way; the
+/// sums run in another order, so the paths agree to round-off.
 inline void eval_forces(const Model& m, const Control& c, double t, const double* q,
                         const double* qd, const BodyGas& gas, const LaneBuffers& lanes,
                         double* f) {
-    if constexpr (kLanes > 1) {
-        pack_rows(m, q, qd, lanes.rows);
-        vertex_pass(m, lanes.rows, gas, f);  // weight, springs, dV/dx, exact volumes
-        volume::evaluate(m, q, gas, true);   // bounding and Monte Carlo volumes
+    const bool threads = lanes.parallel != nullptr && lanes.parallel->chunks > 1;
+    if (kLanes > 1 || threads) {
+        vertex_pass(m, q, qd, gas, lanes, f);  // weight, springs, dV/dx, exact volumes
+        volume::evaluate(m, q, gas, true);     // bounding and Monte Carlo volumes
     } else {
         gravity::force(m, f);           // weight m g (initialises the accumulator)
         springs::force(m, q, qd, f);    // damped Hooke springs: edges, bending, user

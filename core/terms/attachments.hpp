@@ -4,6 +4,7 @@
 #pragma once
 
 #include "model.hpp"
+#include "terms/springs.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::attachments {
@@ -21,6 +22,25 @@ inline void force(const Model& m, const Control& c, const double* q, const doubl
         const double mag = m.attachment_stiffness[a] * (length - m.attachment_rest_length[a]) +
                            m.attachment_damping[a] * rel;
         add_to(f, i, mag * u);
+    }
+}
+
+/// Projective dynamics: the attachments' part of the global step's right-hand side, added
+/// to rhs (N, 3) [N] at the iterate x (N, 3) (x0 at the step's start; h [s] the step). An
+/// attachment is a spring to a fixed anchor a: its energy k / 2 |d - p|^2 + c / (2 h)
+/// |d - q|^2 in d = x_i - a (springs::projection) gives (k + c / h) a + k p + c / h q, the
+/// matrix holding its (k + c / h) on i's diagonal. Pinned particles have none.
+inline void project(const Model& m, const Control& c, double h, const double* x,
+                    const double* x0, double* rhs) {
+    const double inv_h = 1.0 / h;
+    for (index a = 0; a < m.attachment_count; ++a) {
+        const index i = m.attachment_particle[a];
+        if (m.particle_inv_mass[i] == 0.0) continue;
+        const V3 anchor = load(c.attachment_anchor, a);
+        const double k = m.attachment_stiffness[a], c_h = m.attachment_damping[a] * inv_h;
+        const V3 t = springs::projection(load(x, i) - anchor, load(x0, i) - anchor,
+                                         m.attachment_rest_length[a], k, c_h);
+        add_to(rhs, i, (k + c_h) * anchor + t);
     }
 }
 

@@ -132,6 +132,46 @@ inline void smoother_blocks(const Model& m, double h, const double* u, const dou
     }
 }
 
+/// Projective dynamics' local step for one spring (or attachment): k p + c_h q [N] for an
+/// edge d (now) that was e at the step's start, c_h = c / h. p is d's projection onto the
+/// sphere |d| = rest, the minimiser of Hooke's energy 1/2 k (|d| - L0)^2 in its projective
+/// form k / 2 |d - p|^2; q its projection onto the plane u . (d - e) = 0 (u = d / |d|), whose
+/// c / (2 h) |d - q|^2 is the damper c (u . (v_j - v_i)) u of backward Euler. Both lie along
+/// d: p = rest d / |d|, q = (d . e / |d|^2) d, so one division and one square root. A
+/// zero-length edge has no direction: both are d (no force, as in `force`).
+inline V3 projection(V3 d, V3 e, double rest, double k, double c_h) {
+    const double length2 = dot(d, d);
+    if (length2 == 0.0) return (k + c_h) * d;
+    const double inv2 = 1.0 / length2;
+    const double s = k * rest * std::sqrt(inv2) + c_h * dot(d, e) * inv2;
+    return s * d;
+}
+
+/// Projective dynamics: the springs' part of the global step's right-hand side, added to
+/// rhs (N, 3) [N]: A_s^T (k p + c / h q) per spring at the iterate x (N, 3), its edges at
+/// the step's start from x0 (N, 3); h [s] the step. A pinned end (inverse mass 0) is no
+/// unknown: its row is the identity and the spring's pull on it, (k + c / h) x_pinned,
+/// moves to the free end's side.
+inline void project(const Model& m, double h, const double* x, const double* x0, double* rhs) {
+    const double inv_h = 1.0 / h;
+    const double* inv_mass = m.particle_inv_mass;
+    for (index s = 0; s < m.spring_count; ++s) {
+        const index i = m.spring_indices[2 * s], j = m.spring_indices[2 * s + 1];
+        const double k = m.spring_stiffness[s], c_h = m.spring_damping[s] * inv_h;
+        const V3 t = projection(load(x, j) - load(x, i), load(x0, j) - load(x0, i),
+                                m.spring_rest_length[s], k, c_h);
+        const bool free_i = inv_mass[i] > 0.0, free_j = inv_mass[j] > 0.0;
+        if (free_i) {
+            add_to(rhs, i, -t);
+            if (!free_j) add_to(rhs, i, (k + c_h) * load(x, j));
+        }
+        if (free_j) {
+            add_to(rhs, j, t);
+            if (!free_i) add_to(rhs, j, (k + c_h) * load(x, i));
+        }
+    }
+}
+
 /// Elastic energy sum 1/2 k (L - L0)^2 [J].
 inline double energy(const Model& m, const double* q) {
     double e = 0.0;

@@ -33,8 +33,8 @@ def exercise() -> None:
         scene = load_scene(name)
         model = scene.model
         for integrator in integrators:
-            if model.has_drag and integrator not in integrators[:5]:
-                continue  # drag runs on the compiled core's explicit schemes only
+            if model.has_drag and integrator not in [*integrators[:5], "projective"]:
+                continue  # drag runs on the compiled core's solvers only
             dt = 1e-4 if integrator in integrators[:5] else 1e-3
             sim = sb.Simulator(model, integrator=integrator, dt=dt)
             state = model.state()
@@ -84,6 +84,7 @@ def exercise_internals() -> None:
     """The internal kernels the test suite calls on their own from Python (the multigrid
     V-cycle, the smoother's sums), with the argument kinds it passes: compiled here, so
     that no process compiles a kernel into the cache after this one."""
+    import numba
     import numpy as np
 
     import softbody as sb
@@ -93,6 +94,14 @@ def exercise_internals() -> None:
     builder = sb.ModelBuilder()
     builder.add_soft_body(sb.icosphere(2), mass=1.0, stiffness=100.0, damping=0.1, gas=10.0)
     model = builder.finalize()
+    # the Numba explicit loop, which the compiled core replaced: the tests compare the core
+    # with it (Simulator._core = None), on one thread and on two
+    threads = min(2, numba.config.NUMBA_NUM_THREADS)
+    for integrator in ("midpoint", "rk4", "euler", "symplectic_euler", "velocity_verlet"):
+        for count in sorted({1, threads}):
+            sim = sb.Simulator(model, integrator=integrator, dt=1e-4, threads=count)
+            sim._core = None
+            sim.run(model.state(), 2, model.control())
     sim = sb.Simulator(model, integrator="implicit_euler", dt=1e-2)
     sim.run(model.state(), 1)
     mg, n = sim._multigrid, model.particle_count
@@ -101,6 +110,11 @@ def exercise_internals() -> None:
     for i in np.flatnonzero(model.particle_inv_mass > 0)[:2]:
         im._offdiagonal_sum(mg, i, x)
         im._entries_sum(mg, x, im._first_later_entry(mg, i), mg.vertex_spring_ptr[i + 1])
+    # projective dynamics' Numba loop: the compiled core steps it at threads=1, and the
+    # tests compare the two
+    sim = sb.Simulator(model, integrator="projective", dt=1e-2)
+    sim._core = None
+    sim.run(model.state(), 1)
 
 
 def main(argv: list[str]) -> int:

@@ -54,16 +54,16 @@ def step_count(steps) -> int:
 
 
 def _refuse_drag(model: Model, integrator: Integrator, threads: int) -> None:
-    """A ``ValueError`` when ``model`` has air drag: the Numba loop (projective dynamics,
-    threads > 1) has no drag term, and dropping a force silently would be wrong."""
+    """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit integrators
+    and projective dynamics on threads) has no drag term, and dropping a force silently
+    would be wrong."""
     if not model.has_drag:
         return
-    why = f"threads={threads}" if threads > 1 else f"integrator {integrator.name.lower()}"
     raise ValueError(
-        "aerodynamic drag is stepped by the compiled core's integrators only for now "
-        "(euler, midpoint, rk4, symplectic_euler, velocity_verlet, implicit_euler, bdf2, "
-        f"with threads=1); this simulator has {why}. Set drag_coefficient=0 on every body "
-        "or air density 0 to run it without drag"
+        "aerodynamic drag is stepped by the explicit integrators, implicit_euler, bdf2 and "
+        "projective only for now (the last three with threads=1); this simulator has "
+        f"{integrator.name.lower()} with threads={threads}. Set drag_coefficient=0 on every "
+        "body or air density 0 to run it without drag"
     )
 
 
@@ -99,11 +99,13 @@ class Simulator:
         ``implicit_euler`` and ``bdf2``: most CG iterations per step (a step that reaches it keeps
         the last iterate; :attr:`solver_iterations` tells).
     threads : int
-        Threads for the force terms (springs and the exact volume pass), >= 1 and at most
-        ``numba.config.NUMBA_NUM_THREADS``. Default 1: serial. More threads cut the
-        particles into that many chunks (``softbody.partition``); results agree with the
-        serial ones to round-off and are the same in every run. Opt-in because a thread
-        that loses its core to another process stalls the whole step.
+        Threads for the force terms, >= 1 and at most ``numba.config.NUMBA_NUM_THREADS``
+        (the machine's cores unless set). Default 1: serial. The explicit schemes run the
+        compiled core's force pass on that many threads, each on a fixed run of particles;
+        the implicit and projective solvers cut springs and faces into chunks
+        (``softbody.partition``). Results agree with the serial ones to round-off and are
+        the same in every run. Opt-in because a thread that loses its core to another
+        process stalls the whole step.
     implicit_preconditioner : str
         ``implicit_euler`` and ``bdf2``: ``"multigrid"`` (default; one algebraic-multigrid V-cycle
         of the spring Laplacian, built once, so the iteration count barely grows with mesh
@@ -116,11 +118,12 @@ class Simulator:
     A step that blows up raises :class:`SimulationError` naming the body or particle, the
     step and the time; the state is left at the last good step.
 
-    Air drag on faces (``drag_coefficient`` > 0) is stepped by the explicit integrators
-    and by ``implicit_euler`` and ``bdf2`` (explicitly: its force at the step's start
-    enters the solve, its Jacobian does not, which is stable while dt < 2 m / (dF/dv),
-    v_t / g for a body falling at its terminal speed v_t) with ``threads=1``;
-    any other set-up with drag raises a ``ValueError`` rather than leave the drag out.
+    Air drag on faces (``drag_coefficient`` > 0) is stepped by the explicit integrators,
+    and with ``threads=1`` by projective (which takes it, like the pressure, as a force at
+    each iterate) and by ``implicit_euler`` and ``bdf2`` (explicitly: its force at the
+    step's start enters the solve, its Jacobian does not, which is stable while
+    dt < 2 m / (dF/dv), v_t / g for a body falling at its terminal speed v_t); any other
+    set-up with drag raises a ``ValueError`` rather than leave the drag out.
     """
 
     def __init__(
@@ -188,7 +191,6 @@ class Simulator:
         use_mg = self.integrator.implicit and implicit_preconditioner == "multigrid"
         self._multigrid = build_multigrid(model) if use_mg else empty_multigrid()
         self._multigrid_dt = None
-        self._cg_stats_total = [0, 0, 0]
         # BDF2: which state, at which step and dt, the workspace's previous step belongs to
         self._history: tuple | None = None
         # implicit schemes have no step limit: the Gershgorin bounds describe the model
@@ -206,18 +208,21 @@ class Simulator:
                 f"got {threads!r}"
             )
         self.threads = int(threads)
-        # the explicit and implicit schemes step in the compiled C++ core; projective
-        # dynamics and threads still in the Numba kernels, which compile on first use
-        # (softbody._kernel_cache)
+        # the explicit schemes (threads too), and the implicit and projective ones (one
+        # thread) step in the compiled C++ core; the rest (implicit and projective on
+        # threads) still in the Numba kernels, which compile on first use
+        # (softbody._kernel_cache). Projective dynamics' set-up (the dissection order, the
+        # factor's supernodes) is Numba code too, so it needs the cache as well; the
+        # implicit schemes' multigrid set-up does not.
         self._core = None
-        if self.integrator.explicit and self.threads == 1:
-            self._core = _core.ExplicitSolver(core_model(model))
-        elif self.integrator.implicit and self.threads == 1:
-            # drag enters the implicit step explicitly: its force at the step's start is in
-            # the right-hand side, its Jacobian left out of the matrix
-            self._core = self._implicit_solver()
+        self._cg_stats_total = [0, 0, 0]
+        if self.integrator.explicit or self.threads == 1:
+            # implicit schemes take the drag explicitly: its force at the step's start is
+            # in the right-hand side, its Jacobian left out of the matrix
+            self._core = self._core_solver()
         else:
             _refuse_drag(model, self.integrator, self.threads)
+        if not (self.integrator.explicit or self._implicit_core):
             _kernel_cache.ensure_compiled()
         self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
@@ -254,15 +259,7 @@ class Simulator:
     @property
     def _implicit_core(self) -> bool:
         """Whether the compiled core steps this implicit simulator."""
-        return self._core is not None and not self.integrator.explicit
-
-    def _implicit_solver(self, hash_capacity: int | None = None):
-        """The core's backward Euler / BDF2 solver with this simulator's preconditioner
-        (the multigrid hierarchy's arrays are checked once and read at every step)."""
-        mg = self._multigrid if self._multigrid.level_size[0] == self.model.particle_count else None
-        return _core.ImplicitSolver(
-            core_model(self.model), multigrid=mg, hash_capacity=hash_capacity
-        )
+        return self._core is not None and self.integrator.implicit
 
     def stability_note(self) -> str:
         """One line comparing ``dt`` with the stability estimate, with advice."""
@@ -405,13 +402,10 @@ class Simulator:
             if status == _loop.NEED_HASH:
                 # contacts touched more grid cells than the hash holds: grow it and go on
                 # (pin and collider targets are re-aimed over the remaining steps)
-                if self._implicit_core:
-                    self._collect_cg_stats()
-                    self._core = self._implicit_solver(hash_capacity=int(2 * value))
-                elif self._core is not None:
-                    self._core = _core.ExplicitSolver(
-                        core_model(model), hash_capacity=int(2 * value)
-                    )
+                if self._core is not None:
+                    if self._implicit_core:
+                        self._collect_cg_stats()
+                    self._core = self._core_solver(hash_capacity=int(2 * value))
                 else:
                     self._work = Workspace.for_model(
                         model, hash_capacity=int(2 * value), chunk_count=self.threads
@@ -444,18 +438,45 @@ class Simulator:
             cache[dt] = build_projective(self.model, dt)
         return cache[dt]
 
+    @property
+    def _projective_core(self) -> bool:
+        return self.integrator == Integrator.PROJECTIVE
+
+    def _core_solver(self, hash_capacity: int | None = None):
+        """The compiled core's solver for this integrator: the explicit schemes' loop, or
+        projective dynamics' (given its factor for the current dt before each run), or
+        backward Euler's and BDF2's with this simulator's preconditioner (the multigrid
+        hierarchy's arrays are checked once and read at every step)."""
+        if self.integrator.implicit:
+            n = self.model.particle_count
+            mg = self._multigrid if self._multigrid.level_size[0] == n else None
+            return _core.ImplicitSolver(
+                core_model(self.model), multigrid=mg, hash_capacity=hash_capacity
+            )
+        if self._projective_core:
+            return _core.ProjectiveSolver(core_model(self.model), hash_capacity=hash_capacity)
+        return _core.ExplicitSolver(
+            core_model(self.model), hash_capacity=hash_capacity, threads=self.threads
+        )
+
     def _simulate(self, *args):
         """``loop.simulate`` on this simulator's thread count (restored afterwards), or the
         compiled core's loop for the schemes it has."""
-        if self._implicit_core:
-            scheme, steps, t0, dt, _, control, q, qd, _, max_speed, lo, hi, cq, crot, ci = args[:15]
-            tolerance, max_iterations, history = args[16:19]
-            return self._core.simulate(
-                scheme == Integrator.BDF2, steps, t0, dt, control, q, qd, cq, crot, ci,
-                max_speed, lo, hi, tolerance, max_iterations, history,
-            )  # fmt: skip
         if self._core is not None:
             scheme, steps, t0, dt, _, control, q, qd, _, max_speed, lo, hi, cq, crot, ci = args[:15]
+            if self._implicit_core:
+                tolerance, max_iterations, history = args[16:19]
+                return self._core.simulate(
+                    scheme == Integrator.BDF2, steps, t0, dt, control, q, qd, cq, crot, ci,
+                    max_speed, lo, hi, tolerance, max_iterations, history,
+                )  # fmt: skip
+            if self._projective_core:
+                factor, iterations = args[19:21]
+                if self._core.factor is not factor:  # checked once per factor (per dt)
+                    self._core.set_factor(factor)
+                return self._core.simulate(
+                    steps, t0, dt, iterations, control, q, qd, cq, crot, ci, max_speed, lo, hi
+                )
             return self._core.simulate(
                 scheme, steps, t0, dt, control, q, qd, cq, crot, ci, max_speed, lo, hi
             )

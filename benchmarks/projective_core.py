@@ -1,0 +1,92 @@
+"""Projective dynamics in the engine core against the Numba loop it replaces: step time.
+
+The case: the ball drop's ball (``ball_drop.ball_drop``: an icosphere of radius 1 m,
+inflated, over the ground) at 10,242 and 40,962 vertices, projective dynamics at 1/60 s
+with 2 local-global iterations (the Simulator's default). For each size the C++ core (on
+the instruction set in use) and the Numba loop (``sim._core = None``; the same arithmetic,
+bit for bit) step the same drop from its start in the same process, alternating, ``ROUNDS``
+times, each timing ``STEPS`` steps (the first half second of the drop: the fall and the
+first contact). Reported: milliseconds per step, best of the rounds, and the core's
+speed-up over Numba in each round (ratios are what a shared machine measures reliably).
+
+Writes results/projective_core.json. Usage: python benchmarks/projective_core.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import time
+
+import numpy as np
+
+import softbody as sb
+from ball_drop import ball_drop
+from results_io import RESULTS, run_record, write_json
+from softbody import _kernel_cache, core
+
+DT = 1 / 60
+ITERATIONS = 2
+STEPS = 30
+ROUNDS = 5
+
+
+def _step_time(sim: sb.Simulator, model: sb.Model) -> float:
+    """Seconds per step of ``sim`` over STEPS steps of the drop from its start."""
+    state = model.state()
+    start = time.perf_counter()
+    sim.run(state, STEPS)
+    return (time.perf_counter() - start) / STEPS
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--subdivisions", type=int, nargs="+", default=[5, 6])
+    args = parser.parse_args()
+    _kernel_cache.ensure_compiled()
+    sizes = []
+    for sub in args.subdivisions:
+        model = ball_drop(sub)
+        sims = {}
+        for engine in ("core", "numba"):
+            sim = sb.Simulator(model, integrator="projective", dt=DT,
+                               projective_iterations=ITERATIONS)  # fmt: skip
+            if engine == "numba":
+                sim._core = None
+            sim.run(model.state(), 1)  # the factor, buffers and kernels warm
+            sims[engine] = sim
+        times = {"core": [], "numba": []}
+        for _ in range(ROUNDS):
+            for engine, sim in sims.items():
+                times[engine].append(_step_time(sim, model))
+        ratios = [n / c for c, n in zip(times["core"], times["numba"], strict=True)]
+        row = {
+            "vertex_count": model.particle_count,
+            "factor_nonzeros": sims["core"]._projective.factor_nonzeros,
+            "core_ms_per_step": 1e3 * min(times["core"]),
+            "numba_ms_per_step": 1e3 * min(times["numba"]),
+            "speedup_per_round": ratios,
+            "speedup_median": float(np.median(ratios)),
+        }
+        sizes.append(row)
+        print(
+            f"{row['vertex_count']:>7} vertices: core {row['core_ms_per_step']:.2f} ms/step, "
+            f"numba {row['numba_ms_per_step']:.2f} ms/step, speed-up median "
+            f"{row['speedup_median']:.2f} (rounds {', '.join(f'{r:.2f}' for r in ratios)})",
+            flush=True,
+        )
+    record = run_record(
+        "projective_core",
+        dt=DT,
+        iterations=ITERATIONS,
+        steps_per_round=STEPS,
+        rounds=ROUNDS,
+        simd_path=core.simd_path(),
+        machine=platform.machine(),
+        sizes=sizes,
+    )
+    write_json(RESULTS / "projective_core.json", record)
+
+
+if __name__ == "__main__":
+    main()

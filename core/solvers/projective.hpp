@@ -1,0 +1,208 @@
+// Projective dynamics: backward Euler by local-global iterations on a prefactored matrix
+// (Liu et al. 2013, Bouaziz et al. 2014; softbody.integrators.projective has the derivation).
+// Backward Euler, x1 = x0 + h v1 with M (v1 - v0) = h f(x1, v1), is the minimum of
+//
+//     1 / (2 h^2) |x - y|_M^2 + sum_s [k_s / 2 |d_s - p_s|^2 + c_s / (2 h) |d_s - q_s|^2] - ...
+//
+// with y = x0 + h v0 and each spring's (and attachment's) projections p_s, q_s
+// (springs::projection). Each iteration fixes the projections at the iterate (the local
+// step, terms/springs.hpp and terms/attachments.hpp) and solves
+//
+//     (M / h^2 + sum_s (k_s + c_s / h) A_s^T A_s) x = M y / h^2 + sum_s A_s^T (k_s p_s + c_s / h q_s) + f
+//
+// (the global step) by two triangular solves on the factor Python built for h. f is every
+// other force at the iterate, explicit within the iteration: gravity, external and grab
+// forces, the gas pressure and air drag. The same operations in the same order as the Numba
+// loop (softbody.integrators.loop.simulate_projective), so the two agree to the last bit.
+#pragma once
+
+#include "model.hpp"
+#include "solvers/common.hpp"
+#include "terms/attachments.hpp"
+#include "terms/drag.hpp"
+#include "terms/external.hpp"
+#include "terms/gas.hpp"
+#include "terms/gravity.hpp"
+#include "terms/springs.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::projective {
+
+/// Rows of a supernode taken together in the solves below its triangle: their sums are
+/// independent, so interleaving them keeps several additions in flight, each row summed in
+/// its own order (the results do not change).
+constexpr index kSolveRows = 4;
+
+/// out = A^-1 b for b (N, 3) with the factor a (two triangular solves on the three columns
+/// at once); x (N, 3) is scratch in factor order; out may be b.
+inline void solve(const Factor& a, const double* b, double* x, double* out) {
+    const index n = a.size;
+    for (index r = 0; r < n; ++r) store(x, r, load(b, a.perm[r]));
+    const index* rows = a.node_row;
+    const double* values = a.node_value;
+    for (index s = 0; s < a.node_count; ++s) {  // L z = b, node by node: each row a dot product
+        const index c0 = a.node_col[s], width = a.node_col[s + 1] - c0;
+        const index r0 = a.node_row_ptr[s], height = a.node_row_ptr[s + 1] - r0;
+        const double* block = values + a.node_value_ptr[s];
+        for (index p = 1; p < width; ++p) {  // the triangle: row c0 + p reads rows c0.. c0 + p - 1
+            const double* row = block + p * width;
+            double a0 = 0.0, a1 = 0.0, a2 = 0.0;
+            for (index jj = 0; jj < p; ++jj) {
+                const double v = row[jj];
+                a0 += v * x[3 * (c0 + jj)];
+                a1 += v * x[3 * (c0 + jj) + 1];
+                a2 += v * x[3 * (c0 + jj) + 2];
+            }
+            add_to(x, c0 + p, -V3{a0, a1, a2});
+        }
+        // the rows below read only the node's columns (done) and write rows past them
+        index p = width;
+        for (; p + kSolveRows <= height; p += kSolveRows) {
+            double acc[kSolveRows][3] = {};
+            const double* row = block + p * width;
+            for (index jj = 0; jj < width; ++jj) {
+                const V3 xj = load(x, c0 + jj);
+                for (index k = 0; k < kSolveRows; ++k) {
+                    const double v = row[k * width + jj];
+                    acc[k][0] += v * xj.x;
+                    acc[k][1] += v * xj.y;
+                    acc[k][2] += v * xj.z;
+                }
+            }
+            for (index k = 0; k < kSolveRows; ++k)
+                add_to(x, rows[r0 + p + k], -V3{acc[k][0], acc[k][1], acc[k][2]});
+        }
+        for (; p < height; ++p) {
+            const double* row = block + p * width;
+            double a0 = 0.0, a1 = 0.0, a2 = 0.0;
+            for (index jj = 0; jj < width; ++jj) {
+                const double v = row[jj];
+                a0 += v * x[3 * (c0 + jj)];
+                a1 += v * x[3 * (c0 + jj) + 1];
+                a2 += v * x[3 * (c0 + jj) + 2];
+            }
+            add_to(x, rows[r0 + p], -V3{a0, a1, a2});
+        }
+    }
+    for (index j = 0; j < n; ++j) store(x, j, a.inv_diag[j] * load(x, j));  // D^-1
+    for (index s = a.node_count - 1; s >= 0; --s) {  // D L^T x = z: rows below, then the block
+        const index c0 = a.node_col[s], width = a.node_col[s + 1] - c0;
+        const index r0 = a.node_row_ptr[s], height = a.node_row_ptr[s + 1] - r0;
+        const double* block = values + a.node_value_ptr[s];
+        // rows below, last first, kSolveRows at a time: each column entry takes their
+        // products in the same order, with one load and store of it per group
+        index p = height - 1;
+        for (; p - kSolveRows + 1 >= width; p -= kSolveRows) {
+            V3 xr[kSolveRows];
+            for (index k = 0; k < kSolveRows; ++k) xr[k] = load(x, rows[r0 + p - k]);
+            for (index jj = 0; jj < width; ++jj) {
+                V3 xj = load(x, c0 + jj);
+                for (index k = 0; k < kSolveRows; ++k)
+                    xj = xj - block[(p - k) * width + jj] * xr[k];
+                store(x, c0 + jj, xj);
+            }
+        }
+        for (; p > 0; --p) {
+            const V3 xr = load(x, rows[r0 + p]);
+            const double* row = block + p * width;
+            for (index jj = 0; jj < std::min(p, width); ++jj) add_to(x, c0 + jj, -(row[jj] * xr));
+        }
+    }
+    for (index r = 0; r < n; ++r) store(out, a.perm[r], load(x, r));
+}
+
+/// The forces projective dynamics keeps explicit, at time t [s] for the iterate q, qd
+/// (N, 3), into f (N, 3) [N] (refreshing the volumes, dV/dx and pressures in gas).
+inline void forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
+                   const BodyGas& gas, double* f) {
+    gravity::force(m, f);               // weight m g (initialises the accumulator)
+    external::force(m, c, f);           // per-step forces from Control
+    external::grab_force(c, q, qd, f);  // a grabbed particle pulled to a target
+    volume::evaluate(m, q, gas);        // volumes and dV/dx
+    gas::pressures(m, c, t, gas);       // the gas law's P(V, t)
+    gas::force(m, gas, f);              // (P - P_ambient) dV/dx
+    drag::force(m, c, q, qd, f);        // air drag on faces (skipped when off)
+}
+
+/// rhs (N, 3) = M y / h^2 + f + the springs' and attachments' projection terms at the iterate
+/// x (x0 at the step's start); pinned rows (inverse mass 0): y, their identity rows.
+inline void right_hand_side(const Model& m, const Control& c, double h, const double* x,
+                            const double* x0, const double* y, const double* f, double* rhs) {
+    const double inv_h = 1.0 / h;
+    const double inv_h2 = inv_h * inv_h;
+    for (index i = 0; i < m.particle_count; ++i) {
+        if (m.particle_inv_mass[i] > 0.0)
+            store(rhs, i, m.particle_mass[i] * inv_h2 * load(y, i) + load(f, i));
+        else
+            store(rhs, i, load(y, i));
+    }
+    springs::project(m, h, x, x0, rhs);
+    attachments::project(m, c, h, x, x0, rhs);
+}
+
+/// One backward Euler step of `iterations` local-global iterations from w.q0, w.v0 at time t,
+/// starting from y = x0 + dt v0; the factor is built for dt. Leaves x1 in q and
+/// v1 = (x1 - x0) / dt in qd; pinned particles keep their velocity. The other forces are
+/// taken at t + dt, the end of the step.
+inline void step(const Model& m, const Control& c, double t, double dt, index iterations,
+                 const Factor& a, double* q, double* qd, const ProjectiveBuffers& w) {
+    const index n = m.particle_count;
+    for (index i = 0; i < n; ++i) {
+        const V3 y = load(w.q0, i) + dt * load(w.v0, i);
+        store(w.y, i, y);
+        store(q, i, y);
+    }
+    const double inv_dt = 1.0 / dt;
+    for (index it = 0; it < iterations; ++it) {
+        for (index i = 0; i < n; ++i) store(qd, i, inv_dt * (load(q, i) - load(w.q0, i)));
+        forces(m, c, t + dt, q, qd, w.gas, w.f);
+        right_hand_side(m, c, dt, q, w.q0, w.y, w.f, w.rhs);
+        solve(a, w.rhs, w.x, q);
+    }
+    for (index i = 0; i < n; ++i) {
+        if (m.particle_inv_mass[i] > 0.0) {
+            store(qd, i, inv_dt * (load(q, i) - load(w.q0, i)));
+        } else {
+            store(q, i, load(w.y, i));
+            store(qd, i, load(w.v0, i));
+        }
+    }
+}
+
+/// Advance s.q, s.qd by p.steps steps of p.dt from p.t0, p.iterations iterations each. The
+/// checks, contacts and restores are the explicit loop's (solvers/explicit.hpp).
+inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
+                          const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
+    const index n3 = 3 * m.particle_count;
+    BodyGas volumes_only = w.gas;  // the checks need the volumes, not dV/dx (half the time)
+    volumes_only.volume_gradient = nullptr;
+    loop::begin_run(m, c, p, s, w.contact);
+    for (index step_index = 0; step_index < p.steps; ++step_index) {
+        const double t = p.t0 + static_cast<double>(step_index) * p.dt;
+        loop::copy(s.q, w.q0, n3);
+        loop::copy(s.qd, w.v0, n3);
+        volume::evaluate(m, s.q, volumes_only);
+        RunResult r = loop::check_volumes(m, w.gas.volume, p.ratio_min, p.ratio_max);
+        if (r.status != OK) {
+            r.steps_done = step_index;
+            return r;
+        }
+        step(m, c, t, p.dt, p.iterations, a, s.q, s.qd, w);
+        const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact);
+        if (needed > 0) {  // the hash is too small: undo the step, the caller grows it
+            loop::copy(w.q0, s.q, n3);
+            loop::copy(w.v0, s.qd, n3);
+            return {NEED_HASH, step_index, -1, static_cast<double>(needed)};
+        }
+        r = loop::check_particles(m, s.q, s.qd, p.max_speed);
+        if (r.status != OK) {
+            loop::copy(w.q0, s.q, n3);
+            loop::copy(w.v0, s.qd, n3);
+            r.steps_done = step_index;
+            return r;
+        }
+    }
+    return {OK, p.steps, -1, 0.0};
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::projective

@@ -1,0 +1,263 @@
+"""Projective dynamics in the compiled C++ core against the Numba loop it replaces, and the
+core's checks of the factor it is given.
+
+Reference for the comparisons: the Numba projective loop (``integrators.loop.
+simulate_projective``), which test_projective validates against backward Euler and closed
+forms. The core's projective step does the same operations in the same order: the
+springs' and attachments' projections spring by spring, the non-spring forces term by term
+(the scalar force functions on every instruction-set path: projective dynamics does not use
+the vertex-major pass), the triangular solves node by node, no FMA contraction on either
+side. So the two agree to the last bit, and these tests ask for that: any difference is a
+change in the arithmetic, not round-off to allow for.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import softbody as sb
+from conftest import ball_model
+from softbody import _core, core
+from softbody.core import core_model
+from softbody.integrators.projective import build_projective
+from softbody.sim.control import control_data
+from test_core import _everything_model, _surface_model
+
+STEPS = 60
+
+
+def _sim(model, dt, *, use_core, iterations=2):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sb.StabilityWarning)
+        sim = sb.Simulator(model, integrator="projective", dt=dt, projective_iterations=iterations)
+    assert isinstance(sim._core, _core.ProjectiveSolver)
+    if not use_core:
+        sim._core = None  # the Numba loop (compiled by the session's warm-up)
+    return sim
+
+
+def _run(model, dt, *, use_core, steps=STEPS, control=None, iterations=2):
+    sim = _sim(model, dt, use_core=use_core, iterations=iterations)
+    state = model.state()
+    error = None
+    try:
+        sim.run(state, steps, control)
+    except sb.SimulationError as e:
+        error = str(e)
+    return state, error
+
+
+def _assert_same_runs(model, dt, control=None, steps=STEPS, iterations=2, atol=0.0):
+    (a, error_a), (b, error_b) = [
+        _run(model, dt, use_core=c, control=control, steps=steps, iterations=iterations)
+        for c in (True, False)
+    ]
+    assert error_a == error_b
+    assert a.step_count == b.step_count
+    for name in ("particle_q", "particle_qd", "collider_q", "collider_rotation",
+                 "collider_impulse"):  # fmt: skip
+        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=atol,
+                                   err_msg=name)  # fmt: skip
+    return a, error_a
+
+
+def _pinned_attached_ball() -> tuple[sb.Model, sb.Control]:
+    """A ball hanging from two attachments, with two pinned vertices driven to targets, a
+    grab, an external force, under gravity."""
+    b = sb.ModelBuilder(gravity=(0.0, -9.81, 0.0))
+    b.add_soft_body(sb.icosphere(2, radius=0.3, center=(0.0, 1.0, 0.0)), mass=1.0,
+                    stiffness=2000.0, damping=1.0, gas=40.0, pinned=[0, 7])  # fmt: skip
+    b.add_attachment(3, anchor=(0.0, 1.6, 0.0), stiffness=200.0, damping=2.0)
+    b.add_attachment(11, anchor=(0.2, 1.5, 0.1), stiffness=150.0, damping=1.0, rest_length=0.1)
+    model = b.finalize()
+    control = model.control()
+    control.particle_f[20] = (0.0, 1.0, 0.5)
+    control.grab_particle = 30
+    control.grab_target = np.array([0.5, 1.2, 0.0])
+    control.grab_stiffness, control.grab_damping = 30.0, 0.5
+    control.pin_target = model.particle_q[model.pin_particle] + (0.0, 0.05, 0.0)
+    return model, control
+
+
+@pytest.mark.parametrize("iterations", [1, 2, 5])
+def test_ball_matches_the_numba_loop(iterations):
+    """The stiff ball dropped on nothing (gas, springs, gravity), 1/60 s steps: the same
+    trajectory as the Numba loop to the last bit."""
+    model = ball_model(stiffness=5000.0, damping=1.0, gas=300.0, gravity=(0.0, -9.81, 0.0))
+    _assert_same_runs(model, 1 / 60, iterations=iterations)
+
+
+def test_attachments_pins_grab_and_forces_match_the_numba_loop():
+    """Attachments (at rest length 0 and 0.1 m), pinned vertices moving to their targets
+    (identity rows, their springs' pull on the right-hand side), a grab and an external
+    force: bit for bit."""
+    model, control = _pinned_attached_ball()
+    state, _ = _assert_same_runs(model, 1 / 120, control=control)
+    pins = model.pin_particle
+    np.testing.assert_allclose(state.particle_q[pins], control.pin_target, rtol=0, atol=1e-12)
+
+
+def test_contacts_and_every_volume_method_match_the_numba_loop():
+    """Every collider kind and motion, bounding soft contacts, each volume method and gas
+    law, attachments, pins, grab and external forces (test_core's scene). The projective
+    step is bit for bit; the collider and bounding-contact responses, shared with the
+    explicit loop, round some velocities and impulses differently from Numba's in their
+    last bit (1 ulp measured, at the first step and the 60th), so this run gets test_core's
+    allowance for the contacts: 1e-12 of the motion's scale per step."""
+    model, control = _everything_model()
+    scale = max(1.0, float(np.abs(model.particle_q).max()))
+    _assert_same_runs(model, 1e-3, control=control, atol=1e-12 * scale * STEPS)
+
+
+@pytest.mark.parametrize("cloth", [False, True], ids=["two-balls", "ball-on-cloth"])
+def test_surface_contacts_match_the_numba_loop(cloth):
+    """Surface soft contacts (vertex against triangle through the spatial hash), two balls
+    head on or a ball on a pinned cloth: bit for bit."""
+    _assert_same_runs(_surface_model(cloth), 5e-4, steps=150)
+
+
+def test_a_blow_up_stops_at_the_same_step_as_the_numba_loop():
+    """A soft ball with a stiff gas far past its gas step limit (0.05 s against 0.2 ms)
+    blows up (the explicit pressure diverges) at the same step, for the same reason, in
+    both."""
+    model = ball_model(stiffness=5.0, gas=sb.Gas.isothermal(30000.0), mass=0.01)
+    sim = _sim(model, 0.05, use_core=True)
+    assert sim.stable_dt < 0.05
+    _, error = _assert_same_runs(model, 0.05, steps=400)
+    assert error is not None
+
+
+def test_every_instruction_set_gives_the_same_run():
+    """The scalar, AVX2 and AVX-512 builds (those this CPU runs) step projective dynamics
+    with the same scalar arithmetic: the same trajectory to the last bit."""
+    model, control = _pinned_attached_ball()
+    before = core.simd_path()
+    runs = {}
+    try:
+        for name in core.simd_paths():
+            core.use_simd(name)
+            runs[name] = _run(model, 1 / 120, use_core=True, control=control, steps=30)[0]
+    finally:
+        core.use_simd(before)
+    for state in runs.values():
+        np.testing.assert_array_equal(state.particle_q, runs["scalar"].particle_q)
+        np.testing.assert_array_equal(state.particle_qd, runs["scalar"].particle_qd)
+
+
+def test_hanging_particle_rests_at_hookes_extension_in_the_core():
+    """A particle hanging from a pinned particle by a damped spring, and one from an
+    attachment, come to rest where k (L - L0) = m g (to 1e-9 m): the core's projections
+    and pinned columns (test_projective has the same for the default path)."""
+    g, k, mass, rest = 9.81, 40.0, 0.2, 0.5
+    builder = sb.ModelBuilder(gravity=(0.0, -g, 0.0))
+    top = builder.add_particle((0.0, 0.0, 0.0), mass=1.0, pinned=True)
+    low = builder.add_particle((0.0, -0.3, 0.0), mass=mass)
+    builder.add_spring(top, low, stiffness=k, damping=0.5, rest_length=rest)
+    hung = builder.add_particle((2.0, -0.2, 0.0), mass=mass)
+    builder.add_attachment(hung, (2.0, 0.0, 0.0), stiffness=k, damping=0.5, rest_length=rest)
+    model = builder.finalize()
+    sim = _sim(model, 1 / 60, use_core=True)
+    state = model.state()
+    sim.run(state, 1200)
+    drop = rest + mass * g / k
+    assert np.array_equal(state.particle_q[top], (0.0, 0.0, 0.0))
+    np.testing.assert_allclose(state.particle_q[low], (0.0, -drop, 0.0), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(state.particle_q[hung], (2.0, -drop, 0.0), rtol=0, atol=1e-9)
+
+
+def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
+    """Surface contacts with a 1-entry hash: the core stops with NEED_HASH (the step
+    undone), the Simulator rebuilds it with twice the room and re-points the factor, and
+    the run equals one with the default room to the last bit."""
+    model = _surface_model(cloth=False)
+    runs = []
+    for small in (False, True):
+        sim = _sim(model, 5e-4, use_core=True)
+        if small:
+            sim._core = _core.ProjectiveSolver(core_model(model), hash_capacity=1)
+        state = model.state()
+        sim.run(state, 100)
+        runs.append((state, sim))
+    (big, big_sim), (small, small_sim) = runs
+    assert big_sim._core.hash_capacity == 8 * model.tri_count
+    assert small_sim._core.hash_capacity > 1
+    assert small_sim._core.factor is small_sim._projective
+    np.testing.assert_array_equal(small.particle_q, big.particle_q)
+    np.testing.assert_array_equal(small.particle_qd, big.particle_qd)
+
+
+def test_a_new_step_size_gets_its_own_factor():
+    """advance() with substeps of another size: the solver is given the factor built for
+    that dt (the core refuses a factor of another dt), and the run is the same as a
+    simulator made with that dt from the start, bit for bit."""
+    model = ball_model(stiffness=2000.0, damping=1.0, gravity=(0.0, -9.81, 0.0))
+    sim = _sim(model, 1 / 60, use_core=True)
+    state = model.state()
+    sim.run(state, 3)
+    sim.advance(state, 0.01)  # one substep of 0.01 s
+    assert sim._core.factor.dt == 0.01
+    other = _sim(model, 1 / 60, use_core=True)
+    ref = model.state()
+    other.run(ref, 3)
+    other.dt = 0.01
+    other.run(ref, 1)
+    np.testing.assert_array_equal(state.particle_q, ref.particle_q)
+
+
+def _solver_and_state(model, dt):
+    solver = _core.ProjectiveSolver(core_model(model))
+    solver.set_factor(build_projective(model, dt))
+    return solver, model.state()
+
+
+def test_the_core_refuses_a_bad_factor_or_call():
+    """A factor of another model, a wrong dt, or one whose structure would send the solves
+    out of their arrays are ValueErrors naming the problem, before any kernel runs."""
+    model = ball_model(subdivisions=1)
+    dt = 1e-2
+    good = build_projective(model, dt)
+    solver = _core.ProjectiveSolver(core_model(model))
+    state = model.state()
+    args = (control_data(model), state.particle_q, state.particle_qd, state.collider_q,
+            state.collider_rotation, state.collider_impulse, 1e4, 1e-3, 1e3)  # fmt: skip
+    with pytest.raises(ValueError, match="no projective factor set"):
+        solver.simulate(1, 0.0, dt, 2, *args)
+    with pytest.raises(ValueError, match="has size 162 for a model of 42 particles"):
+        solver.set_factor(build_projective(ball_model(subdivisions=2), dt))
+    solver.set_factor(good)
+    assert solver.factor is good
+    with pytest.raises(ValueError, match="built for dt = 0.01"):
+        solver.simulate(1, 0.0, 2e-2, 2, *args)
+    with pytest.raises(ValueError, match="iterations must be >= 1"):
+        solver.simulate(1, 0.0, dt, 0, *args)
+    perm = good.perm.copy()
+    perm[0] = perm[1]
+    with pytest.raises(ValueError, match="perm is not a permutation"):
+        solver.set_factor(good._replace(perm=perm))
+    perm[0] = model.particle_count
+    with pytest.raises(ValueError, match="perm holds 42 at 0"):
+        solver.set_factor(good._replace(perm=perm))
+    rows = good.node_row.copy()
+    last = good.node_row_ptr[-1] - 1
+    rows[last] = model.particle_count  # below the last node: no such row
+    with pytest.raises(ValueError, match="rows must be its columns, then rows below"):
+        solver.set_factor(good._replace(node_row=rows))
+    with pytest.raises(ValueError, match="node_value_ptr must run from 0 to at most"):
+        solver.set_factor(good._replace(node_value=good.node_value[:-1]))
+    value_ptr = good.node_value_ptr.copy()
+    value_ptr[1] += 1
+    with pytest.raises(ValueError, match="values are not a"):
+        solver.set_factor(good._replace(node_value_ptr=value_ptr))
+    with pytest.raises(ValueError, match="node_col must run from 0 to 42"):
+        solver.set_factor(good._replace(node_col=good.node_col[:-1],
+                                        node_row_ptr=good.node_row_ptr[:-1],
+                                        node_value_ptr=good.node_value_ptr[:-1]))  # fmt: skip
+    with pytest.raises(ValueError, match="inv_diag must be a C-contiguous float64 array"):
+        solver.set_factor(good._replace(inv_diag=good.inv_diag.astype(np.float32)))
+    assert solver.factor is good  # a refused factor leaves the last good one
+    with pytest.raises(ValueError, match="q must be a writable"):
+        solver.simulate(1, 0.0, dt, 2, control_data(model), state.particle_q[:, :2],
+                        *args[2:])  # fmt: skip
