@@ -353,22 +353,31 @@ def test_the_core_refuses_inconsistent_model_arrays():
 
 @pytest.mark.parametrize("integrator", ["midpoint", "implicit_euler", "bdf2"])
 def test_an_explicit_run_starts_without_compiling_anything(tmp_path, integrator):
-    """On an empty kernel cache, building a scene, an explicit or implicit run (with its
-    multigrid hierarchy), its stability estimate and the diagnostics use the compiled core
-    only: the Numba kernels' warm-up never starts (it would print and write its files into
-    the cache folder)."""
+    """On an empty kernel cache, building a scene, runs of an explicit or implicit scheme
+    (with its multigrid hierarchy; one after another on one state, as the command line and
+    the viewer do), an explicit run on two threads, their stability estimate and the
+    diagnostics use the compiled core only: the Numba kernels' warm-up never starts and
+    nothing compiles (either would write files into the cache folder)."""
     code = (
         "import softbody as sb\n"
         "from softbody.scenes.loader import load_scene\n"
         "s = load_scene('bouncing-balls')\n"
         f"sim = sb.Simulator(s.model, integrator='{integrator}', dt=s.dt)\n"
-        "st = s.model.state(); sim.run(st, 20)\n"
+        "st = s.model.state(); sim.run(st, 20); sim.run(st, 20); sim.advance(st, 0.01)\n"
+        "import numba; t = min(2, numba.config.NUMBA_NUM_THREADS)\n"
+        "sb.Simulator(s.model, integrator='rk4', dt=s.dt, threads=t).run(st, 5)\n"
         "print(sb.body_volume(s.model, st).sum(), sb.energies(s.model, st).total)\n"
     )
     cache = tmp_path / "cache"
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
     done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                           text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "compiling the kernels" not in done.stderr
+    # the command line on the scene that measures every volume method, with its plots
+    command = [sys.executable, "-m", "softbody.cli", "run", "bounding-volumes", "--duration",
+               "0.05", "--no-video", "--no-gif", "--out", str(tmp_path / "out")]  # fmt: skip
+    done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "compiling the kernels" not in done.stderr
     # (importing the Numba kernels makes their empty cache folders, nothing more)

@@ -72,3 +72,37 @@ def test_ball_on_ground_is_in_front_of_ground():
     ahead = cam.project(np.array([[0.0, 0.0, 1.2]]), 160, 120)[0]  # ground in front
     assert not is_red(image[int(ahead[1]), int(ahead[0])])
     assert hex_rgb("#ff0000").tolist() == [1.0, 0.0, 0.0]
+
+
+def test_rasteriser_refuses_bad_arrays_and_draws_nothing_for_non_finite_points():
+    """The compiled loops never read or write outside their arrays: a face index past the
+    points or a mismatched buffer is a ValueError; NaN or infinite points (a blown-up
+    body) draw nothing, nor does a line to a point far off the image; a triangle reaching
+    far off the image draws only its part on it, and a normal triangle draws."""
+    import pytest
+
+    from softbody.render.raster import clear, draw_lines, draw_triangles
+
+    image, z = np.zeros((40, 50, 3)), np.zeros((40, 50))
+    clear(image, z, np.zeros(3), np.zeros(3))
+    colors = np.ones((3, 3))
+    with pytest.raises(ValueError, match="faces holds 3"):
+        draw_triangles(np.ones((3, 3)), np.array([[0, 1, 3]]), colors, 1e-3, image, z)
+    with pytest.raises(ValueError, match="zbuffer must have shape"):
+        draw_triangles(np.ones((3, 3)), np.array([[0, 1, 2]]), colors, 1e-3, image, z[:10])
+    with pytest.raises(ValueError, match="zbuffer must be a writable C-contiguous"):
+        draw_triangles(np.ones((3, 3)), np.array([[0, 1, 2]]), colors, 1e-3, image, z[:, :10])
+    for bad in (np.nan, np.inf, 1e300):
+        screen = np.array([[bad, 5.0, 1.0], [30.0, 5.0, 1.0], [5.0, 30.0, 1.0]])
+        draw_lines(screen[:1], screen[1:2], colors[:1], 2, 1e-3, 0.0, image, z)
+        if bad != 1e300:
+            draw_triangles(screen, np.array([[0, 1, 2]]), colors, 1e-3, image, z)
+        assert not image.any() and not z.any()
+    far = np.array([[1e300, 5.0, 1.0], [30.0, 5.0, 1.0], [5.0, 30.0, 1.0]])
+    draw_triangles(far, np.array([[0, 1, 2]]), colors, 1e-3, image, z)
+    assert 0 < (z > 0).sum() < z.size
+    clear(image, z, np.zeros(3), np.zeros(3))
+    screen = np.array([[5.0, 5.0, 1.0], [30.0, 5.0, 1.0], [5.0, 30.0, 1.0]])
+    draw_triangles(screen, np.array([[0, 1, 2]]), colors, 1e-3, image, z)
+    # the right triangle of legs 25 px covers about 25^2 / 2 pixel centres
+    assert abs(int((z > 0).sum()) - 312) < 30

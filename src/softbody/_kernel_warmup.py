@@ -6,7 +6,7 @@ for this version of the sources is missing; the child's cache is ``FOLDER``
 Every path a run, the viewer, the diagnostics and the CLI's outputs take through the
 compiled code is exercised here: each integrator family's time loop, the threaded force
 terms, both soft-contact modes, every volume method, the stability estimate, the
-multigrid and projective set-up, the measurements and the rasteriser.
+multigrid and projective set-up and the measurements.
 """
 
 from __future__ import annotations

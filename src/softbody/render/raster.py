@@ -1,4 +1,5 @@
-"""A small z-buffered software rasteriser (Numba): triangles and lines into an RGB image.
+"""A small z-buffered software rasteriser: triangles and lines into an RGB image (the loops
+are the compiled core's, ``core/render/raster.cpp``).
 
 Headless on any machine, no GPU, display or system libraries. Depth is compared as 1/z
 (camera distance), which interpolates linearly in screen space, so occlusion is right
@@ -11,7 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+
+from softbody import _core
 
 
 @dataclass(frozen=True)
@@ -45,108 +47,59 @@ class Camera:
         return np.stack([sx, sy, z], axis=1)
 
 
-@njit(cache=True)
-def clear(image, zbuffer, top, bottom):
+def _input(a, dtype=np.float64) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=dtype)
+
+
+def _buffer(a, name: str, dtype=np.float64) -> np.ndarray:
+    """An output array the loops write into: it must already be C-contiguous, writable and
+    of ``dtype`` (a converted copy would take the drawing and be thrown away)."""
+    if not (
+        isinstance(a, np.ndarray)
+        and a.dtype == dtype
+        and a.flags.c_contiguous
+        and a.flags.writeable
+    ):
+        raise ValueError(f"{name} must be a writable C-contiguous {np.dtype(dtype)} array")
+    return a
+
+
+def clear(image: np.ndarray, zbuffer: np.ndarray, top, bottom) -> None:
     """Fill ``image`` (H, W, 3) with a vertical gradient ``top`` -> ``bottom`` (3,) and
     reset ``zbuffer`` (H, W) (it stores 1/depth; 0 is infinitely far)."""
-    h = image.shape[0]
-    for y in range(h):
-        w = y / max(h - 1, 1)
-        for x in range(image.shape[1]):
-            zbuffer[y, x] = 0.0
-            for k in range(3):
-                image[y, x, k] = top[k] * (1.0 - w) + bottom[k] * w
+    _core.raster_clear(
+        _buffer(image, "image"), _buffer(zbuffer, "zbuffer"), _input(top), _input(bottom)
+    )
 
 
-@njit(cache=True)
-def draw_triangles(screen, faces, colors, near, image, zbuffer):
+def draw_triangles(screen, faces, colors, near: float, image, zbuffer) -> None:
     """Rasterise triangles with depth test and per-vertex colour.
 
     screen (V, 3): x, y [px] and camera depth [m]; faces (F, 3); colors (V, 3) in [0, 1];
-    triangles with a vertex nearer than ``near`` [m] are skipped (no clipping).
+    triangles with a vertex nearer than ``near`` [m] are skipped (no clipping). Depth is
+    compared as 1/z, which interpolates linearly in screen space; colours are weighted
+    perspective-correctly.
     """
-    h, w = zbuffer.shape
-    for t in range(faces.shape[0]):
-        i, j, k = faces[t, 0], faces[t, 1], faces[t, 2]
-        z0, z1, z2 = screen[i, 2], screen[j, 2], screen[k, 2]
-        if z0 < near or z1 < near or z2 < near:
-            continue
-        x0, y0 = screen[i, 0], screen[i, 1]
-        x1, y1 = screen[j, 0], screen[j, 1]
-        x2, y2 = screen[k, 0], screen[k, 1]
-        area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        if area == 0.0:
-            continue
-        xmin = max(int(np.floor(min(x0, x1, x2))), 0)
-        xmax = min(int(np.ceil(max(x0, x1, x2))), w - 1)
-        ymin = max(int(np.floor(min(y0, y1, y2))), 0)
-        ymax = min(int(np.ceil(max(y0, y1, y2))), h - 1)
-        inv_area = 1.0 / area
-        iz0, iz1, iz2 = 1.0 / z0, 1.0 / z1, 1.0 / z2
-        for py in range(ymin, ymax + 1):
-            cy = py + 0.5
-            for px in range(xmin, xmax + 1):
-                cx = px + 0.5
-                b0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv_area
-                b1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * inv_area
-                b2 = 1.0 - b0 - b1
-                if b0 < 0.0 or b1 < 0.0 or b2 < 0.0:
-                    continue
-                iz = b0 * iz0 + b1 * iz1 + b2 * iz2
-                if iz <= zbuffer[py, px]:
-                    continue
-                zbuffer[py, px] = iz
-                # perspective-correct colour weights
-                w0, w1, w2 = b0 * iz0 / iz, b1 * iz1 / iz, b2 * iz2 / iz
-                for c in range(3):
-                    image[py, px, c] = w0 * colors[i, c] + w1 * colors[j, c] + w2 * colors[k, c]
+    _core.raster_triangles(
+        _input(screen), _input(faces, np.int64), _input(colors), float(near),
+        _buffer(image, "image"), _buffer(zbuffer, "zbuffer"),
+    )  # fmt: skip
 
 
-@njit(cache=True)
-def draw_lines(screen_a, screen_b, colors, width, near, depth_bias, image, zbuffer):
+def draw_lines(screen_a, screen_b, colors, width: int, near: float, depth_bias: float,
+               image, zbuffer) -> None:  # fmt: skip
     """Rasterise line segments with depth test.
 
     screen_a, screen_b (L, 3): end points as x, y [px] and depth [m]; colors (L, 3);
     width [px]; a line pixel is drawn if it is no farther than the surface there, with
     ``depth_bias`` (relative) so that edges drawn over their own faces stay visible.
     """
-    h, w = zbuffer.shape
-    half = width // 2
-    for s in range(screen_a.shape[0]):
-        za, zb = screen_a[s, 2], screen_b[s, 2]
-        if za < near or zb < near:
-            continue
-        xa, ya, xb, yb = screen_a[s, 0], screen_a[s, 1], screen_b[s, 0], screen_b[s, 1]
-        n = int(max(abs(xb - xa), abs(yb - ya))) + 1
-        if n > 4 * (w + h):
-            continue  # absurdly long: an end point is near the camera plane
-        iza, izb = 1.0 / za, 1.0 / zb
-        for k in range(n + 1):
-            u = k / n
-            x = int(xa + u * (xb - xa))
-            y = int(ya + u * (yb - ya))
-            iz = iza + u * (izb - iza)
-            for dy in range(-half, width - half):
-                for dx in range(-half, width - half):
-                    px, py = x + dx, y + dy
-                    if px < 0 or py < 0 or px >= w or py >= h:
-                        continue
-                    if iz * (1.0 + depth_bias) < zbuffer[py, px]:
-                        continue
-                    zbuffer[py, px] = max(zbuffer[py, px], iz)
-                    for c in range(3):
-                        image[py, px, c] = colors[s, c]
+    _core.raster_lines(
+        _input(screen_a), _input(screen_b), _input(colors), int(width), float(near),
+        float(depth_bias), _buffer(image, "image"), _buffer(zbuffer, "zbuffer"),
+    )  # fmt: skip
 
 
-@njit(cache=True)
-def downsample(image, factor, out):
+def downsample(image: np.ndarray, factor: int, out: np.ndarray) -> None:
     """Average ``factor`` x ``factor`` blocks of ``image`` (H, W, 3) into ``out`` (uint8)."""
-    for y in range(out.shape[0]):
-        for x in range(out.shape[1]):
-            for c in range(3):
-                acc = 0.0
-                for dy in range(factor):
-                    for dx in range(factor):
-                        acc += image[y * factor + dy, x * factor + dx, c]
-                v = acc / (factor * factor) * 255.0 + 0.5
-                out[y, x, c] = np.uint8(min(max(v, 0.0), 255.0))
+    _core.raster_downsample(_buffer(image, "image"), int(factor), _buffer(out, "out", np.uint8))

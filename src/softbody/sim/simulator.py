@@ -359,10 +359,14 @@ class Simulator:
         if self.integrator == Integrator.PROJECTIVE and self._projective.dt != self.dt:
             self._projective = self._projective_factor(self.dt)
         remaining = steps
+        # only BDF2 uses the step before a run's first (its history): the others skip the
+        # check (two comparisons of whole arrays)
+        bdf2 = self.integrator == Integrator.BDF2
         while remaining:
             ref = self._history
             history = (
-                ref is not None
+                bdf2
+                and ref is not None
                 and ref[0]() is state
                 and ref[1:] == (state.step_count, self.dt)
                 and np.array_equal(state.particle_q, self._work.q_end)
@@ -395,7 +399,7 @@ class Simulator:
             state.step_count = start_step + done
             state.time = float(state.time) + done * self.dt
             remaining -= done
-            if done > 0 or history:
+            if bdf2 and (done > 0 or history):
                 self._history = (weakref.ref(state), state.step_count, self.dt)
                 self._work.q_end[:] = state.particle_q  # to see edits between calls
                 self._work.v_end[:] = state.particle_qd
