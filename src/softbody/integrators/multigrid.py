@@ -122,7 +122,8 @@ def _aggregate(indptr, indices, out):
     returns the aggregate count. Pass 1 takes a node and all its neighbours when none of
     them is taken; pass 2 joins the rest to a neighbouring aggregate; pass 3 groups what
     is left with its free neighbours. Plain Python on lists (planning, once per
-    simulator: 30 ms at 10k nodes), so that the compiled core's implicit solvers need no
+    simulator: the whole hierarchy of the ball drop's ball builds in 0.04 s at 10,242
+    particles, 0.15 s at 40,962), so that the compiled core's implicit solvers need no
     Numba kernel."""
     ptr, adj = indptr.tolist(), indices.tolist()
     n = len(ptr) - 1
