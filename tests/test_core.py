@@ -351,13 +351,14 @@ def test_the_core_refuses_inconsistent_model_arrays():
                         state.collider_impulse, 1e4, 1e-3, 1e3)  # fmt: skip
 
 
-@pytest.mark.parametrize("integrator", ["midpoint", "implicit_euler", "bdf2"])
-def test_an_explicit_run_starts_without_compiling_anything(tmp_path, integrator):
-    """On an empty kernel cache, building a scene, runs of an explicit or implicit scheme
-    (with its multigrid hierarchy; one after another on one state, as the command line and
-    the viewer do), an explicit run on two threads, their stability estimate and the
-    diagnostics use the compiled core only: the Numba kernels' warm-up never starts and
-    nothing compiles (either would write files into the cache folder)."""
+@pytest.mark.parametrize("integrator", ["midpoint", "implicit_euler", "bdf2", "projective"])
+def test_a_run_starts_without_compiling_anything(tmp_path, integrator):
+    """On an empty kernel cache, building a scene, runs of an explicit, implicit or
+    projective scheme (with its multigrid hierarchy or factor; one after another on one
+    state, as the command line and the viewer do), an explicit run on two threads, their
+    stability estimate and the diagnostics use the compiled core only: the Numba kernels'
+    warm-up never starts and nothing compiles (either would write files into the cache
+    folder)."""
     code = (
         "import softbody as sb\n"
         "from softbody.scenes.loader import load_scene\n"

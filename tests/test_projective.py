@@ -179,3 +179,30 @@ def test_bad_iteration_counts():
     for bad in (0, -1, 1.5, True, "2"):
         with pytest.raises(ValueError, match="projective_iterations must be an integer >= 1"):
             sb.Simulator(model, integrator="projective", dt=1e-2, projective_iterations=bad)
+
+
+@pytest.mark.parametrize("subdivisions", [3, 4])
+def test_dissection_order_is_the_one_it_always_was(subdivisions):
+    """The nested-dissection order, computed by the compiled core since its set-up left
+    Numba, is the same permutation the Numba version gave on the ball drop's ball (saved
+    in tests/data by that version): the factors, their fill and the runs are unchanged.
+    Bad patterns are ValueErrors, not reads out of bounds."""
+    import sys
+    from pathlib import Path
+
+    from softbody import _core
+    from softbody.integrators.projective import dissection_order, system_matrix
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from ball_drop import ball_drop
+
+    model = ball_drop(subdivisions)
+    n = model.particle_count
+    expected = np.load(Path(__file__).parent / "data" / f"dissection-order-ball-{n}.npy")
+    order = dissection_order(system_matrix(model, 1.0 / 60.0).tocsr(), model.particle_q)
+    np.testing.assert_array_equal(order, expected)
+    indptr, indices = np.array([0, 1, 2], dtype=np.int64), np.array([1, 2], dtype=np.int64)
+    with pytest.raises(ValueError, match="pattern indices holds 2"):
+        _core.plan_dissection_order(indptr, indices, np.zeros((2, 3)), 8)
+    with pytest.raises(ValueError, match="strictly lower triangular"):
+        _core.plan_supernodes(indptr, np.array([0, 1], dtype=np.int64), np.ones(2))

@@ -41,6 +41,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from softbody import _core
 from softbody.forces.evaluate import eval_body_forces
 from softbody.forces.gravity import eval_gravity
 
@@ -147,10 +148,16 @@ def build_projective(model, dt: float) -> Projective:
             "(a free particle without mass?)"
         )
     factor = lu.L
-    indptr, indices, data = _strict_lower(factor.indptr, factor.indices, factor.data)
+    # the strictly lower part with sorted rows (SuperLU's come unsorted), then its
+    # supernodes: both compiled, as sp.tril and a CSC conversion took 0.8 s at 163,842
+    indptr, indices, data = _core.plan_strict_lower(
+        factor.indptr.astype(np.int64),
+        factor.indices.astype(np.int64),
+        np.ascontiguousarray(factor.data, dtype=np.float64),
+    )
     perm = np.empty(n, dtype=np.int64)
     perm[lu.perm_r] = order
-    col, row_ptr, rows, value_ptr, values = _supernodes(n, indptr, indices, data)
+    col, row_ptr, rows, value_ptr, values = _core.plan_supernodes(indptr, indices, data)
     return Projective(
         n,
         dt,
@@ -179,198 +186,20 @@ def dissection_order(a: sp.csr_matrix, points: np.ndarray) -> np.ndarray:
     joined to the upper half by a spring form the separator, ordered after both halves,
     which are ordered the same way first (George 1973). On the ball drop's 40,962-vertex
     ball it leaves 22% fewer entries in the factor than SuperLU's minimum degree (1.92 M
-    against 2.46 M) and the solve took 9-10 ms instead of 10.4-10.7. Compiled
-    (``_dissect``): 0.02 s at 40,962 particles, where the recursion over SciPy
-    submatrices it replaces took 1.3 s (6.0 s at 163,842), the same order.
+    against 2.46 M) and the solve took 9-10 ms instead of 10.4-10.7. Compiled (the
+    core's ``plan_dissection_order``, a stack of segments of one buffer split in place,
+    stably): 0.02 s at 40,962 particles, where a recursion over SciPy submatrices took
+    1.3 s (6.0 s at 163,842), the same order.
     Returns ``order`` (N,): the particle at each position.
     """
     pattern = (a != 0).tocsr()
     pattern.sort_indices()
-    return _dissect(
+    return _core.plan_dissection_order(
         pattern.indptr.astype(np.int64),
         pattern.indices.astype(np.int64),
         np.ascontiguousarray(points, dtype=np.float64),
         DISSECTION_LEAF,
     )
-
-
-@njit(cache=True)
-def _dissect(indptr, indices, points, leaf):
-    """``dissection_order`` on the CSR pattern (indptr, indices) of the matrix: the
-    recursion run depth-first on a stack of segments of one buffer. A segment is split
-    in place, stably, into [lower half off the separator | upper half | separator]; the
-    separator is pushed to be emitted after the two halves are ordered."""
-    n = points.shape[0]
-    buf = np.arange(n)
-    tmp = np.empty(n, dtype=np.int64)
-    vals = np.empty(n)
-    stamp = np.full(n, -1, dtype=np.int64)
-    upper = np.zeros(n, dtype=np.bool_)
-    order = np.empty(n, dtype=np.int64)
-    done = 0
-    tasks = np.empty((3 * n + 3, 3), dtype=np.int64)  # segment start, end, emit (1) or split
-    tasks[0, 0], tasks[0, 1], tasks[0, 2] = 0, n, 0
-    top = 1
-    cut = 0
-    while top > 0:
-        top -= 1
-        lo, hi, emit = tasks[top, 0], tasks[top, 1], tasks[top, 2] == 1
-        size = hi - lo
-        if not emit and size > leaf:
-            # the widest coordinate of the set, and its median
-            axis, widest = 0, -1.0
-            for k in range(3):
-                c_min, c_max = np.inf, -np.inf
-                for r in range(lo, hi):
-                    x = points[buf[r], k]
-                    c_min = min(c_min, x)
-                    c_max = max(c_max, x)
-                if c_max - c_min > widest:
-                    axis, widest = k, c_max - c_min
-            for r in range(lo, hi):
-                vals[r - lo] = points[buf[r], axis]
-            median = np.median(vals[:size])
-            lows = 0
-            for r in range(lo, hi):
-                v = buf[r]
-                stamp[v] = cut
-                upper[v] = not points[v, axis] < median
-                if not upper[v]:
-                    lows += 1
-            cut += 1
-            if 0 < lows < size:
-                # stable partition: lower half off the separator, upper half, separator
-                first = 0
-                for r in range(lo, hi):
-                    v = buf[r]
-                    if not upper[v] and not _touches_upper(indptr, indices, stamp, upper, v):
-                        tmp[first] = v
-                        first += 1
-                second = first
-                for r in range(lo, hi):
-                    if upper[buf[r]]:
-                        tmp[second] = buf[r]
-                        second += 1
-                third = second
-                for r in range(lo, hi):
-                    v = buf[r]
-                    if not upper[v] and _touches_upper(indptr, indices, stamp, upper, v):
-                        tmp[third] = v
-                        third += 1
-                for r in range(size):
-                    buf[lo + r] = tmp[r]
-                # last pushed, first done: the lower half, the upper half, the separator
-                tasks[top, 0], tasks[top, 1], tasks[top, 2] = lo + second, hi, 1
-                tasks[top + 1, 0], tasks[top + 1, 1], tasks[top + 1, 2] = lo + first, lo + second, 0
-                tasks[top + 2, 0], tasks[top + 2, 1], tasks[top + 2, 2] = lo, lo + first, 0
-                top += 3
-                continue
-            # all at one coordinate: no cut, the set is emitted as it is
-        for r in range(lo, hi):
-            order[done] = buf[r]
-            done += 1
-    return order
-
-
-@njit(cache=True, inline="always")
-def _touches_upper(indptr, indices, stamp, upper, v):
-    """Whether particle v has a neighbour in the current set's upper half (the set's
-    particles carry the newest stamp)."""
-    current = stamp[v]
-    for e in range(indptr[v], indptr[v + 1]):
-        u = indices[e]
-        if stamp[u] == current and upper[u]:
-            return True
-    return False
-
-
-@njit(cache=True)
-def _strict_lower(indptr, indices, data):
-    """The part below the diagonal of a lower triangular CSC matrix (SuperLU's L, whose
-    rows within a column come unsorted), rows sorted in each column: (indptr, indices,
-    data). Two counting sorts, by row then by column, as a transpose and back; compiled,
-    as ``sp.tril`` and a CSC conversion took 0.8 s at 163,842 particles."""
-    n = indptr.shape[0] - 1
-    row_ptr = np.zeros(n + 1, dtype=np.int64)
-    for j in range(n):
-        for e in range(indptr[j], indptr[j + 1]):
-            if indices[e] > j:
-                row_ptr[indices[e] + 1] += 1
-    for i in range(n):
-        row_ptr[i + 1] += row_ptr[i]
-    nnz = row_ptr[n]
-    # by row: each row's columns come in increasing order, as the columns are scanned so
-    row_col = np.empty(nnz, dtype=np.int64)
-    row_data = np.empty(nnz)
-    fill = row_ptr[:n].copy()
-    col_ptr = np.zeros(n + 1, dtype=np.int64)
-    for j in range(n):
-        for e in range(indptr[j], indptr[j + 1]):
-            i = indices[e]
-            if i > j:
-                row_col[fill[i]] = j
-                row_data[fill[i]] = data[e]
-                fill[i] += 1
-                col_ptr[j + 1] += 1
-    for j in range(n):
-        col_ptr[j + 1] += col_ptr[j]
-    # and back by column: each column's rows come in increasing order
-    out_rows = np.empty(nnz, dtype=np.int64)
-    out_data = np.empty(nnz)
-    fill = col_ptr[:n].copy()
-    for i in range(n):
-        for e in range(row_ptr[i], row_ptr[i + 1]):
-            j = row_col[e]
-            out_rows[fill[j]] = i
-            out_data[fill[j]] = row_data[e]
-            fill[j] += 1
-    return col_ptr, out_rows, out_data
-
-
-@njit(cache=True)
-def _supernodes(n, indptr, indices, data):
-    """Group the columns of a strictly lower CSC factor (sorted rows) into supernodes
-    (``Projective``): column j + 1 joins j's node when j's rows are j + 1 and then
-    exactly j + 1's rows."""
-    col = np.empty(n + 1, dtype=np.int64)
-    count = 0
-    col[0] = 0
-    for j in range(n - 1):
-        a0, a1, b0, b1 = indptr[j], indptr[j + 1], indptr[j + 1], indptr[j + 2]
-        joins = a1 - a0 == b1 - b0 + 1 and indices[a0] == j + 1
-        if joins:
-            for e in range(b1 - b0):
-                if indices[a0 + 1 + e] != indices[b0 + e]:
-                    joins = False
-                    break
-        if not joins:
-            count += 1
-            col[count] = j + 1
-    count += 1
-    col[count] = n
-    col = col[: count + 1]
-    row_ptr = np.zeros(count + 1, dtype=np.int64)
-    value_ptr = np.zeros(count + 1, dtype=np.int64)
-    for s in range(count):
-        c0, c1 = col[s], col[s + 1]
-        height = 1 + indptr[c0 + 1] - indptr[c0]  # its first column's diagonal and rows
-        row_ptr[s + 1] = row_ptr[s] + height
-        value_ptr[s + 1] = value_ptr[s] + height * (c1 - c0)
-    rows = np.empty(row_ptr[count], dtype=np.int64)
-    values = np.zeros(value_ptr[count])
-    for s in range(count):
-        c0, c1 = col[s], col[s + 1]
-        width = c1 - c0
-        r0, v0 = row_ptr[s], value_ptr[s]
-        rows[r0] = c0
-        for e in range(indptr[c0], indptr[c0 + 1]):
-            rows[r0 + 1 + e - indptr[c0]] = indices[e]
-        for j in range(c0, c1):
-            # column j's rows are the node's rows from j - c0 + 1 on, by construction
-            for e in range(indptr[j], indptr[j + 1]):
-                p = j - c0 + 1 + e - indptr[j]
-                values[v0 + p * width + j - c0] = data[e]
-    return col, row_ptr, rows, value_ptr, values
 
 
 @njit(cache=True)

@@ -209,11 +209,10 @@ class Simulator:
             )
         self.threads = int(threads)
         # the explicit schemes (threads too), and the implicit and projective ones (one
-        # thread) step in the compiled C++ core; the rest (implicit and projective on
-        # threads) still in the Numba kernels, which compile on first use
-        # (softbody._kernel_cache). Projective dynamics' set-up (the dissection order, the
-        # factor's supernodes) is Numba code too, so it needs the cache as well; the
-        # implicit schemes' multigrid set-up does not.
+        # thread) step in the compiled C++ core, and their set-up (multigrid hierarchy,
+        # the factor's order and supernodes) needs no Numba either; the rest (implicit and
+        # projective on threads) still runs the Numba kernels, which compile on first use
+        # (softbody._kernel_cache).
         self._core = None
         self._cg_stats_total = [0, 0, 0]
         if self.integrator.explicit or self.threads == 1:
@@ -222,7 +221,7 @@ class Simulator:
             self._core = self._core_solver()
         else:
             _refuse_drag(model, self.integrator, self.threads)
-        if not (self.integrator.explicit or self._implicit_core):
+        if self._core is None:
             _kernel_cache.ensure_compiled()
         self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
