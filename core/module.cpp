@@ -530,11 +530,13 @@ public:
         per_body_.assign(11, std::vector<double>(3 * b, 0.0));
         per_collider_.assign(3, std::vector<double>(3 * c, 0.0));
         gradient_.assign(n3, 0.0);
-        const size_t lanes = static_cast<size_t>(8 * m.group_count);
-        rows_buffer_.assign(8 * lanes, 0.0);  // padding rows stay zero
-        lane_pnet_.assign(lanes, 0.0);
-        lanes_view.rows = rows_buffer_.data();
-        lanes_view.lane_pnet = lane_pnet_.data();
+        if (rows > 0) {  // the force pass's packed rows (a volume-only call needs none)
+            const size_t lanes = static_cast<size_t>(8 * m.group_count);
+            rows_buffer_.assign(8 * lanes, 0.0);  // padding rows stay zero
+            lane_pnet_.assign(lanes, 0.0);
+            lanes_view.rows = rows_buffer_.data();
+            lanes_view.lane_pnet = lane_pnet_.data();
+        }
         gas.volume = per_body_[0].data();
         gas.pressure = per_body_[1].data();
         gas.lo = per_body_[2].data();
@@ -579,6 +581,36 @@ Index checked_capacity(const softbody::Model& m, std::optional<Index> asked) {
     if (asked && *asked < 0) fail("hash_capacity must be >= 0, got " + std::to_string(*asked));
     if (m.soft_contact_mode != 2) return 0;
     return asked ? *asked : 8 * m.tri_count;
+}
+
+/// A run's state arrays and limits, checked against the model (views held for one call).
+struct CheckedRun {
+    F64 q, qd, collider_q, collider_rot, collider_impulse;
+    softbody::StateView state;
+    softbody::RunParams params;
+};
+
+CheckedRun checked_run(const softbody::Model& m, Index steps, double t0, double dt,
+                       nb::handle q, nb::handle qd, nb::handle collider_q,
+                       nb::handle collider_rot, nb::handle collider_impulse, double max_speed,
+                       double ratio_min, double ratio_max) {
+    if (steps < 0) fail("steps must be >= 0");
+    if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
+    CheckedRun run;
+    run.q = writable(q, "q", {m.particle_count, 3});
+    run.qd = writable(qd, "qd", {m.particle_count, 3});
+    run.collider_q = writable(collider_q, "collider_q", {m.collider_count, 3});
+    run.collider_rot = writable(collider_rot, "collider_rot", {m.collider_count, 3, 3});
+    run.collider_impulse = writable(collider_impulse, "collider_impulse", {m.collider_count, 3});
+    run.state = {run.q.data(), run.qd.data(), run.collider_q.data(), run.collider_rot.data(),
+                 run.collider_impulse.data()};
+    run.params.steps = steps;
+    run.params.t0 = t0;
+    run.params.dt = dt;
+    run.params.max_speed = max_speed;
+    run.params.ratio_min = ratio_min;
+    run.params.ratio_max = ratio_max;
+    return run;
 }
 
 /// A fixed set of worker threads for softbody::Parallel: run() hands chunk 0 to the caller
@@ -696,27 +728,14 @@ public:
                                                    double ratio_min, double ratio_max) {
         const softbody::Model& m = model_.model();
         if (scheme < 0 || scheme > 4) fail("scheme must be an explicit Integrator (0-4)");
-        if (steps < 0) fail("steps must be >= 0");
-        if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
+        CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
+                                     collider_impulse, max_speed, ratio_min, ratio_max);
+        run.params.scheme = scheme;
         CoreControl c(m, control);
-        F64 aq = writable(q, "q", {m.particle_count, 3});
-        F64 aqd = writable(qd, "qd", {m.particle_count, 3});
-        F64 acq = writable(collider_q, "collider_q", {m.collider_count, 3});
-        F64 arot = writable(collider_rot, "collider_rot", {m.collider_count, 3, 3});
-        F64 aimp = writable(collider_impulse, "collider_impulse", {m.collider_count, 3});
-        softbody::StateView s{aq.data(), aqd.data(), acq.data(), arot.data(), aimp.data()};
-        softbody::RunParams p;
-        p.scheme = scheme;
-        p.steps = steps;
-        p.t0 = t0;
-        p.dt = dt;
-        p.max_speed = max_speed;
-        p.ratio_min = ratio_min;
-        p.ratio_max = ratio_max;
         softbody::RunResult r;
         {
             nb::gil_scoped_release release;
-            r = softbody::kernels().simulate_explicit(m, c.view, p, s, w_);
+            r = softbody::kernels().simulate_explicit(m, c.view, run.params, run.state, w_);
         }
         return {r.status, r.steps_done, r.where, r.value};
     }
@@ -847,32 +866,20 @@ public:
                                                    nb::handle collider_impulse, double max_speed,
                                                    double ratio_min, double ratio_max) {
         const softbody::Model& m = model_.model();
-        if (steps < 0) fail("steps must be >= 0");
-        if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
         if (iterations < 1) fail("iterations must be >= 1");
         if (!factor_) fail("no projective factor set (set_factor)");
         if (factor_->factor().dt != dt)
             fail("the projective factor was built for dt = " + std::to_string(factor_->factor().dt) +
                  " s, not " + std::to_string(dt) + " s");
+        CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
+                                     collider_impulse, max_speed, ratio_min, ratio_max);
+        run.params.iterations = iterations;
         CoreControl c(m, control);
-        F64 aq = writable(q, "q", {m.particle_count, 3});
-        F64 aqd = writable(qd, "qd", {m.particle_count, 3});
-        F64 acq = writable(collider_q, "collider_q", {m.collider_count, 3});
-        F64 arot = writable(collider_rot, "collider_rot", {m.collider_count, 3, 3});
-        F64 aimp = writable(collider_impulse, "collider_impulse", {m.collider_count, 3});
-        softbody::StateView s{aq.data(), aqd.data(), acq.data(), arot.data(), aimp.data()};
-        softbody::RunParams p;
-        p.steps = steps;
-        p.iterations = iterations;
-        p.t0 = t0;
-        p.dt = dt;
-        p.max_speed = max_speed;
-        p.ratio_min = ratio_min;
-        p.ratio_max = ratio_max;
         softbody::RunResult r;
         {
             nb::gil_scoped_release release;
-            r = softbody::kernels().simulate_projective(m, c.view, p, s, factor_->factor(), w_);
+            r = softbody::kernels().simulate_projective(m, c.view, run.params, run.state,
+                                                        factor_->factor(), w_);
         }
         return {r.status, r.steps_done, r.where, r.value};
     }
@@ -1036,25 +1043,12 @@ public:
         double max_speed, double ratio_min, double ratio_max, double tolerance,
         Index max_iterations, bool history) {
         const softbody::Model& m = model_.model();
-        if (steps < 0) fail("steps must be >= 0");
-        if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
         if (!(std::isfinite(tolerance) && tolerance > 0.0 && tolerance < 1.0))
             fail("tolerance must lie in (0, 1)");
         if (max_iterations < 1) fail("max_iterations must be >= 1");
+        CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
+                                     collider_impulse, max_speed, ratio_min, ratio_max);
         CoreControl c(m, control);
-        F64 aq = writable(q, "q", {m.particle_count, 3});
-        F64 aqd = writable(qd, "qd", {m.particle_count, 3});
-        F64 acq = writable(collider_q, "collider_q", {m.collider_count, 3});
-        F64 arot = writable(collider_rot, "collider_rot", {m.collider_count, 3, 3});
-        F64 aimp = writable(collider_impulse, "collider_impulse", {m.collider_count, 3});
-        softbody::StateView s{aq.data(), aqd.data(), acq.data(), arot.data(), aimp.data()};
-        softbody::RunParams p;
-        p.steps = steps;
-        p.t0 = t0;
-        p.dt = dt;
-        p.max_speed = max_speed;
-        p.ratio_min = ratio_min;
-        p.ratio_max = ratio_max;
         softbody::ImplicitParams ip;
         ip.bdf2 = bdf2;
         ip.tolerance = tolerance;
@@ -1064,7 +1058,8 @@ public:
         softbody::RunResult r;
         {
             nb::gil_scoped_release release;
-            r = softbody::kernels().simulate_implicit(m, c.view, p, ip, s, w_, mg);
+            r = softbody::kernels().simulate_implicit(m, c.view, run.params, ip, run.state, w_,
+                                                      mg);
         }
         return {r.status, r.steps_done, r.where, r.value};
     }

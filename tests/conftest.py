@@ -15,6 +15,17 @@ settings.register_profile("softbody", derandomize=True, deadline=None, print_blo
 settings.load_profile("softbody")
 
 
+#: The built-in scenes, in the order the scene tests expect them.
+BUILT_IN = [
+    "bouncing-balls",
+    "hanging-ball",
+    "hand-punch",
+    "cloth-wind",
+    "bounding-volumes",
+    "balloon-drop",
+]
+
+
 def ball_model(
     *,
     subdivisions: int = 2,

@@ -147,27 +147,6 @@ def test_every_instruction_set_gives_the_same_run():
         np.testing.assert_array_equal(state.particle_qd, runs["scalar"].particle_qd)
 
 
-def test_hanging_particle_rests_at_hookes_extension_in_the_core():
-    """A particle hanging from a pinned particle by a damped spring, and one from an
-    attachment, come to rest where k (L - L0) = m g (to 1e-9 m): the core's projections
-    and pinned columns (test_projective has the same for the default path)."""
-    g, k, mass, rest = 9.81, 40.0, 0.2, 0.5
-    builder = sb.ModelBuilder(gravity=(0.0, -g, 0.0))
-    top = builder.add_particle((0.0, 0.0, 0.0), mass=1.0, pinned=True)
-    low = builder.add_particle((0.0, -0.3, 0.0), mass=mass)
-    builder.add_spring(top, low, stiffness=k, damping=0.5, rest_length=rest)
-    hung = builder.add_particle((2.0, -0.2, 0.0), mass=mass)
-    builder.add_attachment(hung, (2.0, 0.0, 0.0), stiffness=k, damping=0.5, rest_length=rest)
-    model = builder.finalize()
-    sim = _sim(model, 1 / 60, use_core=True)
-    state = model.state()
-    sim.run(state, 1200)
-    drop = rest + mass * g / k
-    assert np.array_equal(state.particle_q[top], (0.0, 0.0, 0.0))
-    np.testing.assert_allclose(state.particle_q[low], (0.0, -drop, 0.0), rtol=0, atol=1e-9)
-    np.testing.assert_allclose(state.particle_q[hung], (2.0, -drop, 0.0), rtol=0, atol=1e-9)
-
-
 def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
     """Surface contacts with a 1-entry hash: the core stops with NEED_HASH (the step
     undone), the Simulator rebuilds it with twice the room and re-points the factor, and

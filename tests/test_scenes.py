@@ -6,16 +6,8 @@ import numpy as np
 import pytest
 
 import softbody as sb
+from conftest import BUILT_IN
 from softbody.scenes import SceneError, list_scenes, load_scene
-
-BUILT_IN = [
-    "bouncing-balls",
-    "hanging-ball",
-    "hand-punch",
-    "cloth-wind",
-    "bounding-volumes",
-    "balloon-drop",
-]
 
 
 def test_all_paper_scenes_are_built_in():

@@ -14,20 +14,13 @@ from pathlib import Path
 
 import pytest
 
+from conftest import BUILT_IN
 from softbody import limits
 from softbody.cli import main
 from softbody.errors import SizeLimitError
 from softbody.scenes import SceneError, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
-BUILT_IN = [
-    "bouncing-balls",
-    "hanging-ball",
-    "hand-punch",
-    "cloth-wind",
-    "bounding-volumes",
-    "balloon-drop",
-]
 #: ``dotted.key: reason, got value`` and nothing else on the line
 ONE_LINE = re.compile(r"^[\w.]+: [^\n]+$")
 

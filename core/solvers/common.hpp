@@ -117,4 +117,23 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
     return 0;
 }
 
+/// The end of step `step` (from t to t + p.dt) every solver shares: contacts, then the
+/// particle checks. When the spatial hash needs more room (NEED_HASH, with the entries
+/// needed) or a particle failed, the state goes back to the step's start (q0, v0) and the
+/// result says so; otherwise OK.
+inline RunResult end_step(const Model& m, const Control& c, const RunParams& p, index step,
+                          double t, const StateView& s, const double* q0, const double* v0,
+                          const ContactBuffers& w) {
+    const index n3 = 3 * m.particle_count;
+    const index needed = contacts(m, c, p, step, t + p.dt, s, q0, w);
+    RunResult r = needed > 0 ? RunResult{NEED_HASH, step, -1, static_cast<double>(needed)}
+                             : check_particles(m, s.q, s.qd, p.max_speed);
+    if (r.status != OK) {
+        copy(q0, s.q, n3);
+        copy(v0, s.qd, n3);
+        r.steps_done = step;
+    }
+    return r;
+}
+
 }  // namespace softbody::SOFTBODY_KERNELS::loop

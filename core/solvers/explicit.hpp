@@ -246,19 +246,9 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
             return r;
         }
         step(m, c, p.scheme, t, p.dt, s.q, s.qd, w);
-        const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact);
-        if (needed > 0) {  // the hash is too small: undo the step, the caller grows it
-            loop::copy(w.q0, s.q, n3);
-            loop::copy(w.v0, s.qd, n3);
-            return {NEED_HASH, step_index, -1, static_cast<double>(needed)};
-        }
-        r = loop::check_particles(m, s.q, s.qd, p.max_speed);
-        if (r.status != OK) {
-            loop::copy(w.q0, s.q, n3);
-            loop::copy(w.v0, s.qd, n3);
-            r.steps_done = step_index;
-            return r;
-        }
+        // contacts and particle checks; a failure (or a hash too small) undoes the step
+        r = loop::end_step(m, c, p, step_index, t, s, w.q0, w.v0, w.contact);
+        if (r.status != OK) return r;
     }
     return {OK, p.steps, -1, 0.0};
 }
