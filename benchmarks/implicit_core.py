@@ -19,7 +19,7 @@ import time
 
 import softbody as sb
 from ball_drop import ball_drop
-from results_io import RESULTS, run_record, write_json
+from results_io import RESULTS, plot_core_against_numba, run_record, write_json
 from softbody import _kernel_cache, core
 
 DT = 1.0 / 60.0
@@ -84,6 +84,19 @@ def main() -> None:
             units="milliseconds per implicit Euler step, one thread",
             results=results,
         ),
+    )
+    plot(results)
+
+
+def plot(results: list[dict]) -> None:
+    """results/implicit_core.png: ms per step, core beside Numba, per size and
+    preconditioner."""
+    plot_core_against_numba(
+        RESULTS / "implicit_core.png",
+        [f"{r['vertices']:,}\n{r['preconditioner']}" for r in results],
+        [r["ms_per_step"]["core"] for r in results],
+        [r["ms_per_step"]["numba"] for r in results],
+        "implicit Euler, dt = 1/60 s, ball drop, one thread",
     )
 
 

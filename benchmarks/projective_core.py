@@ -22,7 +22,7 @@ import numpy as np
 
 import softbody as sb
 from ball_drop import ball_drop
-from results_io import RESULTS, run_record, write_json
+from results_io import RESULTS, plot_core_against_numba, run_record, write_json
 from softbody import _kernel_cache, core
 
 DT = 1 / 60
@@ -86,6 +86,18 @@ def main() -> None:
         sizes=sizes,
     )
     write_json(RESULTS / "projective_core.json", record)
+    plot(sizes)
+
+
+def plot(sizes: list[dict]) -> None:
+    """results/projective_core.png: ms per step, core beside Numba, per size."""
+    plot_core_against_numba(
+        RESULTS / "projective_core.png",
+        [f"{s['vertex_count']:,}" for s in sizes],
+        [s["core_ms_per_step"] for s in sizes],
+        [s["numba_ms_per_step"] for s in sizes],
+        f"projective dynamics, dt = 1/60 s, {ITERATIONS} iterations, one thread",
+    )
 
 
 if __name__ == "__main__":

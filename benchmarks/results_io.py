@@ -36,3 +36,30 @@ def save_figure(fig, path: Path) -> None:
     tmp = path.with_suffix(".tmp.png")
     fig.savefig(tmp)
     os.replace(tmp, path)
+
+
+def plot_core_against_numba(
+    path: Path, labels: list[str], core_ms: list[float], numba_ms: list[float], title: str
+) -> None:
+    """Bars of milliseconds per step, the compiled core beside the Numba loop, for each
+    label (a size, or a size and an option), as PNG at ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(7.0, 1.6 * len(labels) + 2.0), 4.0))
+    ax.bar(x - 0.2, numba_ms, 0.4, label="Numba loop", color="0.6")
+    ax.bar(x + 0.2, core_ms, 0.4, label="C++ core", color="tab:green")
+    for k in range(len(labels)):
+        ax.annotate(f"{numba_ms[k] / core_ms[k]:.2f}x", (x[k] + 0.2, core_ms[k]),
+                    ha="center", va="bottom", fontsize=9)  # fmt: skip
+    ax.set_xticks(x, labels)
+    ax.set_ylabel("ms per step")
+    ax.set_title(title)
+    ax.legend()
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
