@@ -263,6 +263,7 @@ struct Factor {
 
 /// Scratch for projective dynamics, owned by softbody::ProjectiveSolver.
 struct ProjectiveBuffers {
+    LaneBuffers lanes;
     double* f = nullptr;    // (N, 3) the non-spring forces at the iterate [N]
     double* q0 = nullptr;   // (N, 3) start-of-step positions
     double* v0 = nullptr;   // (N, 3) start-of-step velocities

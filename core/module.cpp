@@ -692,22 +692,45 @@ private:
     void* context_ = nullptr;
 };
 
+/// A solver's opt-in threads: a pool, its Parallel interface and the per-chunk volume
+/// sums, attached to the solver's force pass (1 thread: nothing, the serial kernels).
+/// Lives inside its solver and never moves, since the lanes point at it.
+class SolverThreads {
+public:
+    SolverThreads(int threads, Index body_count) {
+        if (threads < 1 || threads > ThreadPool::kMostThreads)
+            fail("threads must be from 1 to " + std::to_string(ThreadPool::kMostThreads));
+        if (threads > 1) {
+            pool_ = std::make_unique<ThreadPool>(threads);
+            parallel_ = pool_->interface();
+            chunk_volume_.assign(static_cast<size_t>(threads * body_count), 0.0);
+        }
+    }
+    SolverThreads(const SolverThreads&) = delete;
+    SolverThreads& operator=(const SolverThreads&) = delete;
+
+    void attach(softbody::LaneBuffers& lanes) {
+        if (!pool_) return;
+        lanes.parallel = &parallel_;
+        lanes.chunk_volume = chunk_volume_.data();
+    }
+    int count() const { return parallel_.chunks; }
+
+private:
+    std::unique_ptr<ThreadPool> pool_;
+    softbody::Parallel parallel_;
+    std::vector<double> chunk_volume_;
+};
+
 /// softbody._core.ExplicitSolver: the explicit schemes' time loop and its scratch.
 class ExplicitSolver {
 public:
     ExplicitSolver(nb::object model, std::optional<Index> hash_capacity, int threads)
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
-          buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)) {
-        if (threads < 1 || threads > ThreadPool::kMostThreads)
-            fail("threads must be from 1 to " + std::to_string(ThreadPool::kMostThreads));
-        if (threads > 1) {
-            pool_ = std::make_unique<ThreadPool>(threads);
-            parallel_ = pool_->interface();
-            chunk_volume_.assign(static_cast<size_t>(threads * model_.model().body_count), 0.0);
-            buffers_.lanes_view.parallel = &parallel_;
-            buffers_.lanes_view.chunk_volume = chunk_volume_.data();
-        }
+          buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)),
+          threads_(threads, model_.model().body_count) {
+        threads_.attach(buffers_.lanes_view);
         w_.f = buffers_.row(0);
         w_.q0 = buffers_.row(1);
         w_.v0 = buffers_.row(2);
@@ -741,15 +764,13 @@ public:
     }
 
     Index hash_capacity() const { return buffers_.contact.hash_capacity; }
-    int threads() const { return parallel_.chunks; }
+    int threads() const { return threads_.count(); }
 
 private:
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
     const CoreModel& model_;
     Buffers buffers_;
-    std::unique_ptr<ThreadPool> pool_;
-    softbody::Parallel parallel_;
-    std::vector<double> chunk_volume_;
+    SolverThreads threads_;
     softbody::ExplicitBuffers w_;
 };
 
@@ -836,10 +857,13 @@ private:
 /// factor it solves with (set for each step size by the caller, which builds it).
 class ProjectiveSolver {
 public:
-    ProjectiveSolver(nb::object model, std::optional<Index> hash_capacity)
+    ProjectiveSolver(nb::object model, std::optional<Index> hash_capacity, int threads)
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
-          buffers_(model_.model(), 6, checked_capacity(model_.model(), hash_capacity)) {
+          buffers_(model_.model(), 6, checked_capacity(model_.model(), hash_capacity)),
+          threads_(threads, model_.model().body_count) {
+        threads_.attach(buffers_.lanes_view);
+        w_.lanes = buffers_.lanes_view;
         w_.f = buffers_.row(0);
         w_.q0 = buffers_.row(1);
         w_.v0 = buffers_.row(2);
@@ -885,11 +909,13 @@ public:
     }
 
     Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+    int threads() const { return threads_.count(); }
 
 private:
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
     const CoreModel& model_;
     Buffers buffers_;
+    SolverThreads threads_;
     softbody::ProjectiveBuffers w_;
     std::optional<CoreFactor> factor_;
 };
@@ -1010,11 +1036,14 @@ private:
 /// history (BDF2's previous step, CG's last dv and its statistics).
 class ImplicitSolver {
 public:
-    ImplicitSolver(nb::object model, nb::object multigrid, std::optional<Index> hash_capacity)
+    ImplicitSolver(nb::object model, nb::object multigrid, std::optional<Index> hash_capacity,
+                   int threads)
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
-          buffers_(model_.model(), 13, checked_capacity(model_.model(), hash_capacity)) {
+          buffers_(model_.model(), 13, checked_capacity(model_.model(), hash_capacity)),
+          threads_(threads, model_.model().body_count) {
         const softbody::Model& m = model_.model();
+        threads_.attach(buffers_.lanes_view);
         if (!multigrid.is_none()) multigrid_.emplace(m, multigrid);
         mg_handle_ = multigrid;
         double** rows[] = {&w_.f, &w_.q0, &w_.v0, &w_.qs, &w_.vs, &w_.ky, &w_.cg_r,
@@ -1069,6 +1098,7 @@ public:
     void clear_stats() { flags_[1] = flags_[2] = flags_[3] = 0; }
     Index hash_capacity() const { return buffers_.contact.hash_capacity; }
     bool uses_multigrid() const { return multigrid_.has_value(); }
+    int threads() const { return threads_.count(); }
 
 private:
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
@@ -1076,6 +1106,7 @@ private:
     nb::object mg_handle_;  // keeps the hierarchy's arrays alive
     std::optional<CheckedMultigrid> multigrid_;
     Buffers buffers_;
+    SolverThreads threads_;
     std::vector<std::vector<double>> per_spring_, per_body_;
     std::vector<double> diag_;
     Index flags_[4] = {0, 0, 0, 0};  // contacts acted, then the CG statistics
@@ -1386,9 +1417,11 @@ NB_MODULE(_core, mod) {
     nb::class_<ProjectiveSolver>(mod, "ProjectiveSolver",
                                  "Projective dynamics' time loop with its scratch buffers and "
                                  "the factored matrix it solves with.")
-        .def(nb::init<nb::object, std::optional<Index>>(), nb::arg("model"),
-             nb::arg("hash_capacity") = nb::none(),
-             "hash_capacity: as for ExplicitSolver.")
+        .def(nb::init<nb::object, std::optional<Index>, int>(), nb::arg("model"),
+             nb::arg("hash_capacity") = nb::none(), nb::arg("threads") = 1,
+             "hash_capacity, threads: as for ExplicitSolver (threads run the pass that "
+             "measures the volumes and dV/dx).")
+        .def_prop_ro("threads", &ProjectiveSolver::threads, "Threads of the force pass.")
         .def("set_factor", &ProjectiveSolver::set_factor, nb::arg("factor"),
              "Solve with this Projective factor (integrators.projective.build_projective for "
              "the model and the step); checked once here and kept alive.")
@@ -1406,11 +1439,14 @@ NB_MODULE(_core, mod) {
     nb::class_<ImplicitSolver>(mod, "ImplicitSolver",
                                "Backward Euler and BDF2 with their scratch, BDF2's previous "
                                "step and CG's statistics.")
-        .def(nb::init<nb::object, nb::object, std::optional<Index>>(), nb::arg("model"),
+        .def(nb::init<nb::object, nb::object, std::optional<Index>, int>(), nb::arg("model"),
              nb::arg("multigrid").none() = nb::none(), nb::arg("hash_capacity") = nb::none(),
+             nb::arg("threads") = 1,
              "multigrid: a softbody.integrators.multigrid.Multigrid for this model (checked "
              "once; its values are read at each step, so set_multigrid_step on it takes "
-             "effect), or None for the Jacobi preconditioner.")
+             "effect), or None for the Jacobi preconditioner. threads: as for ExplicitSolver "
+             "(threads run the force pass at each step's start).")
+        .def_prop_ro("threads", &ImplicitSolver::threads, "Threads of the force pass.")
         .def_prop_ro("hash_capacity", &ImplicitSolver::hash_capacity)
         .def_prop_ro("uses_multigrid", &ImplicitSolver::uses_multigrid)
         .def_prop_ro("cg_stats", &ImplicitSolver::cg_stats,

@@ -3,7 +3,6 @@ whatever ran before, and step counts that stay within the compiled loop's intege
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 
@@ -11,7 +10,7 @@ import numpy as np
 import pytest
 
 import softbody as sb
-from conftest import cached_versions, kernel_cache_problems, package_copy
+from conftest import package_copy
 from softbody.integrators import loop
 from softbody.sim.simulator import MAX_STEPS
 
@@ -21,46 +20,6 @@ def small_ball(gravity=(0.0, 0.0, 0.0)) -> sb.Model:
     builder = sb.ModelBuilder(gravity=gravity)
     builder.add_soft_body(sb.icosphere(1), mass=1.0, stiffness=300.0, damping=1.0, gas=100.0)
     return builder.finalize()
-
-
-def test_every_family_in_turn_leaves_one_version_per_kernel_in_a_fresh_cache(tmp_path):
-    """On an empty cache, ``run bounding-volumes`` (explicit), then two implicit runs:
-    the third died with a segmentation fault, and so did every implicit, BDF2 and
-    projective run after it. The second process had compiled its time loop against force
-    kernels the first had cached, and a third that loaded both crashed (Numba issues 4807
-    and 10128). Reference: the issue's sequence, extended so that every family runs once
-    on an empty cache and again after the others, each in a fresh process: every run
-    exits 0, and the cache is the warm-up's alone (one process compiled every kernel;
-    nothing was compiled after it; one version per kernel), so it does not depend on the
-    order the families ran in and this order stands for all six. Every solver now steps
-    in the compiled core on one thread: the Numba kernels run only for the implicit and
-    projective solvers on threads, so those runs take two threads here."""
-    import numba
-
-    if numba.config.NUMBA_NUM_THREADS < 2:
-        pytest.skip("the Numba paths left need two threads")
-    cache = tmp_path / "cache"
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
-    threads = ["--threads", "2"]
-    sequence = [
-        [],  # the scene's own integrator (midpoint), in the core
-        ["--integrator", "implicit_euler", "--dt", "0.01", *threads],
-        ["--integrator", "implicit_euler", "--dt", "0.01", *threads],  # crashed with signal 11
-        ["--integrator", "projective", "--dt", "0.004", *threads],  # gas limit 5 ms here
-        [],
-        ["--integrator", "projective", "--dt", "0.004", *threads],
-        ["--integrator", "bdf2", "--dt", "0.01", *threads],
-    ]
-    for k, extra in enumerate(sequence):
-        command = [sys.executable, "-m", "softbody.cli", "run", "bounding-volumes"]
-        command += ["--duration", "0.1", "--no-video", "--no-gif", "--out", str(tmp_path / "o")]
-        done = subprocess.run(
-            command + extra, env=env, capture_output=True, text=True, timeout=600
-        )
-        assert done.returncode == 0, (k, extra, done.returncode, done.stderr[-2000:])
-    (folder,) = [p for p in cache.glob("numba-*") if p.is_dir()]  # no partial folder left
-    assert len(cached_versions(folder)) > 50  # the three families' kernels were cached
-    assert kernel_cache_problems(folder) == []
 
 
 def test_odd_state_arrays_compile_no_second_version():

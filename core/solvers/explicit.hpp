@@ -18,10 +18,12 @@
 namespace softbody::SOFTBODY_KERNELS::explicit_solver {
 
 /// The vertex-major pass over groups [g0, g1): for every particle, kLanes at a time, its
-/// weight, its springs and dV/dx from its faces, with its share of its body's exact volume
-/// (each face seen from its three corners: 3 x 6 V in all, added to body_six_v (B,)). The
-/// ring's neighbour rows serve a spring and two faces each. Writes the particles' rows of f
-/// and gas.volume_gradient (N, 3) and nothing else's.
+/// weight, its springs (kSprings; projective dynamics solves them implicitly) and dV/dx
+/// from its faces, with its share of its body's exact volume (each face seen from its three
+/// corners: 3 x 6 V in all, added to body_six_v (B,)). The ring's neighbour rows serve a
+/// spring and two faces each. Writes the particles' rows of f and gas.volume_gradient (N, 3)
+/// and nothing else's.
+template <bool kSprings>
 inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas& gas, double* f,
                                index g0, index g1, double* body_six_v) {
     const index n = m.particle_count;
@@ -42,9 +44,11 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
                 const index e = kGroup * s + lane0;
                 const Rows o = load_rows(rows, m.ring_slot_other + e);
                 const vd dx = o.x - self.x, dy = o.y - self.y, dz = o.z - self.z;
-                springs::lane_pair(self, o, dx, dy, dz, load_lanes(m.ring_slot_rest_length + e),
-                                   load_lanes(m.ring_slot_stiffness + e),
-                                   load_lanes(m.ring_slot_damping + e), fx, fy, fz);
+                if constexpr (kSprings)
+                    springs::lane_pair(self, o, dx, dy, dz,
+                                       load_lanes(m.ring_slot_rest_length + e),
+                                       load_lanes(m.ring_slot_stiffness + e),
+                                       load_lanes(m.ring_slot_damping + e), fx, fy, fz);
                 if (s == m.ring_slot_start[g]) {
                     ux0 = dx, uy0 = dy, uz0 = dz;  // the face closing the ring comes last
                 } else {
@@ -57,7 +61,8 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
                 gas::lane_face(ux, uy, uz, ux0, uy0, uz0,
                                load_lanes(m.ring_slot_face + kGroup * m.ring_slot_start[g] + lane0),
                                rx, ry, rz, gx, gy, gz, six_v);
-            springs::lane_force(m, rows, g, lane0, self, fx, fy, fz);  // springs off the rings
+            if constexpr (kSprings)
+                springs::lane_force(m, rows, g, lane0, self, fx, fy, fz);  // springs off the rings
             gas::lane_faces(m, rows, g, lane0, self, rx, ry, rz, gx, gy, gz, six_v);  // odd fans
             for (int l = 0; l < kLanes && first + l < n; ++l) {
                 const index i = first + l;
@@ -82,6 +87,7 @@ inline void pack_rows(const double* q, const double* qd, double* rows, index i0,
 /// The vertex-major pass over every particle (see vertex_pass_groups), on the opt-in threads
 /// when there are: chunk c takes a fixed run of groups and keeps its own volume sums, added
 /// in chunk order, so a run repeats to the bit whatever the threads' timing.
+template <bool kSprings = true>
 inline void vertex_pass(const Model& m, const double* q, const double* qd, const BodyGas& gas,
                         const LaneBuffers& lanes, double* f) {
     const int chunks = lanes.parallel != nullptr ? lanes.parallel->chunks : 1;
@@ -89,7 +95,7 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
     if (chunks <= 1) {
         pack_rows(q, qd, lanes.rows, 0, m.particle_count);
         for (index b = 0; b < bodies; ++b) gas.volume[b] = 0.0;
-        vertex_pass_groups(m, lanes.rows, gas, f, 0, groups, gas.volume);
+        vertex_pass_groups<kSprings>(m, lanes.rows, gas, f, 0, groups, gas.volume);
     } else {
         struct Work {
             const Model* m;
@@ -111,7 +117,7 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
             const Work& w = *static_cast<const Work*>(context);
             double* six_v = w.lanes->chunk_volume + c * w.m->body_count;
             for (index b = 0; b < w.m->body_count; ++b) six_v[b] = 0.0;
-            vertex_pass_groups(*w.m, w.lanes->rows, *w.gas, w.f, w.m->group_count * c / w.chunks,
+            vertex_pass_groups<kSprings>(*w.m, w.lanes->rows, *w.gas, w.f, w.m->group_count * c / w.chunks,
                                w.m->group_count * (c + 1) / w.chunks, six_v);
         }, &work);
         for (index b = 0; b < bodies; ++b) {
@@ -123,6 +129,12 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
     for (index b = 0; b < bodies; ++b) gas.volume[b] /= 18.0;  // each face thrice: 3 x 6 V
 }
 
+/// Whether the force pass runs vertex-major: with SIMD lanes, or on threads (each thread
+/// then writes only its own particles' rows).
+inline bool use_vertex_pass(const LaneBuffers& lanes) {
+    return kLanes > 1 || (lanes.parallel != nullptr && lanes.parallel->chunks > 1);
+}
+
 /// All forces at time t [s] for q, qd (N, 3) into f (N, 3) [N]: the list of physics terms.
 /// With SIMD lanes (or threads) the weight, springs and dV/dx come from the vertex-major
 /// pass; on the scalar path, term by term over springs and faces (half the arithmetic: each
@@ -131,8 +143,7 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
 inline void eval_forces(const Model& m, const Control& c, double t, const double* q,
                         const double* qd, const BodyGas& gas, const LaneBuffers& lanes,
                         double* f) {
-    const bool threads = lanes.parallel != nullptr && lanes.parallel->chunks > 1;
-    if (kLanes > 1 || threads) {
+    if (use_vertex_pass(lanes)) {
         vertex_pass(m, q, qd, gas, lanes, f);  // weight, springs, dV/dx, exact volumes
         volume::evaluate(m, q, gas, true);     // bounding and Monte Carlo volumes
     } else {

@@ -13,11 +13,13 @@
 // (the global step) by two triangular solves on the factor Python built for h. f is every
 // other force at the iterate, explicit within the iteration: gravity, external and grab
 // forces, the gas pressure and air drag. The same operations in the same order as the Numba
-// loop (softbody.integrators.loop.simulate_projective), so the two agree to the last bit.
+// loop (softbody.integrators.loop.simulate_projective) on the scalar path, where the two
+// agree to the last bit.
 #pragma once
 
 #include "model.hpp"
 #include "solvers/common.hpp"
+#include "solvers/explicit.hpp"
 #include "terms/attachments.hpp"
 #include "terms/drag.hpp"
 #include "terms/external.hpp"
@@ -112,13 +114,19 @@ inline void solve(const Factor& a, const double* b, double* x, double* out) {
 }
 
 /// The forces projective dynamics keeps explicit, at time t [s] for the iterate q, qd
-/// (N, 3), into f (N, 3) [N] (refreshing the volumes, dV/dx and pressures in gas).
+/// (N, 3), into f (N, 3) [N] (refreshing the volumes, dV/dx and pressures in gas). With
+/// SIMD lanes or threads the weight, dV/dx and exact volumes come from the vertex-major pass
+/// without its springs; the sums run in another order, so the paths agree to round-off.
 inline void forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
-                   const BodyGas& gas, double* f) {
-    gravity::force(m, f);               // weight m g (initialises the accumulator)
+                   const BodyGas& gas, const LaneBuffers& lanes, double* f) {
+    const bool lanes_pass = explicit_solver::use_vertex_pass(lanes);
+    if (lanes_pass)
+        explicit_solver::vertex_pass<false>(m, q, qd, gas, lanes, f);  // weight, dV/dx, V
+    else
+        gravity::force(m, f);           // weight m g (initialises the accumulator)
     external::force(m, c, f);           // per-step forces from Control
     external::grab_force(c, q, qd, f);  // a grabbed particle pulled to a target
-    volume::evaluate(m, q, gas);        // volumes and dV/dx
+    volume::evaluate(m, q, gas, lanes_pass);  // volumes and dV/dx (the rest, after the pass)
     gas::pressures(m, c, t, gas);       // the gas law's P(V, t)
     gas::force(m, gas, f);              // (P - P_ambient) dV/dx
     drag::force(m, c, q, qd, f);        // air drag on faces (skipped when off)
@@ -155,7 +163,7 @@ inline void step(const Model& m, const Control& c, double t, double dt, index it
     const double inv_dt = 1.0 / dt;
     for (index it = 0; it < iterations; ++it) {
         for (index i = 0; i < n; ++i) store(qd, i, inv_dt * (load(q, i) - load(w.q0, i)));
-        forces(m, c, t + dt, q, qd, w.gas, w.f);
+        forces(m, c, t + dt, q, qd, w.gas, w.lanes, w.f);
         right_hand_side(m, c, dt, q, w.q0, w.y, w.f, w.rhs);
         solve(a, w.rhs, w.x, q);
     }

@@ -16,7 +16,7 @@ import weakref
 
 from softbody import _core
 
-__all__ = ["simd_path", "simd_paths", "use_simd"]
+__all__ = ["available_threads", "simd_path", "simd_paths", "use_simd"]
 
 _MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -42,6 +42,14 @@ def use_simd(name: str) -> None:
             f"instruction set {name!r} is not available here; choose one of: "
             + ", ".join([*simd_paths(), "auto"])
         )
+
+
+def available_threads() -> int:
+    """CPU cores this process may run on: the most ``threads`` a Simulator takes."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 def core_model(model):

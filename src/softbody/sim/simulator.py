@@ -10,7 +10,7 @@ import numba
 import numpy as np
 
 from softbody import _core, _kernel_cache
-from softbody.core import core_model
+from softbody.core import available_threads, core_model
 from softbody.errors import SimulationError, StabilityWarning
 from softbody.integrators import Integrator
 from softbody.integrators import loop as _loop
@@ -53,20 +53,6 @@ def step_count(steps) -> int:
     return n
 
 
-def _refuse_drag(model: Model, integrator: Integrator, threads: int) -> None:
-    """A ``ValueError`` when ``model`` has air drag: the Numba loop (implicit integrators
-    and projective dynamics on threads) has no drag term, and dropping a force silently
-    would be wrong."""
-    if not model.has_drag:
-        return
-    raise ValueError(
-        "aerodynamic drag is stepped by the explicit integrators, implicit_euler, bdf2 and "
-        "projective only for now (the last three with threads=1); this simulator has "
-        f"{integrator.name.lower()} with threads={threads}. Set drag_coefficient=0 on every "
-        "body or air density 0 to run it without drag"
-    )
-
-
 class Simulator:
     """Steps a :class:`Model`'s states forward in time.
 
@@ -99,13 +85,14 @@ class Simulator:
         ``implicit_euler`` and ``bdf2``: most CG iterations per step (a step that reaches it keeps
         the last iterate; :attr:`solver_iterations` tells).
     threads : int
-        Threads for the force terms, >= 1 and at most ``numba.config.NUMBA_NUM_THREADS``
-        (the machine's cores unless set). Default 1: serial. The explicit schemes run the
-        compiled core's force pass on that many threads, each on a fixed run of particles;
-        the implicit and projective solvers cut springs and faces into chunks
-        (``softbody.partition``). Results agree with the serial ones to round-off and are
-        the same in every run. Opt-in because a thread that loses its core to another
-        process stalls the whole step.
+        Threads for the force pass, >= 1 and at most the cores this process may use
+        (``softbody.core.available_threads()``). Default 1: serial. Every solver runs the
+        compiled core's force pass (springs, dV/dx and the volumes; for projective dynamics
+        dV/dx and the volumes) on that many threads, each on a fixed run of particles, and
+        adds the chunks' volume sums in a fixed order; the implicit solve and projective
+        dynamics' triangular solves stay serial. Results agree with the serial ones to
+        round-off and are the same in every run. Opt-in because a thread that loses its
+        core to another process stalls the whole step.
     implicit_preconditioner : str
         ``implicit_euler`` and ``bdf2``: ``"multigrid"`` (default; one algebraic-multigrid V-cycle
         of the spring Laplacian, built once, so the iteration count barely grows with mesh
@@ -118,12 +105,11 @@ class Simulator:
     A step that blows up raises :class:`SimulationError` naming the body or particle, the
     step and the time; the state is left at the last good step.
 
-    Air drag on faces (``drag_coefficient`` > 0) is stepped by the explicit integrators,
-    and with ``threads=1`` by projective (which takes it, like the pressure, as a force at
-    each iterate) and by ``implicit_euler`` and ``bdf2`` (explicitly: its force at the
-    step's start enters the solve, its Jacobian does not, which is stable while
-    dt < 2 m / (dF/dv), v_t / g for a body falling at its terminal speed v_t); any other
-    set-up with drag raises a ``ValueError`` rather than leave the drag out.
+    Air drag on faces (``drag_coefficient`` > 0) is stepped by every integrator:
+    projective dynamics takes it, like the pressure, as a force at each iterate, and
+    ``implicit_euler`` and ``bdf2`` explicitly (its force at the step's start enters the
+    solve, its Jacobian does not, which is stable while dt < 2 m / (dF/dv), v_t / g for a
+    body falling at its terminal speed v_t).
     """
 
     def __init__(
@@ -197,15 +183,15 @@ class Simulator:
         # without the Lanczos runs (seconds at 100k particles)
         self.stiffest_mode = stiffest_mode(model, spectral=self.integrator.explicit)
         self.stable_dt = mode_stable_step(self.integrator, self.stiffest_mode)
-        available = numba.config.NUMBA_NUM_THREADS
+        available = available_threads()
         if (
             isinstance(threads, bool)
             or not isinstance(threads, int | np.integer)
             or not 1 <= threads <= available
         ):
             raise ValueError(
-                f"threads must be an integer from 1 to {available} (NUMBA_NUM_THREADS), "
-                f"got {threads!r}"
+                f"threads must be an integer from 1 to {available} (the cores this process "
+                f"may use), got {threads!r}"
             )
         self.threads = int(threads)
         # the explicit schemes (threads too), and the implicit and projective ones (one
@@ -215,14 +201,9 @@ class Simulator:
         # (softbody._kernel_cache).
         self._core = None
         self._cg_stats_total = [0, 0, 0]
-        if self.integrator.explicit or self.threads == 1:
-            # implicit schemes take the drag explicitly: its force at the step's start is
-            # in the right-hand side, its Jacobian left out of the matrix
-            self._core = self._core_solver()
-        else:
-            _refuse_drag(model, self.integrator, self.threads)
-        if self._core is None:
-            _kernel_cache.ensure_compiled()
+        # implicit schemes take the drag explicitly: its force at the step's start is in
+        # the right-hand side, its Jacobian left out of the matrix
+        self._core = self._core_solver()
         self._work = Workspace.for_model(model, chunk_count=self.threads)
         self._neutral = control_data(model)
         self._control = control_data(model)
@@ -454,10 +435,13 @@ class Simulator:
             n = self.model.particle_count
             mg = self._multigrid if self._multigrid.level_size[0] == n else None
             return _core.ImplicitSolver(
-                core_model(self.model), multigrid=mg, hash_capacity=hash_capacity
-            )
+                core_model(self.model), multigrid=mg, hash_capacity=hash_capacity,
+                threads=self.threads,
+            )  # fmt: skip
         if self._projective_core:
-            return _core.ProjectiveSolver(core_model(self.model), hash_capacity=hash_capacity)
+            return _core.ProjectiveSolver(
+                core_model(self.model), hash_capacity=hash_capacity, threads=self.threads
+            )
         return _core.ExplicitSolver(
             core_model(self.model), hash_capacity=hash_capacity, threads=self.threads
         )
