@@ -1,15 +1,19 @@
-"""The engine core against the Numba loop it replaces: explicit steps per second.
+"""The engine core against the Numba loop it replaced: explicit steps per second.
 
 The case: the ball drop's ball (``ball_drop.ball_drop``: an icosphere of radius 1 m,
 inflated, over the ground) at 2,562 to 40,962 vertices, stepped by symplectic Euler and
 by midpoint at 1e-5 s. For each size and scheme the C++ core runs on each instruction set
-this CPU has (scalar, AVX2, AVX-512), and the Numba loop (the previous engine, the same
-arithmetic) runs in the same process; the runs alternate, each timed over at least
-``MIN_SECONDS`` of wall time, best of ``ROUNDS``. Reported: million vertex-steps per
-second, and each path's speed-up over Numba in the same round (ratios are what this
+this CPU has (scalar, AVX2, AVX-512), and with ``--baseline SRC`` the Numba loop of an
+earlier version (the last with Numba: commit 91e398b, its core built in place) runs in a
+worker process beside this one (``versions.py``); the runs alternate, each timed over at
+least ``MIN_SECONDS`` of wall time, best of ``ROUNDS``. Reported: million vertex-steps
+per second, and each path's speed-up over Numba in the same round (ratios are what this
 shared 2-core machine measures reliably).
 
-Writes results/engine.{json,png}. Usage: python benchmarks/engine.py [--max-subdivisions 6]
+Writes results/engine.{json,png}. Usage:
+
+    git worktree add /tmp/numba 91e398b && (cd /tmp/numba && python tools/build_core.py)
+    python benchmarks/engine.py --baseline /tmp/numba/src [--max-subdivisions 6]
 """
 
 from __future__ import annotations
@@ -18,13 +22,15 @@ import argparse
 import platform
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
 import softbody as sb
 from ball_drop import ball_drop
 from results_io import RESULTS, run_record, save_figure, write_json
-from softbody import _kernel_cache, core
+from softbody import core
+from versions import softbody_version, versions
 
 SCHEMES = ["symplectic_euler", "midpoint"]
 DT = 1e-5
@@ -46,67 +52,89 @@ def _rate(sim: sb.Simulator, model: sb.Model) -> float:
     return model.particle_count * steps / elapsed
 
 
-def _simulator(model: sb.Model, scheme: str, engine: str) -> sb.Simulator:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", sb.StabilityWarning)
-        sim = sb.Simulator(model, integrator=scheme, dt=DT)
-    if engine == "numba":
-        sim._core = None  # the previous engine's loop, same arithmetic
-    return sim
+_SIMULATORS: dict = {}
+
+
+def rate(subdivisions: int, scheme: str, simd: str | None) -> float:
+    """Vertex-steps per second of ``scheme`` on the ball of ``subdivisions``, in the
+    version this process runs: this one's core on instruction set ``simd``, or the
+    baseline's Numba loop (its Simulator's core set aside, as that version allowed)."""
+    key = (subdivisions, scheme)
+    if key not in _SIMULATORS:
+        model = ball_drop(subdivisions)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sb.StabilityWarning)
+            sim = sb.Simulator(model, integrator=scheme, dt=DT)
+        if softbody_version() == "baseline":
+            from softbody import _kernel_cache
+
+            _kernel_cache.ensure_compiled()
+            sim._core = None  # the Numba loop
+        _SIMULATORS[key] = model, sim
+    model, sim = _SIMULATORS[key]
+    if simd is not None:
+        core.use_simd(simd)
+    return _rate(sim, model)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--max-subdivisions", type=int, default=6)
+    parser.add_argument("--baseline", type=Path, help="the src folder of the Numba version")
     args = parser.parse_args()
-    _kernel_cache.ensure_compiled()
+    workers = versions(args.baseline)
     paths = core.simd_paths()
-    engines = [f"core-{p}" for p in paths] + ["numba"]
+    engines = {f"core-{p}": (workers[0], p) for p in paths}
+    if args.baseline:
+        engines["numba"] = (workers[1], None)
     results = []
     for subdivisions in range(4, args.max_subdivisions + 1):
-        model = ball_drop(subdivisions)
+        vertices = ball_drop(subdivisions).particle_count
         for scheme in SCHEMES:
-            sims = {e: _simulator(model, scheme, e) for e in engines}
             best = {e: 0.0 for e in engines}
             ratios = {e: [] for e in engines if e != "numba"}
             for _ in range(ROUNDS):
                 rates = {}
-                for e in engines:
-                    if e.startswith("core-"):
-                        core.use_simd(e.removeprefix("core-"))
-                    rates[e] = _rate(sims[e], model)
+                for e, (worker, simd) in engines.items():
+                    rates[e] = worker.call("engine:rate", subdivisions=subdivisions,
+                                           scheme=scheme, simd=simd)  # fmt: skip
                     best[e] = max(best[e], rates[e])
                 for e in ratios:
-                    ratios[e].append(rates[e] / rates["numba"])
-            core.use_simd("auto")
+                    if "numba" in rates:
+                        ratios[e].append(rates[e] / rates["numba"])
             row = {
-                "vertices": model.particle_count,
+                "vertices": vertices,
                 "scheme": scheme,
                 "mvps": {e: best[e] / 1e6 for e in engines},
-                "speedup_over_numba": {e: [min(r), max(r)] for e, r in ratios.items()},
             }
+            if args.baseline:
+                row["speedup_over_numba"] = {e: [min(r), max(r)] for e, r in ratios.items()}
             results.append(row)
             print(
-                f"{model.particle_count:6d} {scheme:17s} "
+                f"{vertices:6d} {scheme:17s} "
                 + " ".join(f"{e}={best[e] / 1e6:6.1f}" for e in engines)
                 + "  x"
-                + " ".join(f"{e}:{min(r):.2f}-{max(r):.2f}" for e, r in ratios.items()),
+                + " ".join(f"{e}:{min(r):.2f}-{max(r):.2f}" for e, r in ratios.items() if r),
                 flush=True,
             )
+    for worker in workers:
+        worker.close()
     write_json(
         RESULTS / "engine.json",
         run_record(
             "engine",
             machine=f"{platform.machine()}, {platform.processor() or 'cpu'}",
-            command="python benchmarks/engine.py",
+            command="python benchmarks/engine.py"
+            + (" --baseline NUMBA_VERSION/src" if args.baseline else ""),
+            baseline="the Numba loop of commit 91e398b" if args.baseline else None,
             dt=DT,
             simd_paths=paths,
             units="million vertex-steps per second (mvps), one thread",
             results=results,
         ),
     )
-    _plot(results, engines)
-    print(markdown_table(results, engines))
+    _plot(results, list(engines))
+    print(markdown_table(results, list(engines)))
 
 
 def markdown_table(results: list[dict], engines: list[str]) -> str:
@@ -121,7 +149,8 @@ def markdown_table(results: list[dict], engines: list[str]) -> str:
     lines = [head + " |", "|" + "---|" * (2 + len(engines) + len(engines) - 1)]
     for r in results:
         rates = " | ".join(f"{r['mvps'][e]:.1f}" for e in engines)
-        ratios = " | ".join(f"{lo:.2f}-{hi:.2f}" for lo, hi in r["speedup_over_numba"].values())
+        spans = r.get("speedup_over_numba", {}).values()
+        ratios = " | ".join(f"{lo:.2f}-{hi:.2f}" for lo, hi in spans)
         lines.append(f"| {r['vertices']:,} | {r['scheme']} | {rates} | {ratios} |")
     return "\n".join(lines)
 
@@ -147,7 +176,7 @@ def _plot(results: list[dict], engines: list[str]) -> None:
         ax.grid(True, alpha=0.3)
     np.atleast_1d(axes)[0].set_ylabel("million vertex-steps / s")
     np.atleast_1d(axes)[0].legend()
-    fig.suptitle("Engine core (C++) against the Numba loop, ball drop, same process")
+    fig.suptitle("Engine core (C++) against the Numba loop, ball drop, alternating")
     fig.tight_layout()
     save_figure(fig, RESULTS / "engine.png")
 

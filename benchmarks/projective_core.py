@@ -1,15 +1,18 @@
-"""Projective dynamics in the engine core against the Numba loop it replaces: step time.
+"""Projective dynamics in the engine core against the Numba loop it replaced: step time.
 
 The case: the ball drop's ball (``ball_drop.ball_drop``: an icosphere of radius 1 m,
 inflated, over the ground) at 10,242 and 40,962 vertices, projective dynamics at 1/60 s
 with 2 local-global iterations (the Simulator's default). For each size the C++ core (on
-the instruction set in use) and the Numba loop (``sim._core = None``; the same arithmetic,
-bit for bit) step the same drop from its start in the same process, alternating, ``ROUNDS``
-times, each timing ``STEPS`` steps (the first half second of the drop: the fall and the
-first contact). Reported: milliseconds per step, best of the rounds, and the core's
-speed-up over Numba in each round (ratios are what a shared machine measures reliably).
+the instruction set in use) and the Numba loop of the baseline version (``--baseline
+SRC``: the last with Numba, commit 91e398b, in a worker process of its own,
+``versions.py``) step the same drop from its start, alternating, ``ROUNDS`` times, each
+timing ``STEPS`` steps (the first half second of the drop: the fall and the first
+contact). Reported: milliseconds per step, best of the rounds, and the core's speed-up
+over Numba in each round (ratios are what a shared machine measures reliably).
 
-Writes results/projective_core.json. Usage: python benchmarks/projective_core.py
+Writes results/projective_core.{json,png}. Usage (engine.py's docstring makes the baseline):
+
+    python benchmarks/projective_core.py --baseline /tmp/numba/src
 """
 
 from __future__ import annotations
@@ -17,13 +20,15 @@ from __future__ import annotations
 import argparse
 import platform
 import time
+from pathlib import Path
 
 import numpy as np
 
 import softbody as sb
 from ball_drop import ball_drop
 from results_io import RESULTS, plot_core_against_numba, run_record, write_json
-from softbody import _kernel_cache, core
+from softbody import core
+from versions import softbody_version, versions
 
 DT = 1 / 60
 ITERATIONS = 2
@@ -31,38 +36,51 @@ STEPS = 30
 ROUNDS = 5
 
 
-def _step_time(sim: sb.Simulator, model: sb.Model) -> float:
-    """Seconds per step of ``sim`` over STEPS steps of the drop from its start."""
+_SIMULATORS: dict = {}
+
+
+def step_time(subdivisions: int) -> dict:
+    """Seconds per step over STEPS steps of the drop from its start, in the version this
+    process runs (the baseline: its Numba loop), and the factor's size."""
+    if subdivisions not in _SIMULATORS:
+        model = ball_drop(subdivisions)
+        sim = sb.Simulator(model, integrator="projective", dt=DT,
+                           projective_iterations=ITERATIONS)  # fmt: skip
+        if softbody_version() == "baseline":
+            from softbody import _kernel_cache
+
+            _kernel_cache.ensure_compiled()
+            sim._core = None  # the Numba loop
+        sim.run(model.state(), 1)  # the factor, buffers and kernels warm
+        _SIMULATORS[subdivisions] = model, sim
+    model, sim = _SIMULATORS[subdivisions]
     state = model.state()
     start = time.perf_counter()
     sim.run(state, STEPS)
-    return (time.perf_counter() - start) / STEPS
+    seconds = (time.perf_counter() - start) / STEPS
+    factor = sim.solver.factor(DT) if hasattr(sim, "solver") else sim._projective
+    return {"seconds": seconds, "vertices": model.particle_count,
+            "factor_nonzeros": int(factor.factor_nonzeros)}  # fmt: skip
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--subdivisions", type=int, nargs="+", default=[5, 6])
+    parser.add_argument("--baseline", type=Path, required=True,
+                        help="the src folder of the Numba version")  # fmt: skip
     args = parser.parse_args()
-    _kernel_cache.ensure_compiled()
+    this, baseline = versions(args.baseline)
     sizes = []
     for sub in args.subdivisions:
-        model = ball_drop(sub)
-        sims = {}
-        for engine in ("core", "numba"):
-            sim = sb.Simulator(model, integrator="projective", dt=DT,
-                               projective_iterations=ITERATIONS)  # fmt: skip
-            if engine == "numba":
-                sim._core = None
-            sim.run(model.state(), 1)  # the factor, buffers and kernels warm
-            sims[engine] = sim
         times = {"core": [], "numba": []}
         for _ in range(ROUNDS):
-            for engine, sim in sims.items():
-                times[engine].append(_step_time(sim, model))
+            for engine, worker in (("core", this), ("numba", baseline)):
+                out = worker.call("projective_core:step_time", subdivisions=sub)
+                times[engine].append(out["seconds"])
         ratios = [n / c for c, n in zip(times["core"], times["numba"], strict=True)]
         row = {
-            "vertex_count": model.particle_count,
-            "factor_nonzeros": sims["core"]._projective.factor_nonzeros,
+            "vertex_count": out["vertices"],
+            "factor_nonzeros": out["factor_nonzeros"],
             "core_ms_per_step": 1e3 * min(times["core"]),
             "numba_ms_per_step": 1e3 * min(times["numba"]),
             "speedup_per_round": ratios,
@@ -75,12 +93,16 @@ def main() -> None:
             f"{row['speedup_median']:.2f} (rounds {', '.join(f'{r:.2f}' for r in ratios)})",
             flush=True,
         )
+    this.close()
+    baseline.close()
     record = run_record(
         "projective_core",
         dt=DT,
         iterations=ITERATIONS,
         steps_per_round=STEPS,
         rounds=ROUNDS,
+        baseline="the Numba loop of commit 91e398b",
+        command="python benchmarks/projective_core.py --baseline NUMBA_VERSION/src",
         simd_path=core.simd_path(),
         machine=platform.machine(),
         sizes=sizes,

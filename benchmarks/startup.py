@@ -2,14 +2,13 @@
 
 Two parts, one run:
 
-* **Compile** (cold and warm start): for each integrator family (``loop.family``:
-  explicit, implicit, projective; represented by midpoint, implicit Euler and projective
-  dynamics), a fresh Python process with an empty Numba cache imports softbody, builds a
-  162-vertex ball, a simulator, and runs 3 steps; then a second process does the same
-  from the cache the first one wrote. Each family starts from its own empty cache: what
-  a user of that family alone waits for on a fresh machine (since the cache is written
-  whole, by one process compiling every family, the cold start is the same for all).
-  ``--baseline OLD/src`` times another version's sources alternately in the same run.
+* **Compile** (cold and warm start): for each integrator family (explicit, implicit,
+  projective; represented by midpoint, implicit Euler and projective dynamics), a fresh
+  Python process with an empty kernel cache imports softbody, builds a 162-vertex ball,
+  a simulator, and runs 3 steps; then a second process does the same again. The C++ core
+  compiles nothing at run time, so both are its start-up; a version with Numba kernels
+  (``--baseline OLD/src``, timed alternately in the same run) compiled them into the
+  empty cache first.
 * **Set-up against size** (cache warm, this process): for the ball drop's ball
   (``ball_drop.ball_drop``) from 162 to 163,842 vertices, the time to build the model,
   and for velocity Verlet (its stability estimate), implicit Euler (its multigrid
@@ -64,7 +63,7 @@ print(json.dumps({"import_s": t1 - t0, "model_s": t2 - t1, "simulator_s": t3 - t
 
 
 def start(integrator: str, cache: Path, source: Path | None = None) -> dict:
-    """One fresh process's start-up phases [s] with Numba's cache in ``cache``; with
+    """One fresh process's start-up phases [s] with a kernel cache in ``cache``; with
     ``source``, softbody is imported from that folder (another version's ``src``)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
     flags = []

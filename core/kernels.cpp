@@ -26,6 +26,15 @@ RunResult simulate_implicit(const Model& m, const Control& c, const RunParams& p
     return implicit_solver::simulate(m, c, p, ip, s, w, mg);
 }
 
+void apply_preconditioner(const Model& m, const Control& c, double t, double h,
+                          const ImplicitBuffers& w, const MultigridView* mg, const double* r,
+                          double* z) {
+    gas::evaluate(m, c, t, w.q0, w.gas);
+    implicit_solver::prepare(m, c, h, w, mg);
+    if (mg == nullptr) implicit_solver::jacobi_diagonal(m, h, w);
+    implicit_solver::precondition(m, mg, w.cg_diag, r, z);
+}
+
 void apply_multigrid(const MultigridView& mg, const double* r, double* z) {
     multigrid::apply(mg, r, z);
 }
@@ -33,6 +42,10 @@ void apply_multigrid(const MultigridView& mg, const double* r, double* z) {
 RunResult simulate_projective(const Model& m, const Control& c, const RunParams& p,
                               const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
     return projective::simulate(m, c, p, s, a, w);
+}
+
+void projective_solve(const Factor& a, const double* b, double* x, double* out) {
+    projective::solve(a, b, x, out);
 }
 
 void eval_forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
@@ -62,14 +75,20 @@ void apply_jacobians(const Model& m, const Control& c, const double* q, const do
     gas::jacobian_product(m, q, gradient, dpdv, pnet, alpha_k, p, out);
 }
 
+index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers& w) {
+    if (m.soft_contact_mode == 1) soft::contacts_bounding(m, q, qd, w);
+    if (m.soft_contact_mode == 2) return soft::contacts_surface(m, q, qd, w);
+    return 0;
+}
+
 }  // namespace
 
 const KernelTable& kernel_table() {
     static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), simulate_explicit,
-                                   simulate_implicit, apply_multigrid, simulate_projective,
-                                   eval_forces,
+                                   simulate_implicit, apply_preconditioner, apply_multigrid, simulate_projective,
+                                   projective_solve, eval_forces,
                                    eval_gas, eval_volumes,
-                                   apply_jacobians};
+                                   apply_jacobians, soft_contacts};
     return table;
 }
 

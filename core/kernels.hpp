@@ -19,6 +19,11 @@ struct KernelTable {
     RunResult (*simulate_implicit)(const Model&, const Control&, const RunParams&,
                                    const ImplicitParams&, const StateView&,
                                    const ImplicitBuffers&, const MultigridView* mg);
+    /// z = P^-1 r for r, z (N, 3): the implicit solve's preconditioner for step h with its
+    /// blocks at w.q0 at time t (w.gas refreshed there); mg null: Jacobi.
+    void (*apply_preconditioner)(const Model&, const Control&, double t, double h,
+                                 const ImplicitBuffers& w, const MultigridView* mg,
+                                 const double* r, double* z);
     /// z = V(r) for r, z (N, 3): one V-cycle of the Laplacian hierarchy from z = 0.
     void (*apply_multigrid)(const MultigridView& mg, const double* r, double* z);
     /// Advance a state by projective dynamics (p.iterations per step) on factor `a`,
@@ -26,6 +31,9 @@ struct KernelTable {
     RunResult (*simulate_projective)(const Model&, const Control&, const RunParams&,
                                      const StateView&, const Factor& a,
                                      const ProjectiveBuffers&);
+    /// out = A^-1 b for b, out (N, 3): projective dynamics' two triangular solves on the
+    /// factor a; x (N, 3) scratch.
+    void (*projective_solve)(const Factor& a, const double* b, double* x, double* out);
     /// All forces f (N, 3) [N] at time t for q, qd (N, 3); refreshes gas.
     void (*eval_forces)(const Model&, const Control&, double t, const double* q,
                         const double* qd, const BodyGas& gas, const LaneBuffers& lanes,
@@ -44,6 +52,9 @@ struct KernelTable {
                             const double* a, const double* b, const double* gradient,
                             const double* dpdv, const double* pnet, bool attachments,
                             double* out);
+    /// One pass of the soft-soft contacts (the model's mode) on q, qd (N, 3) in place;
+    /// returns the hash entries the surface contacts needed (0 if they fit, or none).
+    index (*soft_contacts)(const Model&, double* q, double* qd, const ContactBuffers& w);
 };
 
 namespace isa_scalar {

@@ -1093,6 +1093,28 @@ public:
         return {r.status, r.steps_done, r.where, r.value};
     }
 
+    /// z (N, 3) = P^-1 r: the preconditioner for step h [s] with its blocks at q (N, 3) at
+    /// time t [s] (the multigrid hierarchy's values must be set for h). For tests.
+    nb::ndarray<nb::numpy, double> apply_preconditioner(nb::handle control, double t, double h,
+                                                        ConstF64 q, ConstF64 r) {
+        const softbody::Model& m = model_.model();
+        check_shape(q, "q", {m.particle_count, 3});
+        check_shape(r, "r", {m.particle_count, 3});
+        if (!(std::isfinite(h) && h > 0.0)) fail("h must be finite and > 0");
+        CoreControl c(m, control);
+        const size_t n3 = static_cast<size_t>(3 * m.particle_count);
+        std::copy(q.data(), q.data() + n3, w_.q0);
+        double* z = new double[n3 > 0 ? n3 : 1];
+        nb::capsule owner(z, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+        {
+            nb::gil_scoped_release release;
+            softbody::kernels().apply_preconditioner(
+                m, c.view, t, h, w_, multigrid_ ? &multigrid_->view : nullptr, r.data(), z);
+        }
+        size_t shape[2] = {static_cast<size_t>(m.particle_count), 3};
+        return nb::ndarray<nb::numpy, double>(z, 2, shape, owner);
+    }
+
     /// (steps, CG iterations in all, most in one step) since the last clear_stats.
     std::tuple<Index, Index, Index> cg_stats() const { return {flags_[1], flags_[2], flags_[3]}; }
     void clear_stats() { flags_[1] = flags_[2] = flags_[3] = 0; }
@@ -1112,6 +1134,25 @@ private:
     Index flags_[4] = {0, 0, 0, 0};  // contacts acted, then the CG statistics
     softbody::ImplicitBuffers w_;
 };
+
+/// x (N, 3) = A^-1 b by a projective factor's two triangular solves: for tests of the
+/// factor.
+nb::ndarray<nb::numpy, double> solve_factor(const CoreModel& core, nb::handle factor,
+                                            ConstF64 b) {
+    const softbody::Model& m = core.model();
+    check_shape(b, "b", {m.particle_count, 3});
+    CoreFactor checked(factor, m.particle_count);
+    const size_t n3 = static_cast<size_t>(3 * m.particle_count);
+    std::vector<double> scratch(n3 > 0 ? n3 : 1);
+    double* x = new double[n3 > 0 ? n3 : 1];
+    nb::capsule owner(x, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().projective_solve(checked.factor(), b.data(), scratch.data(), x);
+    }
+    size_t shape[2] = {static_cast<size_t>(m.particle_count), 3};
+    return nb::ndarray<nb::numpy, double>(x, 2, shape, owner);
+}
 
 /// One V-cycle z = V(r) of a hierarchy for r (N, 3): for tests of the preconditioner.
 nb::ndarray<nb::numpy, double> apply_multigrid(const CoreModel& core, nb::handle mg, ConstF64 r) {
@@ -1176,6 +1217,17 @@ nb::tuple eval_volumes(const CoreModel& core, nb::handle control, double t, Cons
     const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
     return nb::make_tuple(out(b.gas.volume, {nb_}), out(b.gas.pressure, {nb_}),
                           out(b.gas.volume_gradient, {n, 3}));
+}
+
+/// One pass of the soft-soft contacts on q, qd in place (for tests of the response);
+/// returns the hash entries the surface contacts needed beyond hash_capacity, or 0.
+Index soft_contacts(const CoreModel& core, F64 q, F64 qd, std::optional<Index> hash_capacity) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particle_count, 3});
+    check_shape(qd, "qd", {m.particle_count, 3});
+    Buffers b(m, 0, checked_capacity(m, hash_capacity));
+    nb::gil_scoped_release release;
+    return softbody::kernels().soft_contacts(m, q.data(), qd.data(), b.contact);
 }
 
 /// The implicit schemes' matrix-free product, also behind the stability estimate.
@@ -1453,6 +1505,11 @@ NB_MODULE(_core, mod) {
                      "(implicit steps, CG iterations in all, most in one step) since the last "
                      "clear_stats().")
         .def("clear_stats", &ImplicitSolver::clear_stats)
+        .def("apply_preconditioner", &ImplicitSolver::apply_preconditioner,
+             nb::arg("control"), nb::arg("t"), nb::arg("h"), nb::arg("q").noconvert(),
+             nb::arg("r").noconvert(),
+             "z (N, 3) = P^-1 r, the solve's preconditioner for step h with its blocks at q "
+             "(N, 3); its hierarchy's values must be set for h.")
         .def("simulate", &ImplicitSolver::simulate, nb::arg("bdf2"), nb::arg("steps"),
              nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
              nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
@@ -1460,6 +1517,9 @@ NB_MODULE(_core, mod) {
              nb::arg("tolerance"), nb::arg("max_iterations"), nb::arg("history"),
              "Advance q, qd in place by backward Euler (or BDF2); history: the solver holds "
              "the step before q, qd. Returns (status, steps_done, index, value).");
+    mod.def("solve_factor", &solve_factor, nb::arg("model"), nb::arg("factor"),
+            nb::arg("b").noconvert(),
+            "x (N, 3) = A^-1 b by a projective factor's two triangular solves.");
     mod.def("apply_multigrid", &apply_multigrid, nb::arg("model"), nb::arg("multigrid"),
             nb::arg("r").noconvert(), "z (N, 3) = one V-cycle of the hierarchy for r (N, 3).");
 
@@ -1474,6 +1534,10 @@ NB_MODULE(_core, mod) {
             nb::arg("body_pnet").noconvert(), nb::arg("out").noconvert(),
             nb::arg("attachments") = true,
             "out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p (C = df/dv, K = df/dx).");
+    mod.def("soft_contacts", &soft_contacts, nb::arg("model"), nb::arg("q").noconvert(),
+            nb::arg("qd").noconvert(), nb::arg("hash_capacity") = nb::none(),
+            "One pass of the model's soft-soft contacts on q, qd (N, 3) in place; returns "
+            "the hash entries the surface contacts needed when they did not fit, else 0.");
     mod.def("body_volumes", &body_volumes, nb::arg("q").noconvert(),
             nb::arg("tri_indices").noconvert(), nb::arg("body_particle_range").noconvert(),
             nb::arg("body_tri_range").noconvert(), nb::arg("body_volume_method").noconvert(),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import pickle
 from pathlib import Path
 
 import numpy as np
@@ -127,37 +126,6 @@ def start_viewer(**options):
     )
 
 
-def cached_versions(cache: Path) -> dict[str, int]:
-    """Compiled versions per cached kernel: the entries of each Numba index file
-    (``<kernel>-<line>.pyXY.nbi``: a pickled version tag, then (stamp, {key: file}))."""
-    counts = {}
-    for index in sorted(cache.rglob("*.nbi")):
-        with open(index, "rb") as fh:
-            pickle.load(fh)
-            _, overloads = pickle.loads(fh.read())
-        counts[index.name.split(".py")[0]] = len(overloads)
-    return counts
-
-
-def kernel_cache_problems(folder: Path) -> list[str]:
-    """What is wrong with a kernel cache folder (``softbody._kernel_cache``): a kernel
-    with several compiled versions, or a cache file written after the warm-up finished
-    (compiled by a process that loaded the rest: the mix that crashed)."""
-    from softbody._kernel_cache import COMPLETE
-
-    marker = folder / COMPLETE
-    if not marker.is_file():
-        return [f"{folder} has no {COMPLETE} marker: not written by the warm-up"]
-    problems = [f"{name}: {n} versions" for name, n in cached_versions(folder).items() if n > 1]
-    finished = marker.stat().st_mtime
-    problems += [
-        f"{path.relative_to(folder)} written after the warm-up"
-        for path in sorted(folder.rglob("*.nb[ic]"))
-        if path.stat().st_mtime > finished
-    ]
-    return problems
-
-
 def package_copy(folder: Path) -> dict:
     """Copy the installed package, compiled core included, into ``folder/softbody``;
     return the environment under which ``python -S`` imports that copy: -S skips the
@@ -177,27 +145,3 @@ def package_copy(folder: Path) -> dict:
     site = sysconfig.get_paths()
     paths = dict.fromkeys([str(folder), site["purelib"], site["platlib"]])
     return {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
-
-
-def pytest_sessionstart(session):
-    """Compile the Numba kernels (or load them) before any test runs: tests call some of
-    them directly, and one compiled outside the warm-up would be cached piecemeal."""
-    from softbody import _kernel_cache
-
-    _kernel_cache.ensure_compiled()
-
-
-def pytest_sessionfinish(session, exitstatus):
-    """Fail the run if this session's kernel cache went wrong (``kernel_cache_problems``):
-    every test and every CLI subprocess of the session loaded from it, and a kernel
-    compiled outside the warm-up or with a second set of argument types is what crashes
-    a later process (``tests/test_kernel_cache.py``)."""
-    import numba
-
-    folder = Path(numba.config.CACHE_DIR or "")
-    if numba.config.DISABLE_JIT or not folder.name.startswith("numba-"):
-        return  # no lasting cache (the warm-up failed and said so)
-    problems = kernel_cache_problems(folder)
-    if problems:
-        print(f"\nkernel cache {folder}: " + "; ".join(problems[:20]))
-        session.exitstatus = 1

@@ -8,16 +8,16 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numba
 import numpy as np
 import pytest
 
 import softbody as sb
 from softbody.cli import main
+from softbody.core import available_threads
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the fixture's run uses the opt-in threads where the machine has two
-THREADS = min(2, numba.config.NUMBA_NUM_THREADS)
+THREADS = min(2, available_threads())
 
 
 @pytest.fixture(scope="module")

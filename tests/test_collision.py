@@ -336,27 +336,10 @@ def _fit_reference(x, shape):
 
 def bounding_contact_pass(model, q, qd):
     """One pass of the paper's soft-soft contact kernel on q, qd (N, 3) in place."""
-    from softbody.collision.soft import eval_soft_contacts_bounding
-    from softbody.integrators.workspace import Workspace
+    from softbody import _core
+    from softbody.core import core_model
 
-    w, m = Workspace.for_model(model), model.data
-    eval_soft_contacts_bounding(
-        m.particle_mass,
-        m.particle_inv_mass,
-        m.body_particle_range,
-        m.body_contact_shape,
-        m.soft_contact_restitution,
-        m.soft_contact_friction,
-        q,
-        qd,
-        w.body_lo,
-        w.body_hi,
-        w.body_velocity,
-        w.body_mass,
-        w.body_center,
-        w.body_axes,
-        w.body_dv,
-    )
+    assert _core.soft_contacts(core_model(model), q, qd) == 0
 
 
 @pytest.mark.parametrize("shape", ["bounding_box", "bounding_sphere", "bounding_ellipsoid"])

@@ -15,25 +15,23 @@ import softbody as sb
 from conftest import ball_model
 from softbody import _core, core
 from softbody.core import core_model
-from softbody.integrators.projective import build_projective
 from softbody.sim.control import control_data
+from softbody.solvers.factor import build_projective
 from test_core import _surface_model
 
 STEPS = 60
 
 
-def _sim(model, dt, *, use_core, iterations=2):
+def _sim(model, dt, *, iterations=2):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sb.StabilityWarning)
         sim = sb.Simulator(model, integrator="projective", dt=dt, projective_iterations=iterations)
-    assert isinstance(sim._core, _core.ProjectiveSolver)
-    if not use_core:
-        sim._core = None  # the Numba loop (compiled by the session's warm-up)
+    assert isinstance(sim.solver._core, _core.ProjectiveSolver)
     return sim
 
 
-def _run(model, dt, *, use_core, steps=STEPS, control=None, iterations=2):
-    sim = _sim(model, dt, use_core=use_core, iterations=iterations)
+def _run(model, dt, *, steps=STEPS, control=None, iterations=2):
+    sim = _sim(model, dt, iterations=iterations)
     state = model.state()
     error = None
     try:
@@ -41,20 +39,6 @@ def _run(model, dt, *, use_core, steps=STEPS, control=None, iterations=2):
     except sb.SimulationError as e:
         error = str(e)
     return state, error
-
-
-def _assert_same_runs(model, dt, control=None, steps=STEPS, iterations=2, atol=0.0):
-    (a, error_a), (b, error_b) = [
-        _run(model, dt, use_core=c, control=control, steps=steps, iterations=iterations)
-        for c in (True, False)
-    ]
-    assert error_a == error_b
-    assert a.step_count == b.step_count
-    for name in ("particle_q", "particle_qd", "collider_q", "collider_rotation",
-                 "collider_impulse"):  # fmt: skip
-        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=atol,
-                                   err_msg=name)  # fmt: skip
-    return a, error_a
 
 
 def _pinned_attached_ball() -> tuple[sb.Model, sb.Control]:
@@ -86,7 +70,7 @@ def test_every_instruction_set_gives_the_same_run():
     try:
         for name in core.simd_paths():
             core.use_simd(name)
-            runs[name] = _run(model, 1 / 120, use_core=True, control=control, steps=30)[0]
+            runs[name] = _run(model, 1 / 120, control=control, steps=30)[0]
     finally:
         core.use_simd(before)
     for state in runs.values():
@@ -106,16 +90,16 @@ def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
     model = _surface_model(cloth=False)
     runs = []
     for small in (False, True):
-        sim = _sim(model, 5e-4, use_core=True)
+        sim = _sim(model, 5e-4)
         if small:
-            sim._core = _core.ProjectiveSolver(core_model(model), hash_capacity=1)
+            sim.solver.grow_hash(1)
         state = model.state()
         sim.run(state, 100)
         runs.append((state, sim))
     (big, big_sim), (small, small_sim) = runs
-    assert big_sim._core.hash_capacity == 8 * model.tri_count
-    assert small_sim._core.hash_capacity > 1
-    assert small_sim._core.factor is small_sim._projective
+    assert big_sim.solver._core.hash_capacity == 8 * model.tri_count
+    assert small_sim.solver._core.hash_capacity > 1
+    assert small_sim.solver._core.factor is small_sim.solver.factor(5e-4)
     np.testing.assert_array_equal(small.particle_q, big.particle_q)
     np.testing.assert_array_equal(small.particle_qd, big.particle_qd)
 
@@ -125,12 +109,12 @@ def test_a_new_step_size_gets_its_own_factor():
     that dt (the core refuses a factor of another dt), and the run is the same as a
     simulator made with that dt from the start, bit for bit."""
     model = ball_model(stiffness=2000.0, damping=1.0, gravity=(0.0, -9.81, 0.0))
-    sim = _sim(model, 1 / 60, use_core=True)
+    sim = _sim(model, 1 / 60)
     state = model.state()
     sim.run(state, 3)
     sim.advance(state, 0.01)  # one substep of 0.01 s
-    assert sim._core.factor.dt == 0.01
-    other = _sim(model, 1 / 60, use_core=True)
+    assert sim.solver._core.factor.dt == 0.01
+    other = _sim(model, 1 / 60)
     ref = model.state()
     other.run(ref, 3)
     other.dt = 0.01

@@ -1,6 +1,7 @@
 """The engine core built with AddressSanitizer and UndefinedBehaviorSanitizer
 (``tools/build_core.py --sanitize``) running the core's fast tests
-(test_core.py, test_core_projective.py, test_core_implicit.py). Reference: the
+(test_core.py, test_core_projective.py, test_core_implicit.py, test_trajectories.py).
+Reference: the
 sanitizers' own checks; a read or write outside an array, a use after free or undefined
 behaviour (overflow, misalignment, a bad shift) in the C++ aborts the run with its
 report, so this passes only when none fired on any instruction-set path."""
@@ -18,10 +19,11 @@ import pytest
 from conftest import package_copy
 
 ROOT = Path(__file__).resolve().parent.parent
-#: the core's test files, and among their tests those that do not run the Numba kernels
-#: (Numba runs as Python here)
-CORE_TESTS = ("test_core.py", "test_core_projective.py", "test_core_implicit.py")
-FAST = "not numba and not blow_up and not without_compiling"
+#: the core's test files and the reference trajectories, and among their tests the fast
+#: ones (a fresh process per run, or runs on one instruction set only, add nothing here)
+CORE_TESTS = ("test_core.py", "test_core_projective.py", "test_core_implicit.py",
+              "test_trajectories.py")  # fmt: skip
+FAST = "not without_compiling"
 
 
 def _runtime(name: str) -> str | None:
@@ -60,7 +62,6 @@ def test_core_tests_pass_under_address_and_undefined_behaviour_sanitizers(tmp_pa
         "LD_PRELOAD": f"{asan} {ubsan}",
         "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=1",
         "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1",
-        "NUMBA_DISABLE_JIT": "1",
     }
     which = subprocess.run(
         [sys.executable, "-S", "-c", "import softbody._core as c; print(c.__file__)"],

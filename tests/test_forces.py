@@ -139,8 +139,8 @@ def test_spring_damping_force_closed_form():
 @settings(max_examples=10)
 @given(seed=st.integers(0, 2**31 - 1))
 def test_compiled_pressure_kernel_matches_numpy_reference(seed):
-    """The Numba kernel equals the readable NumPy version (P area n / 3 per corner) to
-    round-off (1e-13 relative)."""
+    """The compiled core's pressure force equals the readable NumPy version (P area n / 3
+    per corner) to round-off (1e-13 relative)."""
     model = ball_model(subdivisions=2, stiffness=0.0, gas=sb.Gas.fixed_pressure(350.0))
     state = deformed(model, seed, 0.2)
     f = forces(model, state)

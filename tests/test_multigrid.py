@@ -10,7 +10,10 @@ import scipy.sparse as sp
 
 import softbody as sb
 from conftest import ball_model
-from softbody.integrators.multigrid import apply_multigrid, build_multigrid, set_multigrid_step
+from softbody import _core
+from softbody.core import core_model
+from softbody.sim.control import control_data
+from softbody.solvers.multigrid import build_multigrid, set_multigrid_step
 
 DT = 1.0 / 60.0
 
@@ -23,6 +26,15 @@ def level_matrix(mg, level: int = 0) -> sp.csr_matrix:
     return sp.csr_matrix(
         (mg.a_data[z0 : z0 + nnz], mg.a_indices[z0 : z0 + nnz], indptr), shape=(n, n)
     )
+
+
+def v_cycle(model, mg):
+    """The core's V-cycle of hierarchy ``mg`` as apply(r, z) on (N, 3) arrays."""
+
+    def apply(r, z):
+        z[:] = _core.apply_multigrid(core_model(model), mg, np.ascontiguousarray(r))
+
+    return apply
 
 
 def dense_operator(apply, n: int) -> np.ndarray:
@@ -51,23 +63,17 @@ def test_finest_level_is_mass_plus_spring_laplacian():
     assert abs(a - a.T).max() == 0.0
 
 
-def test_coarsest_dense_solve_solves_its_level():
-    """The coarsest level's dense Cholesky solve gives A_L x = b for three right-hand
-    sides at once (relative residual at round-off)."""
-    from softbody.integrators.multigrid import _coarse_solve
-
+def test_coarsest_level_is_factored_for_its_dense_solve():
+    """The coarsest level, solved densely in the V-cycle, holds the Cholesky factor of its
+    matrix at the current step: L L^T = A_L to round-off, L lower triangular."""
     model = ball_model(subdivisions=3, stiffness=500.0, damping=0.5)
     mg = build_multigrid(model)
     set_multigrid_step(mg, DT)
     assert mg.coarse_dense
-    last = mg.level_count
-    v, n = mg.vec_offset[last], mg.level_size[last]
-    b = np.random.default_rng(5).normal(size=(n, 3))
-    mg.b[v : v + n] = b
-    _coarse_solve(mg)
-    x = mg.x[v : v + n]
-    a = level_matrix(mg, last).toarray()
-    assert np.abs(a @ x - b).max() <= 1e-12 * np.abs(a).max() * np.abs(x).max() * n
+    a = level_matrix(mg, mg.level_count).toarray()
+    factor = mg.coarse_cholesky
+    assert np.array_equal(factor, np.tril(factor))
+    assert np.abs(factor @ factor.T - a).max() <= 1e-12 * np.abs(a).max()
 
 
 def test_v_cycle_is_symmetric_positive_definite():
@@ -79,7 +85,7 @@ def test_v_cycle_is_symmetric_positive_definite():
     set_multigrid_step(mg, DT)
     assert mg.level_count >= 1
     n = model.particle_count
-    b = dense_operator(lambda r, z: apply_multigrid(mg, r, z), n)
+    b = dense_operator(v_cycle(model, mg), n)
     assert np.abs(b - b.T).max() <= 1e-12 * np.abs(b).max()
     assert np.linalg.eigvalsh(0.5 * (b + b.T)).min() > 0.0
 
@@ -97,7 +103,8 @@ def test_multigrid_cg_iterations_do_not_grow_with_the_mesh(subdivisions):
     rng = np.random.default_rng(7)
     b = rng.standard_normal((n, 3))
     x, r, z = np.zeros((n, 3)), b.copy(), np.zeros((n, 3))
-    apply_multigrid(mg, r, z)
+    apply_multigrid = v_cycle(model, mg)
+    apply_multigrid(r, z)
     p, rz = z.copy(), np.sum(r * z)
     iterations = 0
     while iterations < 100:
@@ -108,7 +115,7 @@ def test_multigrid_cg_iterations_do_not_grow_with_the_mesh(subdivisions):
         r -= alpha * ap
         if np.linalg.norm(r) <= 1e-8 * np.linalg.norm(b):
             break
-        apply_multigrid(mg, r, z)
+        apply_multigrid(r, z)
         rz, rz_old = np.sum(r * z), rz
         p = z + rz / rz_old * p
     assert np.linalg.norm(a @ x - b) <= 1e-8 * np.linalg.norm(b)
@@ -127,75 +134,28 @@ def pinned_attached_ball() -> sb.Model:
     return builder.finalize()
 
 
-def smoother_ready_ball():
-    """The pinned, attached ball after five implicit steps, with the smoother's spring
-    blocks prepared at its state: (model, workspace, model data, multigrid)."""
-    from softbody.integrators import implicit as im
-
+def test_hybrid_preconditioner_is_spd_on_the_free_particles():
+    """The solver's preconditioner (block Gauss-Seidel with the true spring blocks, then
+    the Laplacian hierarchy) is symmetric, zero on pinned rows and positive definite on
+    the free ones, with pins, bending springs and an attachment: what preconditioned CG
+    requires. Its blocks are taken at the ball after five implicit steps."""
     model = pinned_attached_ball()
     sim = sb.Simulator(model, integrator="implicit_euler", dt=DT)
     state = model.state()
     sim.run(state, 5)
-    w, m, c, mg = sim._work, model.data, sim._neutral, sim._multigrid
-    q = state.particle_q.copy()
-    im._prepare_springs(
-        q,
-        m.spring_indices,
-        m.spring_rest_length,
-        m.spring_stiffness,
-        w.spring_u,
-        w.spring_a,
-        w.spring_b,
-    )
-    im._prepare_blocks(m, c, DT, q, w, mg)
-    return model, w, m, mg
-
-
-def test_hybrid_preconditioner_is_spd_on_the_free_particles():
-    """The solver's preconditioner (block Gauss-Seidel with the true spring blocks, then
-    the Laplacian hierarchy) is symmetric, zero on pinned rows and positive definite on
-    the free ones, with pins, bending springs and an attachment."""
-    from softbody.integrators import implicit as im
-
-    model, w, m, mg = smoother_ready_ball()
+    core = sim.solver._core
+    control = control_data(model)
     n = model.particle_count
-    b = dense_operator(
-        lambda r, z: im._precondition(m, mg, w, w.cg_diag, m.particle_inv_mass, r, z), n
-    )
+
+    def apply(r, z):
+        z[:] = core.apply_preconditioner(control, state.time, DT, state.particle_q, r)
+
+    b = dense_operator(apply, n)
     free = np.repeat(model.particle_inv_mass > 0, 3)
     assert np.abs(b[~free]).max() == 0.0 and np.abs(b[:, ~free]).max() == 0.0
     bf = b[np.ix_(free, free)]
     assert np.abs(bf - bf.T).max() <= 1e-12 * np.abs(bf).max()
     assert np.linalg.eigvalsh(0.5 * (bf + bf.T)).min() > 0.0
-
-
-def test_forward_sweep_and_its_residual_read_half_the_entries():
-    """A forward block Gauss-Seidel sweep from x = 0 needs only each particle's springs to
-    earlier particles (the later x_j are still 0), and afterwards b - A x at particle i is
-    the sum over its springs to later particles j > i of their blocks times x_j (row i
-    held when x_i was set, with those x_j still 0): both shortcuts equal the textbook
-    sweep and the full residual to round-off, with pins, bending springs and an
-    attachment."""
-    from softbody.integrators import implicit as im
-
-    model, _, m, mg = smoother_ready_ball()
-    n, inv_mass = model.particle_count, m.particle_inv_mass
-    b = np.random.default_rng(3).normal(size=(n, 3))
-    # the textbook sweep: x = 0, then row by row x_i = D_i^-1 (b_i + sum_j B_ij x_j)
-    x = np.zeros((n, 3))
-    for i in np.flatnonzero(inv_mass > 0):
-        x[i] = np.linalg.solve(mg.block[i], b[i] + np.array(im._offdiagonal_sum(mg, i, x)))
-    mg.x[:n] = np.nan  # the sweep from zero must not read what was there
-    im._forward_sweep_from_zero(mg, inv_mass, b)
-    assert np.abs(mg.x[:n] - x).max() <= 1e-12 * np.abs(x).max()
-    free = np.flatnonzero(inv_mass > 0)
-    full = np.array(
-        [b[i] + np.array(im._offdiagonal_sum(mg, i, x)) - mg.block[i] @ x[i] for i in free]
-    )
-    later = [(im._first_later_entry(mg, i), mg.vertex_spring_ptr[i + 1]) for i in free]
-    shortcut = np.array([im._entries_sum(mg, x, a, z) for a, z in later])
-    assert np.abs(full).max() > 0.1  # a sweep leaves a residual
-    assert np.abs(shortcut - full).max() <= 1e-12 * np.abs(full).max()
 
 
 def test_multigrid_and_jacobi_take_the_same_backward_euler_step():

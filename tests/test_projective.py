@@ -11,15 +11,17 @@ import pytest
 
 import softbody as sb
 from conftest import ball_model, uniform_scaling_stationary
-from softbody.forces.evaluate import eval_forces
+from softbody import _core
+from softbody.core import core_model
+from softbody.sim.control import control_data
 from test_implicit import assert_explicit_euler_blows_up, centre_heights, dropped_stiff_ball
 
 
 def _forces(sim, state, t=0.0):
     """f(x, v) [N] (N, 3) with the library's own force terms."""
-    f = np.zeros_like(state.particle_q)
-    eval_forces(sim.model.data, sim._neutral, t, state.particle_q, state.particle_qd, sim._work, f)
-    return f
+    model = sim.model
+    q, qd = state.particle_q, state.particle_qd
+    return _core.eval_forces(core_model(model), control_data(model), t, q, qd)[0]
 
 
 def test_fixed_point_is_backward_euler():
@@ -71,13 +73,8 @@ def test_factor_solves_the_global_matrix_with_less_fill(scene):
     (Morton) order, by more than half, and than SuperLU's minimum degree order."""
     import scipy.sparse.linalg as spla
 
-    from softbody.integrators.projective import (
-        build_projective,
-        dissection_order,
-        solve_factored,
-        system_matrix,
-    )
     from softbody.scenes.loader import load_scene
+    from softbody.solvers.factor import build_projective, dissection_order, system_matrix
 
     if scene:
         model = load_scene(scene).model
@@ -91,8 +88,7 @@ def test_factor_solves_the_global_matrix_with_less_fill(scene):
     factored = build_projective(model, dt)
     a = system_matrix(model, dt)
     b = np.random.default_rng(3).standard_normal((model.particle_count, 3))
-    x = np.zeros_like(b)
-    solve_factored(factored, b, x)
+    x = _core.solve_factor(core_model(model), factored, b)
     assert np.linalg.norm(a @ x - b) <= 1e-12 * np.linalg.norm(b)
     order = dissection_order(a.tocsr(), model.particle_q)
     np.testing.assert_array_equal(np.sort(order), np.arange(model.particle_count))
@@ -190,8 +186,7 @@ def test_dissection_order_is_the_one_it_always_was(subdivisions):
     import sys
     from pathlib import Path
 
-    from softbody import _core
-    from softbody.integrators.projective import dissection_order, system_matrix
+    from softbody.solvers.factor import dissection_order, system_matrix
 
     sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
     from ball_drop import ball_drop

@@ -219,17 +219,15 @@ def test_euler_and_midpoint_estimates_bound_the_growth_of_undamped_modes(integra
 def _force_jacobians(model: sb.Model, q: np.ndarray, eps: float = 1e-6):
     """K = df/dx (central differences) and C = df/dv (exact: forces are linear in v),
     both (3N, 3N), at positions q and zero velocity."""
-    from softbody.forces.evaluate import eval_forces
-    from softbody.integrators.workspace import Workspace
+    from softbody import _core
+    from softbody.core import core_model
     from softbody.sim.control import control_data
 
-    w, c = Workspace.for_model(model), control_data(model)
+    core, c = core_model(model), control_data(model)
     n = 3 * model.particle_count
-    f = np.zeros((model.particle_count, 3))
 
     def force(x, v):
-        eval_forces(model.data, c, 0.0, x.reshape(-1, 3), v.reshape(-1, 3), w, f)
-        return f.ravel().copy()
+        return _core.eval_forces(core, c, 0.0, x.reshape(-1, 3), v.reshape(-1, 3))[0].ravel()
 
     x0, v0 = q.ravel().copy(), np.zeros(n)
     base = force(x0, v0)

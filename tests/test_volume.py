@@ -31,7 +31,9 @@ def test_volume_alone_equals_the_gradient_pass():
     pressure force) sum the same divergence-theorem terms, written differently ((a - r) .
     (b - r) x (c - r) against (a - r) . (b - a) x (c - a)): equal to round-off on two
     randomly deformed bodies (seeded)."""
-    from softbody.volume import eval_exact_volume, eval_volume_gradient
+    from softbody import _core
+    from softbody.core import core_model
+    from softbody.sim.control import control_data
 
     builder = sb.ModelBuilder()
     builder.add_soft_body(BOX, mass=1.0, stiffness=1.0, damping=0.0, gas=1.0)
@@ -40,10 +42,11 @@ def test_volume_alone_equals_the_gradient_pass():
     )
     model = builder.finalize()
     q = model.particle_q + np.random.default_rng(5).normal(0.0, 0.05, model.particle_q.shape)
-    args = (q, model.tri_indices, model.body_particle_range, model.body_tri_range)
-    alone, with_gradient = np.zeros(2), np.zeros(2)
-    eval_exact_volume(*args, alone)
-    eval_volume_gradient(*args, np.zeros_like(q), with_gradient)
+    exact = np.zeros(2, dtype=np.int64)
+    alone = _core.body_volumes(q, model.tri_indices, model.body_particle_range,
+                               model.body_tri_range, exact, model.body_mc_range,
+                               model.mc_samples)  # fmt: skip
+    with_gradient = _core.eval_volumes(core_model(model), control_data(model), 0.0, q)[0]
     assert alone == pytest.approx(with_gradient, rel=1e-12)
     assert alone[1] == pytest.approx(4.0 / 3.0 * np.pi, rel=0.05)  # an icosphere of radius 1
 

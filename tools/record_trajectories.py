@@ -4,12 +4,12 @@ under tests/data/trajectories/ (the final positions, velocities, collider poses 
 impulses, the step count, and the blow-up message when a run stops).
 
 tests/test_trajectories.py runs the same cases and compares. The committed files were
-recorded by the Numba time loop of the engine before its port to the C++ core (the first
-version of this script, ``--engine numba``, at the commit that added it), so the test
-holds the core to the engine the physics tests validated; rerun it to record the current
-engine when a change of the physics is intended, and say so in the commit.
+recorded by the Numba time loop of the engine before its port to the C++ core (this
+script's first version, with ``--engine numba``, at commit 91e398b), so the test holds
+the core to the engine the physics tests validated; rerun it to record the current
+engine only when a change of the physics is intended, and say so in the commit.
 
-    python tools/record_trajectories.py [--engine core|numba] [--out DIR]
+    python tools/record_trajectories.py [--out DIR]
 """
 
 from __future__ import annotations
@@ -28,13 +28,11 @@ import softbody as sb  # noqa: E402
 from trajectory_cases import CASES, STEPS, build_case  # noqa: E402
 
 
-def record(name: str, integrator: str, engine: str) -> dict:
+def record(name: str, integrator: str) -> dict:
     model, control, dt = build_case(name, integrator)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sb.StabilityWarning)
         sim = sb.Simulator(model, integrator=integrator, dt=dt)
-    if engine == "numba":
-        sim._core = None
     state = model.state()
     out: dict = {"dt": np.array(dt)}
     error = ""
@@ -54,12 +52,11 @@ def record(name: str, integrator: str, engine: str) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--engine", choices=["core", "numba"], default="core")
     parser.add_argument("--out", type=Path, default=ROOT / "tests/data/trajectories")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     for name, integrator in CASES:
-        data = record(name, integrator, args.engine)
+        data = record(name, integrator)
         path = args.out / f"{name}--{integrator}.npz"
         np.savez_compressed(path, **data)
         print(f"{path.name}: {int(data['step_count'])} steps {str(data['error'])[:60]}")

@@ -4,10 +4,6 @@ Closed triangle meshes with mass-carrying vertices, damped springs on the edges 
 ideal gas inside whose pressure pushes every face outward along its normal.
 """
 
-from softbody import _kernel_cache
-
-_kernel_cache.configure()  # before any compiled kernel is defined (compiles nothing)
-
 from softbody.collision import (
     ColliderBox,
     ColliderPlane,

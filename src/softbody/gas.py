@@ -24,7 +24,6 @@ from dataclasses import dataclass
 from enum import IntEnum
 
 import numpy as np
-from numba import njit
 
 #: Molar gas constant R [J / (mol K)].
 GAS_CONSTANT = 8.314462618
@@ -156,83 +155,6 @@ class Gas:
             ambient_pressure=ambient_pressure,
             schedule=schedule,
         )
-
-
-@njit(cache=True)
-def gas_value_at(
-    b, t, body_gas_value, body_schedule_range, schedule_time, schedule_value, override
-):
-    """The driving value (nRT [J] or P0 [Pa]) of body ``b`` at time ``t`` [s].
-
-    A finite ``override[b]`` wins; else the body's piecewise-linear schedule; else its value.
-    """
-    if np.isfinite(override[b]):
-        return override[b]
-    begin, end = body_schedule_range[b, 0], body_schedule_range[b, 1]
-    if end == begin:
-        return body_gas_value[b]
-    if t <= schedule_time[begin]:
-        return schedule_value[begin]
-    for s in range(begin + 1, end):
-        if t < schedule_time[s]:
-            w = (t - schedule_time[s - 1]) / (schedule_time[s] - schedule_time[s - 1])
-            return schedule_value[s - 1] + w * (schedule_value[s] - schedule_value[s - 1])
-    return schedule_value[end - 1]
-
-
-@njit(cache=True)
-def gas_pressure(law, value, gamma, reference_volume, volume):
-    """Absolute gas pressure [Pa] for one body at ``volume`` [m^3] (NaN if volume <= 0)."""
-    if law == 1:
-        return value
-    if not volume > 0.0:
-        return np.nan
-    if law == 0:
-        return value / volume
-    return value * reference_volume ** (gamma - 1.0) / volume**gamma
-
-
-@njit(cache=True)
-def eval_body_pressure(
-    t,
-    body_gas_law,
-    body_gas_value,
-    body_gas_gamma,
-    body_gas_reference_volume,
-    body_schedule_range,
-    schedule_time,
-    schedule_value,
-    gas_override,
-    body_volume,
-    body_pressure,
-):
-    """Gas pressure of every body [Pa] at time ``t`` from its volume (B,) [m^3]."""
-    for b in range(body_volume.shape[0]):
-        value = gas_value_at(
-            b, t, body_gas_value, body_schedule_range, schedule_time, schedule_value, gas_override
-        )
-        body_pressure[b] = gas_pressure(
-            body_gas_law[b], value, body_gas_gamma[b], body_gas_reference_volume[b], body_volume[b]
-        )
-
-
-@njit(cache=True)
-def eval_model_pressure(m, t, gas_override, w):
-    """``eval_body_pressure`` on a model's arrays (m: ``ModelData``) at time ``t`` [s], from
-    and into the workspace w (body_volume -> body_pressure)."""
-    eval_body_pressure(
-        t,
-        m.body_gas_law,
-        m.body_gas_value,
-        m.body_gas_gamma,
-        m.body_gas_reference_volume,
-        m.body_schedule_range,
-        m.schedule_time,
-        m.schedule_value,
-        gas_override,
-        w.body_volume,
-        w.body_pressure,
-    )
 
 
 def gas_energy(

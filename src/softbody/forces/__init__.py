@@ -1,1 +1,1 @@
-"""Force terms: pure kernels over flat arrays, accumulated into one (N, 3) array."""
+"""NumPy forms of force terms used outside the compiled core."""

@@ -4,35 +4,28 @@ from __future__ import annotations
 
 import operator
 import warnings
-import weakref
 
-import numba
 import numpy as np
 
-from softbody import _core, _kernel_cache
-from softbody.core import available_threads, core_model
+from softbody.core import available_threads
 from softbody.errors import SimulationError, StabilityWarning
 from softbody.integrators import Integrator
-from softbody.integrators import loop as _loop
-from softbody.integrators.multigrid import build_multigrid, empty_multigrid, set_multigrid_step
-from softbody.integrators.projective import build_projective, empty_projective
-from softbody.integrators.workspace import Workspace
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
 from softbody.sim.state import State
-from softbody.stability import mode_stable_step, stiffest_mode
+from softbody.solvers import RunLimits, Solver, Status, solver_class
+from softbody.solvers.implicit import check_options as check_implicit_options
+from softbody.solvers.projective import check_iterations as check_projective_iterations
+from softbody.stability import stiffest_mode
 
 #: With dt="auto": the fraction of the stability estimate used, and the largest step [s].
 AUTO_SAFETY = 0.8
 MAX_AUTO_DT = 1.0 / 60.0
 #: With dt="auto": simulated seconds between re-estimates of the stable step.
 AUTO_RECHECK = 0.25
-#: Projective dynamics: factored matrices kept, one per step size.
-PROJECTIVE_FACTORS = 4
 #: Most steps one :meth:`Simulator.run` or :meth:`Simulator.advance` call takes. Counts
-#: stay 64-bit integers in the compiled loop (a Python int past 2**63 would compile a
-#: second, unsigned version of it), and a call that long is a mistake: 1e12 steps of the
-#: smallest model take weeks.
+#: stay 64-bit integers in the compiled loop, and a call that long is a mistake: 1e12
+#: steps of the smallest model take weeks.
 MAX_STEPS = 10**12
 
 
@@ -149,40 +142,13 @@ class Simulator:
         if not (0 < lo < 1 < hi):
             raise ValueError(f"volume_limits must satisfy 0 < low < 1 < high, got {volume_limits}")
         self.volume_limits = (lo, hi)
-        if not (np.isfinite(implicit_tolerance) and 0 < implicit_tolerance < 1):
-            raise ValueError(f"implicit_tolerance must lie in (0, 1), got {implicit_tolerance!r}")
-        if int(implicit_max_iterations) != implicit_max_iterations or implicit_max_iterations < 1:
-            raise ValueError(
-                f"implicit_max_iterations must be an integer >= 1, got {implicit_max_iterations!r}"
-            )
-        self.implicit_tolerance = float(implicit_tolerance)
-        self.implicit_max_iterations = int(implicit_max_iterations)
-        if implicit_preconditioner not in ("multigrid", "jacobi"):
-            raise ValueError(
-                "implicit_preconditioner must be 'multigrid' or 'jacobi', "
-                f"got {implicit_preconditioner!r}"
-            )
-        self.implicit_preconditioner = implicit_preconditioner
-        if (
-            isinstance(projective_iterations, bool)
-            or not isinstance(projective_iterations, int | np.integer)
-            or projective_iterations < 1
-        ):
-            raise ValueError(
-                f"projective_iterations must be an integer >= 1, got {projective_iterations!r}"
-            )
-        self.projective_iterations = int(projective_iterations)
-        self._projective = empty_projective()
-        self._projective_cache: dict = {}
-        use_mg = self.integrator.implicit and implicit_preconditioner == "multigrid"
-        self._multigrid = build_multigrid(model) if use_mg else empty_multigrid()
-        self._multigrid_dt = None
-        # BDF2: which state, at which step and dt, the workspace's previous step belongs to
-        self._history: tuple | None = None
-        # implicit schemes have no step limit: the Gershgorin bounds describe the model
-        # without the Lanczos runs (seconds at 100k particles)
-        self.stiffest_mode = stiffest_mode(model, spectral=self.integrator.explicit)
-        self.stable_dt = mode_stable_step(self.integrator, self.stiffest_mode)
+        # every method's options are checked, whichever this simulator uses, so a typo
+        # fails the same way for every integrator
+        (self.implicit_tolerance, self.implicit_max_iterations,
+         self.implicit_preconditioner) = check_implicit_options(
+            implicit_tolerance, implicit_max_iterations, implicit_preconditioner
+        )  # fmt: skip
+        self.projective_iterations = check_projective_iterations(projective_iterations)
         available = available_threads()
         if (
             isinstance(threads, bool)
@@ -194,17 +160,14 @@ class Simulator:
                 f"may use), got {threads!r}"
             )
         self.threads = int(threads)
-        # the explicit schemes (threads too), and the implicit and projective ones (one
-        # thread) step in the compiled C++ core, and their set-up (multigrid hierarchy,
-        # the factor's order and supernodes) needs no Numba either; the rest (implicit and
-        # projective on threads) still runs the Numba kernels, which compile on first use
-        # (softbody._kernel_cache).
-        self._core = None
-        self._cg_stats_total = [0, 0, 0]
-        # implicit schemes take the drag explicitly: its force at the step's start is in
-        # the right-hand side, its Jacobian left out of the matrix
-        self._core = self._core_solver()
-        self._work = Workspace.for_model(model, chunk_count=self.threads)
+        cls = solver_class(self.integrator)
+        own = {k: v for k, v in self.options.items() if k in cls.option_names}
+        #: The solver that steps this simulator's states (softbody.solvers).
+        self.solver: Solver = cls(model, self.integrator, threads=self.threads, **own)
+        # implicit schemes have no step limit: the Gershgorin bounds describe the model
+        # without the Lanczos runs (seconds at 100k particles)
+        self.stiffest_mode = stiffest_mode(model, spectral=self.integrator.explicit)
+        self.stable_dt = self.solver.stable_step(self.stiffest_mode)
         self._neutral = control_data(model)
         self._control = control_data(model)
         if self.auto_dt:
@@ -232,14 +195,7 @@ class Simulator:
     def solver_iterations(self) -> tuple[float, int]:
         """``implicit_euler``, ``bdf2``: (mean, most) CG iterations per step over the
         last :meth:`run` call; (0, 0) for explicit integrators."""
-        stats = self._cg_stats_total if self._implicit_core else self._work.cg_stats
-        steps, total, most = (int(x) for x in stats)
-        return (total / steps if steps else 0.0, most)
-
-    @property
-    def _implicit_core(self) -> bool:
-        """Whether the compiled core steps this implicit simulator."""
-        return self._core is not None and self.integrator.implicit
+        return self.solver.iterations
 
     def stability_note(self) -> str:
         """One line comparing ``dt`` with the stability estimate, with advice."""
@@ -291,7 +247,7 @@ class Simulator:
                 )
                 self._auto_limit = min(
                     MAX_AUTO_DT,
-                    AUTO_SAFETY * mode_stable_step(self.integrator, mode),
+                    AUTO_SAFETY * self.solver.stable_step(mode),
                 )
                 self._auto_time = state.time
             limit = self._auto_limit
@@ -325,167 +281,39 @@ class Simulator:
         if steps == 0:
             return state
         data = self._neutral if control is None else control.write(model, self._control)
-        lo, hi = self.volume_limits
+        limits = RunLimits(self.max_speed, *self.volume_limits)
         state.collider_impulse[:] = 0.0
-        self._work.cg_stats[:] = 0
-        self._cg_stats_total = [0, 0, 0]  # the core's, over solvers rebuilt during the run
-        if self._implicit_core:
-            self._core.clear_stats()
-        # the system matrix's step: dt for backward Euler, 2/3 dt for BDF2
-        h = self.dt * (2.0 / 3.0 if self.integrator == Integrator.BDF2 else 1.0)
-        if self._multigrid.level_size[0] == model.particle_count and self._multigrid_dt != h:
-            set_multigrid_step(self._multigrid, h)
-            self._multigrid_dt = h
-        if self.integrator == Integrator.PROJECTIVE and self._projective.dt != self.dt:
-            self._projective = self._projective_factor(self.dt)
+        solver = self.solver
+        solver.begin_run()
         remaining = steps
-        # only BDF2 uses the step before a run's first (its history): the others skip the
-        # check (two comparisons of whole arrays)
-        bdf2 = self.integrator == Integrator.BDF2
-        while remaining:
-            ref = self._history
-            history = (
-                bdf2
-                and ref is not None
-                and ref[0]() is state
-                and ref[1:] == (state.step_count, self.dt)
-                and np.array_equal(state.particle_q, self._work.q_end)
-                and np.array_equal(state.particle_qd, self._work.v_end)
-            )
-            status, done, index, value = self._simulate(
-                int(self.integrator),
-                remaining,
-                float(state.time),
-                self.dt,
-                model.data,
-                data,
-                state.particle_q,
-                state.particle_qd,
-                self._work,
-                self.max_speed,
-                lo,
-                hi,
-                state.collider_q,
-                state.collider_rotation,
-                state.collider_impulse,
-                self._multigrid,
-                self.implicit_tolerance,
-                self.implicit_max_iterations,
-                history,
-                self._projective,
-                self.projective_iterations,
-            )
-            start_step = state.step_count
-            state.step_count = start_step + done
-            state.time = float(state.time) + done * self.dt
-            remaining -= done
-            if bdf2 and (done > 0 or history):
-                self._history = (weakref.ref(state), state.step_count, self.dt)
-                self._work.q_end[:] = state.particle_q  # to see edits between calls
-                self._work.v_end[:] = state.particle_qd
-            if status == _loop.NEED_HASH:
-                # contacts touched more grid cells than the hash holds: grow it and go on
-                # (pin and collider targets are re-aimed over the remaining steps)
-                if self._core is not None:
-                    if self._implicit_core:
-                        self._collect_cg_stats()
-                    self._core = self._core_solver(hash_capacity=int(2 * value))
-                else:
-                    self._work = Workspace.for_model(
-                        model, hash_capacity=int(2 * value), chunk_count=self.threads
-                    )
-                self._history = None  # the undone step overwrote BDF2's previous step
-                continue
-            if status != _loop.OK:
-                if self._implicit_core:
-                    self._collect_cg_stats()
-                raise self._blow_up(status, start_step + done, state.time, index, value)
-        if self._implicit_core:
-            self._collect_cg_stats()
-        return state
-
-    def _collect_cg_stats(self) -> None:
-        """Add the core solver's CG statistics to this run's, and clear them there."""
-        steps, total, most = self._core.cg_stats
-        acc = self._cg_stats_total
-        acc[0], acc[1], acc[2] = acc[0] + steps, acc[1] + total, max(acc[2], most)
-        self._core.clear_stats()
-
-    def _projective_factor(self, dt: float):
-        """Projective dynamics' matrix factored for step ``dt``: built once per step size
-        (about 0.5 s at 40,962 particles), the last ``PROJECTIVE_FACTORS`` kept, since
-        :meth:`advance` may alternate between a few substep sizes."""
-        cache = self._projective_cache
-        if dt not in cache:
-            if len(cache) >= PROJECTIVE_FACTORS:
-                del cache[next(iter(cache))]
-            cache[dt] = build_projective(self.model, dt)
-        return cache[dt]
-
-    @property
-    def _projective_core(self) -> bool:
-        return self.integrator == Integrator.PROJECTIVE
-
-    def _core_solver(self, hash_capacity: int | None = None):
-        """The compiled core's solver for this integrator: the explicit schemes' loop, or
-        projective dynamics' (given its factor for the current dt before each run), or
-        backward Euler's and BDF2's with this simulator's preconditioner (the multigrid
-        hierarchy's arrays are checked once and read at every step)."""
-        if self.integrator.implicit:
-            n = self.model.particle_count
-            mg = self._multigrid if self._multigrid.level_size[0] == n else None
-            return _core.ImplicitSolver(
-                core_model(self.model), multigrid=mg, hash_capacity=hash_capacity,
-                threads=self.threads,
-            )  # fmt: skip
-        if self._projective_core:
-            return _core.ProjectiveSolver(
-                core_model(self.model), hash_capacity=hash_capacity, threads=self.threads
-            )
-        return _core.ExplicitSolver(
-            core_model(self.model), hash_capacity=hash_capacity, threads=self.threads
-        )
-
-    def _simulate(self, *args):
-        """``loop.simulate`` on this simulator's thread count (restored afterwards), or the
-        compiled core's loop for the schemes it has."""
-        if self._core is not None:
-            scheme, steps, t0, dt, _, control, q, qd, _, max_speed, lo, hi, cq, crot, ci = args[:15]
-            if self._implicit_core:
-                tolerance, max_iterations, history = args[16:19]
-                return self._core.simulate(
-                    scheme == Integrator.BDF2, steps, t0, dt, control, q, qd, cq, crot, ci,
-                    max_speed, lo, hi, tolerance, max_iterations, history,
-                )  # fmt: skip
-            if self._projective_core:
-                factor, iterations = args[19:21]
-                if self._core.factor is not factor:  # checked once per factor (per dt)
-                    self._core.set_factor(factor)
-                return self._core.simulate(
-                    steps, t0, dt, iterations, control, q, qd, cq, crot, ci, max_speed, lo, hi
-                )
-            return self._core.simulate(
-                scheme, steps, t0, dt, control, q, qd, cq, crot, ci, max_speed, lo, hi
-            )
-        _kernel_cache.ensure_compiled()  # (cheap once done) before any Numba kernel runs
-        if self.threads == 1:
-            return _loop.simulate(*args)
-        before = numba.get_num_threads()
-        numba.set_num_threads(self.threads)
         try:
-            return _loop.simulate(*args)
+            while remaining:
+                result = solver.simulate(state, remaining, self.dt, data, limits)
+                start_step = state.step_count
+                state.step_count = start_step + result.steps_done
+                state.time = float(state.time) + result.steps_done * self.dt
+                remaining -= result.steps_done
+                if result.status == Status.NEED_HASH:
+                    # contacts touched more grid cells than the hash holds: grow it and go
+                    # on (pin and collider targets are re-aimed over the remaining steps)
+                    solver.grow_hash(2 * int(result.value))
+                    continue
+                if result.status != Status.OK:
+                    raise self._blow_up(result.status, state.step_count, state.time,
+                                        result.where, result.value)  # fmt: skip
         finally:
-            numba.set_num_threads(before)
+            solver.end_run()
+        return state
 
     def _blow_up(self, status, step, time, index, value) -> SimulationError:
         model = self.model
         where = f"at step {step} (t = {time:.6g} s)"
-        if status in (_loop.NONFINITE, _loop.RUNAWAY):
+        if status in (Status.NONFINITE, Status.RUNAWAY):
             body = int(model.particle_body[index])
             who = f"body {body}" if body >= 0 else "free particle"
             what = (
                 "position or velocity became NaN or infinite"
-                if status == _loop.NONFINITE
+                if status == Status.NONFINITE
                 else f"speed {value:.3g} m/s exceeds max_speed {self.max_speed:.3g} m/s "
                 "(runaway kinetic energy)"
             )
@@ -495,9 +323,9 @@ class Simulator:
             body, particle = int(index), -1
             lo, hi = self.volume_limits
             what = {
-                _loop.BAD_VOLUME: f"volume became {value:.3g} m^3 (collapsed or inverted)",
-                _loop.SHRUNK: f"volume fell to {value:.3g} of its rest volume (limit {lo:g})",
-                _loop.EXPLODED: f"volume grew to {value:.3g} times its rest volume (limit {hi:g})",
+                Status.BAD_VOLUME: f"volume became {value:.3g} m^3 (collapsed or inverted)",
+                Status.SHRUNK: f"volume fell to {value:.3g} of its rest volume (limit {lo:g})",
+                Status.EXPLODED: f"volume grew to {value:.3g} times its rest volume (limit {hi:g})",
             }[status]
             msg = f"body {body} blew up {where}: {what}"
         if self.dt > self.stable_dt:

@@ -11,11 +11,10 @@ def kernel_array(a) -> np.ndarray:
     """``a`` as the compiled kernels take every state array: float64, C-contiguous,
     aligned and writable (a copy only when ``a`` is not already all of these).
 
-    A kernel compiled once for writable float64 arrays and called again with a read-only
-    or float32 one compiles a second version of itself; Numba's on-disk cache then holds
-    two and, in a later process, may load the wrong one and crash. Every array that
-    crosses into a kernel goes through here (or :meth:`State.conform`) so each kernel
-    only ever sees one set of argument types.
+    The core writes the state in place and refuses any other kind of array with a
+    ValueError; every array that crosses into it goes through here (or
+    :meth:`State.conform`), so a user's read-only, float32 or strided arrays are
+    converted instead.
     """
     return np.require(a, dtype=np.float64, requirements=["C", "A", "W"])
 
@@ -31,8 +30,7 @@ def _kernel_ready(a, shape: tuple) -> bool:
 def kernel_input(a, dtype=np.float64) -> np.ndarray:
     """``a`` as the compiled kernels take a model's arrays: C-contiguous, aligned and
     read-only (a read-only view; a copy only when the layout or ``dtype`` differs), for
-    a call from Python that passes arrays the compiled loop takes from a ``Model``
-    (:func:`kernel_array` says why the kinds must match)."""
+    a call from Python that passes arrays the compiled loop takes from a ``Model``."""
     view = np.require(a, dtype=dtype, requirements=["C", "A"]).view()
     view.flags.writeable = False
     return view

@@ -1,4 +1,7 @@
-"""Projective dynamics: backward Euler by local-global iterations on a prefactored matrix.
+"""Projective dynamics' set-up: the global matrix, its nested-dissection order and its
+factor (the iterations are the core's, core/solvers/projective.hpp).
+
+Projective dynamics is backward Euler by local-global iterations on a prefactored matrix.
 
 Liu, Bargteil, O'Brien & Kavan (2013), "Fast simulation of mass-spring systems", and
 Bouaziz et al. (2014), "Projective dynamics". Backward Euler, x1 = x0 + h v1 with
@@ -39,15 +42,12 @@ from typing import NamedTuple
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numba import njit
 
 from softbody import _core
-from softbody.forces.evaluate import eval_body_forces
-from softbody.forces.gravity import eval_gravity
 
 
 class Projective(NamedTuple):
-    """The factored matrix of projective dynamics for one model and step, and scratch.
+    """The factored matrix of projective dynamics for one model and step.
 
     A = P^T L D L^T P: ``perm[r]`` is the particle at row r of the factor; ``inv_diag`` =
     1 / diag(D). L (unit lower triangular) is stored by supernodes, runs of columns
@@ -56,8 +56,7 @@ class Projective(NamedTuple):
     own columns first, then the rows below), and its values a dense row-major block of
     (rows, c1 - c0) at ``node_value[node_value_ptr[s]:]`` (upper triangle of the square
     part unused). The wide supernodes of the separators hold most of the factor, so the
-    solves run mostly over dense, contiguous rows. ``size`` is 0 in the placeholder of
-    other integrators.
+    solves run mostly over dense, contiguous rows.
     """
 
     size: int
@@ -70,32 +69,11 @@ class Projective(NamedTuple):
     node_value_ptr: np.ndarray  # (S + 1,) int64
     node_value: np.ndarray  # (V,) float64
     nonzeros: int  # entries of L below the diagonal
-    rhs: np.ndarray  # (N, 3) scratch: right-hand side, particle order
-    x: np.ndarray  # (N, 3) scratch: solution, factor order
 
     @property
     def factor_nonzeros(self) -> int:
         """Entries of L below the diagonal."""
         return self.nonzeros
-
-
-def empty_projective() -> Projective:
-    """A zero-size placeholder for simulators that do not use projective dynamics."""
-    i0 = np.zeros(1, dtype=np.int64)
-    return Projective(
-        0,
-        0.0,
-        i0[:0],
-        np.zeros(0),
-        i0,
-        i0,
-        i0[:0],
-        i0,
-        np.zeros(0),
-        0,
-        np.zeros((0, 3)),
-        np.zeros((0, 3)),
-    )
 
 
 def system_matrix(model, dt: float) -> sp.csc_matrix:
@@ -169,8 +147,6 @@ def build_projective(model, dt: float) -> Projective:
         value_ptr,
         values,
         len(indices),
-        np.zeros((n, 3)),
-        np.zeros((n, 3)),
     )
 
 
@@ -200,175 +176,3 @@ def dissection_order(a: sp.csr_matrix, points: np.ndarray) -> np.ndarray:
         np.ascontiguousarray(points, dtype=np.float64),
         DISSECTION_LEAF,
     )
-
-
-@njit(cache=True)
-def solve_factored(pd, b, out):
-    """out = A^-1 b for b (N, 3) with the factored matrix of ``pd`` (two triangular
-    solves on the three columns at once); ``out`` may be ``b``."""
-    n = pd.size
-    x = pd.x
-    perm = pd.perm
-    for r in range(n):
-        p = perm[r]
-        x[r, 0] = b[p, 0]
-        x[r, 1] = b[p, 1]
-        x[r, 2] = b[p, 2]
-    rows, values = pd.node_row, pd.node_value
-    count = pd.node_col.shape[0] - 1
-    for s in range(count):  # L z = b, node by node: each row takes a dot product
-        c0, width = pd.node_col[s], pd.node_col[s + 1] - pd.node_col[s]
-        r0, r1, v0 = pd.node_row_ptr[s], pd.node_row_ptr[s + 1], pd.node_value_ptr[s]
-        for p in range(1, r1 - r0):
-            r = rows[r0 + p]
-            base = v0 + p * width
-            a0 = a1 = a2 = 0.0
-            for jj in range(min(p, width)):
-                v = values[base + jj]
-                a0 += v * x[c0 + jj, 0]
-                a1 += v * x[c0 + jj, 1]
-                a2 += v * x[c0 + jj, 2]
-            x[r, 0] -= a0
-            x[r, 1] -= a1
-            x[r, 2] -= a2
-    for j in range(n):
-        d = pd.inv_diag[j]
-        x[j, 0] *= d
-        x[j, 1] *= d
-        x[j, 2] *= d
-    for s in range(count - 1, -1, -1):  # D L^T x = z: rows below first, then the block
-        c0, width = pd.node_col[s], pd.node_col[s + 1] - pd.node_col[s]
-        r0, r1, v0 = pd.node_row_ptr[s], pd.node_row_ptr[s + 1], pd.node_value_ptr[s]
-        for p in range(r1 - r0 - 1, 0, -1):
-            r = rows[r0 + p]
-            x0, x1, x2 = x[r, 0], x[r, 1], x[r, 2]
-            base = v0 + p * width
-            for jj in range(min(p, width)):
-                v = values[base + jj]
-                x[c0 + jj, 0] -= v * x0
-                x[c0 + jj, 1] -= v * x1
-                x[c0 + jj, 2] -= v * x2
-    for r in range(n):
-        p = perm[r]
-        out[p, 0] = x[r, 0]
-        out[p, 1] = x[r, 1]
-        out[p, 2] = x[r, 2]
-
-
-@njit(cache=True, inline="always")
-def _projection_term(dx, dy, dz, ex, ey, ez, rest, k, c_h):
-    """k p + c_h q for an edge d = (dx, dy, dz) that was e at the step's start: p its
-    projection onto |d| = rest, q onto the plane u . (d - e) = 0 (u = d / |d|). Both lie
-    along d: p = rest d / |d| and q = d - (u . (d - e)) u = (d . e / |d|^2) d, so one
-    division and one square root (written out with u, the right-hand side of the
-    five-ball scene took 32 us instead of 21). A
-    zero-length edge has no direction: both are d (no force, as in the force kernel)."""
-    length2 = dx * dx + dy * dy + dz * dz
-    if length2 == 0.0:
-        w = k + c_h
-        return w * dx, w * dy, w * dz
-    inv2 = 1.0 / length2
-    s = k * rest * np.sqrt(inv2) + c_h * (dx * ex + dy * ey + dz * ez) * inv2
-    return s * dx, s * dy, s * dz
-
-
-@njit(cache=True)
-def _right_hand_side(m, c, h, x, x0, y, f, rhs):
-    """rhs = M y / h^2 + f + the springs' and attachments' projection terms at the
-    iterate x (N, 3) (module docstring); pinned rows: y."""
-    inv_h = 1.0 / h
-    inv_h2 = inv_h * inv_h
-    inv_mass = m.particle_inv_mass
-    for i in range(x.shape[0]):
-        if inv_mass[i] > 0.0:
-            w = m.particle_mass[i] * inv_h2
-            for k in range(3):
-                rhs[i, k] = w * y[i, k] + f[i, k]
-        else:
-            for k in range(3):
-                rhs[i, k] = y[i, k]
-    for s in range(m.spring_indices.shape[0]):
-        i, j = m.spring_indices[s, 0], m.spring_indices[s, 1]
-        k_s, c_h = m.spring_stiffness[s], m.spring_damping[s] * inv_h
-        tx, ty, tz = _projection_term(
-            x[j, 0] - x[i, 0],
-            x[j, 1] - x[i, 1],
-            x[j, 2] - x[i, 2],
-            x0[j, 0] - x0[i, 0],
-            x0[j, 1] - x0[i, 1],
-            x0[j, 2] - x0[i, 2],
-            m.spring_rest_length[s],
-            k_s,
-            c_h,
-        )
-        free_i, free_j = inv_mass[i] > 0.0, inv_mass[j] > 0.0
-        if free_i:
-            rhs[i, 0] -= tx
-            rhs[i, 1] -= ty
-            rhs[i, 2] -= tz
-            if not free_j:  # the pinned end's column, moved to this side
-                w = k_s + c_h
-                rhs[i, 0] += w * x[j, 0]
-                rhs[i, 1] += w * x[j, 1]
-                rhs[i, 2] += w * x[j, 2]
-        if free_j:
-            rhs[j, 0] += tx
-            rhs[j, 1] += ty
-            rhs[j, 2] += tz
-            if not free_i:
-                w = k_s + c_h
-                rhs[j, 0] += w * x[i, 0]
-                rhs[j, 1] += w * x[i, 1]
-                rhs[j, 2] += w * x[i, 2]
-    for a in range(m.attachment_particle.shape[0]):
-        i = m.attachment_particle[a]
-        if inv_mass[i] == 0.0:
-            continue
-        px, py, pz = c.attachment_anchor[a, 0], c.attachment_anchor[a, 1], c.attachment_anchor[a, 2]
-        k_a, c_h = m.attachment_stiffness[a], m.attachment_damping[a] * inv_h
-        tx, ty, tz = _projection_term(
-            x[i, 0] - px,
-            x[i, 1] - py,
-            x[i, 2] - pz,
-            x0[i, 0] - px,
-            x0[i, 1] - py,
-            x0[i, 2] - pz,
-            m.attachment_rest_length[a],
-            k_a,
-            c_h,
-        )
-        w = k_a + c_h
-        rhs[i, 0] += w * px + tx
-        rhs[i, 1] += w * py + ty
-        rhs[i, 2] += w * pz + tz
-
-
-@njit(cache=True)
-def step_projective(m, c, t, dt, q, qd, w, pd, iterations):
-    """One backward Euler step by ``iterations`` local-global iterations (module
-    docstring) from w.q0, w.v0, starting from y = x0 + dt v0; ``pd`` is factored for
-    ``dt``. Leaves x1 in q and v1 = (x1 - x0) / dt in qd; pinned particles keep their
-    velocity. The other forces are taken at t + dt, the end of the step."""
-    n = q.shape[0]
-    inv_mass = m.particle_inv_mass
-    y = w.qs
-    for i in range(n):
-        for k in range(3):
-            y[i, k] = w.q0[i, k] + dt * w.v0[i, k]
-            q[i, k] = y[i, k]
-    inv_dt = 1.0 / dt
-    for _ in range(iterations):
-        for i in range(n):
-            for k in range(3):
-                qd[i, k] = (q[i, k] - w.q0[i, k]) * inv_dt
-        eval_gravity(m.particle_mass, m.gravity, w.f)
-        eval_body_forces(m, c, t + dt, q, qd, w, w.f)
-        _right_hand_side(m, c, dt, q, w.q0, y, w.f, pd.rhs)
-        solve_factored(pd, pd.rhs, q)
-    for i in range(n):
-        for k in range(3):
-            if inv_mass[i] > 0.0:
-                qd[i, k] = (q[i, k] - w.q0[i, k]) * inv_dt
-            else:
-                q[i, k] = y[i, k]
-                qd[i, k] = w.v0[i, k]

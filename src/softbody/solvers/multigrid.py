@@ -1,4 +1,5 @@
-"""Algebraic multigrid preconditioner for the implicit Euler solve.
+"""Algebraic multigrid preconditioner for the implicit solvers: the hierarchy's set-up
+(the V-cycle itself is the core's, core/solvers/multigrid.hpp).
 
 Backward Euler's system matrix is M - dt C - dt^2 K. Its stiff part is the spring network:
 with k per spring the largest eigenvalue grows like k N / m, so Jacobi-preconditioned CG
@@ -28,7 +29,6 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 
 #: Unknowns at which coarsening stops and the level is solved densely.
 COARSE_SIZE = 256
@@ -37,7 +37,7 @@ STALL_RATIO = 0.85
 
 
 class Multigrid(NamedTuple):
-    """A V-cycle's arrays (L sparse levels and a coarsest one), flat for the kernels.
+    """A V-cycle's arrays (L sparse levels and a coarsest one), flat for the core.
 
     Level l has ``level_size[l]`` unknowns; its matrix A_l is CSR in ``a_indptr`` /
     ``a_indices`` / ``a_data`` at offsets ``a_row_offset[l]`` / ``a_nz_offset[l]``, with
@@ -123,8 +123,7 @@ def _aggregate(indptr, indices, out):
     them is taken; pass 2 joins the rest to a neighbouring aggregate; pass 3 groups what
     is left with its free neighbours. Plain Python on lists (planning, once per
     simulator: the whole hierarchy of the ball drop's ball builds in 0.04 s at 10,242
-    particles, 0.15 s at 40,962), so that the compiled core's implicit solvers need no
-    Numba kernel."""
+    particles, 0.15 s at 40,962)."""
     ptr, adj = indptr.tolist(), indices.tolist()
     n = len(ptr) - 1
     agg = [-1] * n
@@ -317,137 +316,3 @@ def _diagonals(mg):
         rows = np.repeat(np.arange(n), np.diff(indptr))
         on = mg.a_indices[entries] == rows
         mg.a_diag[v0 : v0 + n] = np.bincount(rows[on], weights=mg.a_data[entries][on], minlength=n)
-
-
-# inlined, as are restrict, prolong and cycle_from: their callers pass constants (a
-# level, a direction), which Numba compiles as separate versions of a kernel, one per
-# constant, and a cached kernel with several versions is what crashes (_kernel_cache)
-@njit(cache=True, inline="always")
-def _gauss_seidel(mg, lv, forward):
-    """One Gauss-Seidel sweep on A_l x_l = b_l (3 right-hand sides), in place."""
-    r0, z0, v0 = mg.a_row_offset[lv], mg.a_nz_offset[lv], mg.vec_offset[lv]
-    n = mg.level_size[lv]
-    x, b = mg.x, mg.b
-    for step in range(n):
-        i = step if forward else n - 1 - step
-        s0, s1, s2 = b[v0 + i, 0], b[v0 + i, 1], b[v0 + i, 2]
-        for e in range(mg.a_indptr[r0 + i], mg.a_indptr[r0 + i + 1]):
-            col = mg.a_indices[z0 + e]
-            if col != i:
-                a = mg.a_data[z0 + e]
-                s0 -= a * x[v0 + col, 0]
-                s1 -= a * x[v0 + col, 1]
-                s2 -= a * x[v0 + col, 2]
-        inv = 1.0 / mg.a_diag[v0 + i]
-        x[v0 + i, 0] = s0 * inv
-        x[v0 + i, 1] = s1 * inv
-        x[v0 + i, 2] = s2 * inv
-
-
-@njit(cache=True, inline="always")  # called with the constant level 0 (see _gauss_seidel)
-def restrict(mg, lv, res):
-    """b_{l+1} = P_l^T res for res (n_l, 3)."""
-    vc = mg.vec_offset[lv + 1]
-    for i in range(mg.level_size[lv + 1]):
-        for k in range(3):
-            mg.b[vc + i, k] = 0.0
-    pr0, pz0 = mg.p_row_offset[lv], mg.p_nz_offset[lv]
-    for i in range(mg.level_size[lv]):
-        s0, s1, s2 = res[i, 0], res[i, 1], res[i, 2]
-        for e in range(mg.p_indptr[pr0 + i], mg.p_indptr[pr0 + i + 1]):
-            col = mg.p_indices[pz0 + e]
-            p = mg.p_data[pz0 + e]
-            mg.b[vc + col, 0] += p * s0
-            mg.b[vc + col, 1] += p * s1
-            mg.b[vc + col, 2] += p * s2
-
-
-@njit(cache=True, inline="always")  # called with the constant level 0 (see _gauss_seidel)
-def prolong(mg, lv):
-    """x_l += P_l x_{l+1}."""
-    v0, vc = mg.vec_offset[lv], mg.vec_offset[lv + 1]
-    pr0, pz0 = mg.p_row_offset[lv], mg.p_nz_offset[lv]
-    for i in range(mg.level_size[lv]):
-        for e in range(mg.p_indptr[pr0 + i], mg.p_indptr[pr0 + i + 1]):
-            col = mg.p_indices[pz0 + e]
-            p = mg.p_data[pz0 + e]
-            mg.x[v0 + i, 0] += p * mg.x[vc + col, 0]
-            mg.x[v0 + i, 1] += p * mg.x[vc + col, 1]
-            mg.x[v0 + i, 2] += p * mg.x[vc + col, 2]
-
-
-@njit(cache=True)
-def _coarse_solve(mg):
-    last = mg.level_count
-    vl, nl = mg.vec_offset[last], mg.level_size[last]
-    if mg.coarse_dense:
-        # L L^T x = b for the three right-hand sides at once, reading L by rows only:
-        # 14 us for the five-ball scene's 100 unknowns, against 40 us one right-hand
-        # side at a time with a column walk in the back substitution
-        ch = mg.coarse_cholesky
-        x = mg.x
-        for i in range(nl):  # L y = b
-            s0, s1, s2 = mg.b[vl + i, 0], mg.b[vl + i, 1], mg.b[vl + i, 2]
-            for j in range(i):
-                lij = ch[i, j]
-                s0 -= lij * x[vl + j, 0]
-                s1 -= lij * x[vl + j, 1]
-                s2 -= lij * x[vl + j, 2]
-            inv = 1.0 / ch[i, i]
-            x[vl + i, 0], x[vl + i, 1], x[vl + i, 2] = s0 * inv, s1 * inv, s2 * inv
-        for i in range(nl - 1, -1, -1):  # L^T x = y, column by column of L^T (rows of L)
-            inv = 1.0 / ch[i, i]
-            x0, x1, x2 = x[vl + i, 0] * inv, x[vl + i, 1] * inv, x[vl + i, 2] * inv
-            x[vl + i, 0], x[vl + i, 1], x[vl + i, 2] = x0, x1, x2
-            for j in range(i):
-                lij = ch[i, j]
-                x[vl + j, 0] -= lij * x0
-                x[vl + j, 1] -= lij * x1
-                x[vl + j, 2] -= lij * x2
-    else:
-        for i in range(nl):
-            for k in range(3):
-                mg.x[vl + i, k] = 0.0
-        for _ in range(2):
-            _gauss_seidel(mg, last, True)
-            _gauss_seidel(mg, last, False)
-
-
-@njit(cache=True, inline="always")  # called with the constants 0 and 1 (see _gauss_seidel)
-def cycle_from(mg, first):
-    """V-cycle on levels first..L for A_first x = b_first (b set, x overwritten)."""
-    for lv in range(first, mg.level_count):
-        r0, z0, v0 = mg.a_row_offset[lv], mg.a_nz_offset[lv], mg.vec_offset[lv]
-        n = mg.level_size[lv]
-        for i in range(n):
-            for k in range(3):
-                mg.x[v0 + i, k] = 0.0
-        _gauss_seidel(mg, lv, True)
-        # residual b - A x into r, then restricted to the next level's b
-        for i in range(n):
-            s0, s1, s2 = mg.b[v0 + i, 0], mg.b[v0 + i, 1], mg.b[v0 + i, 2]
-            for e in range(mg.a_indptr[r0 + i], mg.a_indptr[r0 + i + 1]):
-                col = mg.a_indices[z0 + e]
-                a = mg.a_data[z0 + e]
-                s0 -= a * mg.x[v0 + col, 0]
-                s1 -= a * mg.x[v0 + col, 1]
-                s2 -= a * mg.x[v0 + col, 2]
-            mg.r[v0 + i, 0], mg.r[v0 + i, 1], mg.r[v0 + i, 2] = s0, s1, s2
-        restrict(mg, lv, mg.r[v0 : v0 + n])
-    _coarse_solve(mg)
-    for lv in range(mg.level_count - 1, first - 1, -1):
-        prolong(mg, lv)
-        _gauss_seidel(mg, lv, False)
-
-
-@njit(cache=True)
-def apply_multigrid(mg, r, z):
-    """z = V(r) for r, z (N, 3): one V-cycle for A z = r from z = 0 (module docstring)."""
-    n0 = mg.level_size[0]
-    for i in range(n0):
-        for k in range(3):
-            mg.b[i, k] = r[i, k]
-    cycle_from(mg, 0)
-    for i in range(n0):
-        for k in range(3):
-            z[i, k] = mg.x[i, k]

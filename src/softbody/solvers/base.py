@@ -1,0 +1,114 @@
+"""What every solver shares: the run's outcome codes and the interface a Simulator steps.
+
+A solver owns its method's options, the compiled core's loop with its buffers, its
+history and caches (BDF2's previous step, a multigrid hierarchy, factored matrices) and
+its stable-step rule. :class:`softbody.Simulator` is the public front: it checks the
+options common to all, chooses the step, and turns a failed run into a
+:class:`~softbody.SimulationError`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+from softbody.core import core_model
+from softbody.integrators import Integrator
+from softbody.stability import StiffestMode, mode_stable_step
+
+
+class Status(IntEnum):
+    """Outcome of a run of steps (the core's ``softbody::Status``)."""
+
+    OK = 0
+    NONFINITE = 1  # a position or velocity became NaN or infinite
+    RUNAWAY = 2  # a particle moved faster than the speed limit
+    BAD_VOLUME = 3  # a body volume became NaN, zero or negative
+    SHRUNK = 4  # a body volume fell below the lower limit
+    EXPLODED = 5  # a body volume grew past the upper limit
+    NEED_HASH = 6  # the surface contacts' spatial hash needs more room (value: entries)
+
+
+@dataclass(frozen=True)
+class RunLimits:
+    """The checks every step makes: the largest particle speed [m/s] and each body's
+    volume between ``ratio_min`` and ``ratio_max`` times its rest volume."""
+
+    max_speed: float
+    ratio_min: float
+    ratio_max: float
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """How a run of steps ended: ``status``, the steps done, the body or particle at
+    fault (-1 when none) and the value that failed (a speed [m/s], a volume ratio, a
+    volume [m^3], or the hash entries needed)."""
+
+    status: Status
+    steps_done: int
+    where: int
+    value: float
+
+
+class Solver:
+    """A method's loop in the compiled core with its options, buffers and history.
+
+    Subclasses set :attr:`integrators` (the schemes they step) and :attr:`option_names`,
+    build their core loop in
+    :meth:`_make_core` and step with :meth:`simulate`.
+    """
+
+    integrators: tuple[Integrator, ...] = ()
+    #: The keyword options of :class:`Simulator` this solver takes.
+    option_names: tuple[str, ...] = ()
+
+    def __init__(self, model, integrator: Integrator, *, threads: int = 1):
+        if integrator not in self.integrators:
+            raise ValueError(f"{type(self).__name__} does not step {integrator.name.lower()}")
+        self.model = model
+        self.integrator = integrator
+        self.threads = int(threads)
+        self._core = self._make_core(hash_capacity=None)
+
+    @property
+    def options(self) -> dict:
+        """This solver's own options, as keyword arguments of :class:`Simulator`."""
+        return {}
+
+    @property
+    def iterations(self) -> tuple[float, int]:
+        """(mean, most) inner iterations per step over the last run; (0, 0) without."""
+        return (0.0, 0)
+
+    def stable_step(self, mode: StiffestMode) -> float:
+        """The largest stable step [s] for the modes bounded by ``mode``
+        (``stability.mode_stable_step``)."""
+        return mode_stable_step(self.integrator, mode)
+
+    def grow_hash(self, entries: int) -> None:
+        """Give the surface contacts' spatial hash room for ``entries`` entries (a run
+        returned NEED_HASH); the solver's history does not survive the undone step."""
+        self._core = self._make_core(hash_capacity=int(entries))
+
+    def begin_run(self) -> None:
+        """Called once per :meth:`Simulator.run`, before its first :meth:`simulate`."""
+
+    def end_run(self) -> None:
+        """Called once per :meth:`Simulator.run`, after its last :meth:`simulate`."""
+
+    def _make_core(self, hash_capacity: int | None):
+        raise NotImplementedError
+
+    def _core_model(self):
+        return core_model(self.model)
+
+    def simulate(self, state, steps: int, dt: float, control, limits: RunLimits) -> RunResult:
+        """Advance ``state`` (its arrays in place) by at most ``steps`` steps of ``dt`` [s]
+        with the control's data; stops at the first failed check."""
+        raise NotImplementedError
+
+    @staticmethod
+    def _result(raw) -> RunResult:
+        status, done, where, value = raw
+        return RunResult(Status(status), int(done), int(where), float(value))
