@@ -547,3 +547,79 @@ def test_drag_power_is_never_positive_in_still_air():
     expected = -np.sum(0.5 * model.air_density * cd * area * np.abs(vn) ** 3)
     assert expected < 0.0
     assert drag.power(model, data, q, qd) == pytest.approx(expected, rel=1e-12)
+
+
+# -- reference steps of the implicit solvers ---------------------------------------------
+def _small() -> tuple[sb.Model, sb.Control, np.ndarray, np.ndarray]:
+    """A small ball (42 particles: dense matrices stay small) with a gas and an ambient
+    pressure, damping, bending springs, a pinned particle, an attachment, external forces
+    and a grab; a deformed, moving start (the pinned particle at rest)."""
+    b = sb.ModelBuilder(gravity=(0.0, -9.81, 0.0))
+    gas = sb.Gas.isothermal(25.0, ambient_pressure=10.0)
+    b.add_soft_body(sb.icosphere(1, radius=0.3, center=(0.0, 0.5, 0.0)), mass=0.5,
+                    stiffness=300.0, damping=0.4, gas=gas, bend_stiffness=10.0,
+                    bend_damping=0.05, pinned=[0])  # fmt: skip
+    b.add_attachment(5, anchor=(0.0, 1.2, 0.0), stiffness=40.0, damping=0.5, rest_length=0.3)
+    model = b.finalize()
+    control = model.control()
+    control.particle_f[:] = np.random.default_rng(1).normal(0.0, 0.2, control.particle_f.shape)
+    control.grab_particle = 20
+    control.grab_target = np.array([0.3, 0.9, 0.1])
+    control.grab_stiffness, control.grab_damping = 20.0, 0.2
+    q, qd = _state(model, 2)
+    qd[0] = 0.0
+    return model, control, q, qd
+
+
+def _simulator_step(model, control, q, qd, integrator, dt, **options):
+    state = model.state()
+    state.particle_q[:], state.particle_qd[:] = q, qd
+    sim = sb.Simulator(model, integrator=integrator, dt=dt, **options)
+    sim.step(state, control)
+    return state, sim
+
+
+def test_one_backward_euler_step_matches_the_dense_newton_step(simd):
+    """One step of Simulator(integrator="implicit_euler") equals the reference's dense
+    Newton step (M - h C - h^2 K) dv = h (f0 + K h v0), solved by numpy.linalg.solve: CG
+    stops at a residual |r| <= tol |b|, so |dv - dv_ref| <= tol |b| / sigma_min(M - h C -
+    h^2 K) (smallest singular value, from the dense matrix), and x1 differs by dt times
+    that."""
+    from softbody.reference import steps
+
+    model, control, q0, v0 = _small()
+    dt, tolerance = 5e-3, 1e-12
+    state, sim = _simulator_step(model, control, q0, v0, "implicit_euler", dt,
+                                 implicit_tolerance=tolerance,
+                                 implicit_max_iterations=2000)  # fmt: skip
+    expected = steps.backward_euler_step(model, ref.control_arrays(model, control), 0.0, dt,
+                                         q0, v0)  # fmt: skip
+    sigma_min = np.linalg.svd(expected.matrix, compute_uv=False)[-1]
+    bound = tolerance * np.linalg.norm(expected.rhs) / sigma_min
+    bound += ULPS * EPS * np.abs(expected.qd).max()  # the solves' own round-off
+    dv = expected.qd - v0
+    assert bound < 1e-9 * np.abs(dv).max()  # sharp against the change it checks
+    assert np.linalg.norm(state.particle_qd - expected.qd) <= bound
+    assert np.linalg.norm(state.particle_q - expected.q) <= dt * bound + ULPS * EPS
+    assert sim.solver_iterations[1] > 1  # CG ran
+
+
+@pytest.mark.parametrize("iterations", [1, 3])
+def test_one_projective_step_matches_the_dense_local_global_iterations(iterations, simd):
+    """One step of Simulator(integrator="projective") equals the reference's local-global
+    iterations with a dense solve of the global matrix: the factored and the dense solve
+    agree to round-off amplified by the matrix's condition number, ULPS eps cond(A) |x|
+    per iteration (and v1 = (x1 - x0) / dt that divided by dt)."""
+    from softbody.reference import steps
+
+    model, control, q0, v0 = _small()
+    dt = 5e-3
+    state, _ = _simulator_step(model, control, q0, v0, "projective", dt,
+                               projective_iterations=iterations)  # fmt: skip
+    x, v = steps.projective_step(model, ref.control_arrays(model, control), 0.0, dt, q0, v0,
+                                 iterations)  # fmt: skip
+    cond = np.linalg.cond(steps.projective_matrix(model, dt))
+    bound = iterations * ULPS * EPS * cond * np.abs(x).max()
+    assert bound < 1e-6 * np.abs(x - q0).max()  # sharp against the step's motion
+    assert np.abs(state.particle_q - x).max() <= bound
+    assert np.abs(state.particle_qd - v).max() <= bound / dt + ULPS * EPS * np.abs(v).max()
