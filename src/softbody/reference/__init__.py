@@ -7,7 +7,9 @@ model's spring arrays), :mod:`~softbody.reference.attachments`,
 :mod:`~softbody.reference.volume`, :mod:`~softbody.reference.gas` and
 :mod:`~softbody.reference.drag`; :mod:`~softbody.reference.forces` sums them in the order
 of ``core/solvers/explicit.hpp: eval_forces`` and :mod:`~softbody.reference.jacobians`
-applies (alpha_m M + alpha_c C + alpha_k K) p as the implicit solvers do.
+applies (alpha_m M + alpha_c C + alpha_k K) p as the implicit solvers do;
+:mod:`~softbody.reference.steps` takes one backward Euler step (a dense Newton step) and
+one projective-dynamics step (dense local-global iterations) on small meshes.
 
 Written for reading, not for speed: plain vectorised NumPy (``np.add.at`` scatters), one
 equation per function, no compiled code. Every function takes the model
@@ -28,6 +30,7 @@ from softbody.reference import (
     gravity,
     jacobians,
     springs,
+    steps,
     volume,
 )
 from softbody.reference._inputs import control_arrays
@@ -42,5 +45,6 @@ __all__ = [
     "gravity",
     "jacobians",
     "springs",
+    "steps",
     "volume",
 ]
