@@ -588,7 +588,7 @@ def test_one_backward_euler_step_matches_the_dense_newton_step(simd):
     Newton step (M - h C - h^2 K) dv = h (f0 + K h v0), solved by numpy.linalg.solve: CG
     stops at a residual |r| <= tol |b|, so |dv - dv_ref| <= tol |b| / sigma_min(M - h C -
     h^2 K) (smallest singular value, from the dense matrix), and x1 differs by dt times
-    that."""
+    that. The matrix is symmetric to round-off, as CG needs."""
     from softbody.reference import steps
 
     model, control, q0, v0 = _small()
@@ -598,7 +598,10 @@ def test_one_backward_euler_step_matches_the_dense_newton_step(simd):
                                  implicit_max_iterations=2000)  # fmt: skip
     expected = steps.backward_euler_step(model, ref.control_arrays(model, control), 0.0, dt,
                                          q0, v0)  # fmt: skip
-    sigma_min = np.linalg.svd(expected.matrix, compute_uv=False)[-1]
+    # CG's premise: the matrix is symmetric (the closed surface's pressure Hessian too)
+    a = expected.matrix
+    assert np.abs(a - a.T).max() <= ULPS * EPS * np.abs(a).max()
+    sigma_min = np.linalg.svd(a, compute_uv=False)[-1]
     bound = tolerance * np.linalg.norm(expected.rhs) / sigma_min
     bound += ULPS * EPS * np.abs(expected.qd).max()  # the solves' own round-off
     dv = expected.qd - v0
