@@ -115,9 +115,8 @@ def energies(model: Model, control: ControlData, t: float, volume: np.ndarray) -
 def force(model: Model, pressure: np.ndarray, gradient: np.ndarray) -> np.ndarray:
     """(P_b - P_a,b) dV/dx_i on every particle i of body b [N], shape (N, 3), from the
     bodies' pressures (B,) [Pa] and dV/dx (N, 3) [m^2]; zero on free particles."""
-    net = np.asarray(pressure) - model.body_ambient_pressure
-    body = model.particle_body
-    per_particle = np.where(body >= 0, net[np.maximum(body, 0)], 0.0)
+    net = np.append(np.asarray(pressure) - model.body_ambient_pressure, 0.0)
+    per_particle = net[model.particle_body]  # body -1 (a free particle) reads the 0 appended
     return per_particle[:, None] * gradient
 
 
