@@ -8,8 +8,10 @@ import numpy as np
 
 from softbody import _core
 from softbody.core import core_model
-from softbody.forces.springs import attachment_energy, spring_energy
-from softbody.gas import gas_energy
+from softbody.reference import attachments as ref_attachments
+from softbody.reference import gas as ref_gas
+from softbody.reference import gravity as ref_gravity
+from softbody.reference import springs as ref_springs
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
 from softbody.sim.state import State, kernel_input
@@ -32,12 +34,7 @@ def _gas_values(model: Model, time: float, control: Control | None) -> np.ndarra
     """Each body's driving gas value at ``time`` [s]: the control's override where
     finite, else its piecewise-linear schedule (held before the first and after the last
     point), else the model's value; shape (B,)."""
-    override = _control(model, control).gas_override
-    values = model.body_gas_value.copy()
-    for b, (s0, s1) in enumerate(model.body_schedule_range):
-        if s1 > s0:
-            values[b] = np.interp(time, model.schedule_time[s0:s1], model.schedule_value[s0:s1])
-    return np.where(np.isfinite(override), override, values)
+    return ref_gas.driving_values(model, _control(model, control), time)
 
 
 def body_volume_by(model: Model, state: State, method: str) -> np.ndarray:
@@ -160,38 +157,20 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
     in_body = pb >= 0
 
     kin = 0.5 * m * np.einsum("ij,ij->i", qd, qd)
-    grav = -m * (q @ model.gravity)
-    spr = spring_energy(q, model.spring_indices, model.spring_rest_length, model.spring_stiffness)
-    anchors = (
-        model.attachment_anchor
-        if control is None
-        else np.asarray(control.attachment_anchor, dtype=np.float64)
-    )
-    att = attachment_energy(
-        q,
-        model.attachment_particle,
-        anchors,
-        model.attachment_rest_length,
-        model.attachment_stiffness,
-    )
+    data = _control(model, control)
+    grav = ref_gravity.energies(model, q)
+    spr = ref_springs.energies(model, q)
+    att = ref_attachments.energies(model, data, q)
     att_body = pb[model.attachment_particle]
 
     def per_body(values, owner):
         keep = owner >= 0
         return np.bincount(owner[keep], weights=values[keep], minlength=bodies)
 
+    # each body's gas energy at its volume by its own method; an open surface (cloth)
+    # holds no gas: the work of its wind pressure is not counted
     volume = _gas(model, state, control)[0]
-    values = _gas_values(model, float(state.time), control)
-    gas = gas_energy(
-        model.body_gas_law,
-        values,
-        model.body_gas_gamma,
-        model.body_gas_reference_volume,
-        model.body_ambient_pressure,
-        volume,
-    )
-    # an open surface (cloth) holds no gas: the work of its wind pressure is not counted
-    gas = np.where(model.body_closed == 1, gas, 0.0)
+    gas = ref_gas.energies(model, data, float(state.time), volume)
     return Energies(
         kinetic=float(kin.sum()),
         gravitational=float(grav.sum()),

@@ -1,0 +1,82 @@
+"""All forces of a state: the list of physics terms of ``core/solvers/explicit.hpp:
+eval_forces``, summed in its order, and the potential energy of the conservative ones.
+
+    f = m g                              gravity
+      + sum_s springs                    edges, bending and user springs (damped Hooke)
+      + (P - P_a) dV/dx                  gas, P by each body's law at its volume (method)
+      + attachments                      springs to anchors
+      + Control.particle_f               external forces
+      + grab spring                      a grabbed particle pulled to a target
+      + drag                             air drag on faces
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from softbody.reference import attachments, drag, external, gas, gravity, springs, volume
+from softbody.sim.control import ControlData
+from softbody.sim.model import Model
+
+
+class Forces(NamedTuple):
+    """What ``softbody._core.eval_forces`` returns, in its order."""
+
+    force: np.ndarray  # (N, 3) [N]
+    volume: np.ndarray  # (B,) [m^3], each body by its own method
+    pressure: np.ndarray  # (B,) absolute [Pa]
+    volume_gradient: np.ndarray  # (N, 3) exact dV/dx [m^2]
+
+
+def gas_state(
+    model: Model, control: ControlData, t: float, q: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(volume (B,) [m^3] by each body's method, pressure (B,) [Pa], exact dV/dx (N, 3)
+    [m^2]) at time t [s] and positions q (N, 3): what ``softbody._core.eval_volumes``
+    returns."""
+    v = volume.volumes(model, q)
+    return v, gas.pressures(model, control, t, v), volume.gradient(model, q)
+
+
+def terms(
+    model: Model, control: ControlData, t: float, q: np.ndarray, qd: np.ndarray
+) -> dict[str, np.ndarray]:
+    """Each term's force (N, 3) [N] at time t [s], q, qd (N, 3), by name, in the order
+    the core adds them."""
+    _, pressure, grad = gas_state(model, control, t, q)
+    return {
+        "gravity": gravity.force(model),
+        "springs": springs.force(model, q, qd),
+        "gas": gas.force(model, pressure, grad),
+        "attachments": attachments.force(model, control, q, qd),
+        "external": external.force(model, control),
+        "grab": external.grab_force(control, q, qd),
+        "drag": drag.force(model, control, q, qd),
+    }
+
+
+def eval_forces(
+    model: Model, control: ControlData, t: float, q: np.ndarray, qd: np.ndarray
+) -> Forces:
+    """The total force and the gas state at time t [s] for q, qd (N, 3)."""
+    v, pressure, grad = gas_state(model, control, t, q)
+    f = np.zeros_like(q, dtype=np.float64)
+    for term in terms(model, control, t, q, qd).values():
+        f += term
+    return Forces(f, v, pressure, grad)
+
+
+def potential_energy(model: Model, control: ControlData, t: float, q: np.ndarray) -> float:
+    """Energy [J] of the conservative terms at q (N, 3): gravity, springs, attachments,
+    the grab spring and the closed bodies' gas (at their exact volumes). At zero
+    velocities, without drag and external forces, and with every body closed and of the
+    exact volume, -dE/dx is the total force."""
+    return (
+        gravity.energy(model, q)
+        + springs.energy(model, q)
+        + attachments.energy(model, control, q)
+        + external.grab_energy(control, q)
+        + gas.potential_energy(model, control, t, q)
+    )
