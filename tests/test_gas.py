@@ -7,7 +7,7 @@ import pytest
 
 import softbody as sb
 from conftest import ball_model
-from softbody.gas import gas_energy
+from softbody.reference.gas import law_energy
 
 
 def scaled_state(model, s):
@@ -71,7 +71,7 @@ def test_gas_energy_derivative_is_minus_net_pressure(law, gamma):
     law_a = np.full(3, int(law))
 
     def energy(x):
-        return gas_energy(law_a, value, gamma, vref, amb, x)
+        return law_energy(law_a, value, gamma, vref, amb, x)
 
     de = (energy(v + h) - energy(v - h)) / (2 * h)
     p = {

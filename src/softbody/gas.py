@@ -155,25 +155,3 @@ class Gas:
             ambient_pressure=ambient_pressure,
             schedule=schedule,
         )
-
-
-def gas_energy(
-    law: np.ndarray,
-    value: np.ndarray,
-    gamma: np.ndarray,
-    reference_volume: np.ndarray,
-    ambient_pressure: np.ndarray,
-    volume: np.ndarray,
-) -> np.ndarray:
-    """Potential energy of each body's gas [J] (table in the module docstring), shape (B,).
-
-    Its negative derivative with respect to volume is the net pressure P - P_ambient.
-    """
-    law = np.asarray(law)
-    v = np.asarray(volume, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        iso = -value * np.log(v)
-        fixed = -value * v
-        adi = value * reference_volume ** (gamma - 1.0) * v ** (1.0 - gamma) / (gamma - 1.0)
-    e = np.where(law == GasLaw.ISOTHERMAL, iso, np.where(law == GasLaw.FIXED_PRESSURE, fixed, adi))
-    return e + ambient_pressure * v

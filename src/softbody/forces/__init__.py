@@ -1,1 +1,0 @@
-"""NumPy forms of force terms used outside the compiled core."""
