@@ -105,8 +105,7 @@ def _run(args) -> int:
     print(
         f"simulated {summary['duration_s']:.3g} s in {t['simulation']:.2f} s of compute "
         f"({t['simulated_per_wall_second']:.1f}x real time), rendered in "
-        f"{t['rendering']:.2f} s (kernels compiled or loaded in "
-        f"{t['kernel_compile_or_load']:.1f} s)"
+        f"{t['rendering']:.2f} s (first step {t['kernel_compile_or_load']:.2f} s)"
     )
     for path in summary["files"]:
         print(f"wrote {path}")

@@ -242,6 +242,11 @@ def run_scene(
     limits = {"max_steps": max_steps, "max_frames": max_frames}
     if not auto:  # refuse an endless run at once, before the stability analysis
         plan_frames(duration, settings.fps, dt, **limits)
+    # say what happens before the first step: the stability estimate (Lanczos runs) and
+    # the solver's set-up (multigrid hierarchy, projective factor) take seconds on large
+    # meshes, and a silent terminal looks hung
+    _say(progress_stream, f"preparing {integrator}: stability estimate and solver set-up")
+    t_setup = time.perf_counter()
     with warnings.catch_warnings():
         if strict_stability:
             warnings.simplefilter("error", StabilityWarning)
@@ -254,6 +259,11 @@ def run_scene(
         )
     plan = plan_frames(duration, settings.fps, sim.dt, auto=auto, **limits)
     _check_frame_memory(plan, scene, outputs)
+    _say(
+        progress_stream,
+        f"ready in {time.perf_counter() - t_setup:.1f} s: dt = {sim.dt * 1e3:.3g} ms"
+        f"{' (auto)' if auto else ''}, {plan.total_steps:,} steps, {plan.frame_count + 1} frames",
+    )
 
     out = Path(out)
     prepare(out)
@@ -275,6 +285,13 @@ def run_scene(
             return summary
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _say(stream, text: str) -> None:
+    """One status line on ``stream`` (nothing when it is None)."""
+    if stream is not None:
+        stream.write(text + "\n")
+        stream.flush()
 
 
 def _simulate_and_write(
