@@ -28,6 +28,7 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
+    "sphinx-mathjax-offline",  # MathJax ships with the site: equations render offline too
     "sphinx.ext.viewcode",
     "softbody_docs",
 ]

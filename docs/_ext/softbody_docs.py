@@ -100,7 +100,12 @@ def scene_keys() -> str:
         required = set(node.get("required", []))
         lines.extend(["| key | type | default | bounds | meaning |", "|---|---|---|---|---|"])
         for key, prop in node.get("properties", {}).items():
-            default = "required" if key in required else f"`{json.dumps(prop.get('default'))}`"
+            if key in required:
+                default = "required"
+            elif isinstance(prop.get("default"), dict):
+                default = "its table's defaults"
+            else:
+                default = f"`{json.dumps(prop.get('default'))}`"
             lines.append(
                 f"| `{key}` | {_cell(_type(prop, defs))} | {_cell(default)} | "
                 f"{_cell(_bounds(prop))} | {_cell(prop.get('description', ''))} |"
