@@ -257,6 +257,22 @@ def test_console_script_runs_without_terminal(tmp_path):
     assert (tmp_path / "hanging-ball-summary.json").exists()
 
 
+def test_run_says_what_it_prepares_before_the_first_step(tmp_path, capsys):
+    """Start-up is never silent: before the first progress line ``softbody run`` prints
+    the model's size, what it is preparing, and when it is ready, with the step and the
+    step count it chose (dt = 1 ms from the scene, 0.2 s: 200 or more steps)."""
+    code = main(["run", "hanging-ball", "--duration", "0.2", "--no-video", "--no-gif",
+                 "--out", str(tmp_path)])  # fmt: skip
+    assert code == 0
+    lines = capsys.readouterr().out.splitlines()
+    first_progress = next(k for k, line in enumerate(lines) if re.match(r"^\s*0\.0% ", line))
+    head = "\n".join(lines[:first_progress])
+    assert "486 particles" in head
+    assert "preparing midpoint" in head
+    ready = re.search(r"ready in [\d.]+ s: dt = 1 ms, ([\d,]+) steps", head)
+    assert ready and int(ready.group(1).replace(",", "")) >= 200
+
+
 def test_readme_test_command_is_what_ci_runs():
     """.ci/run runs exactly the README's test command."""
     readme = (ROOT / "README.md").read_text()
