@@ -527,7 +527,7 @@ class _BodyBase(Table):
         ge=0,
         le=1e3,
         description="quadratic air drag coefficient C_d of every face [1] (0: none; "
-        "explicit integrators only)",
+        "every integrator)",
     )
 
 
