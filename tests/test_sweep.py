@@ -263,12 +263,14 @@ def test_metrics_of_a_known_history():
     h = History(t=t, volume=np.array([[2.0], [1.0], [1.5], [2.0], [2.0], [3.0]]),
                 rest_volume=np.array([2.0]), pressure=np.ones((6, 1)), center_of_mass=com,
                 kinetic=np.array([[0.0], [10.0], [1.0], [0.001], [0.0], [0.0]]),
+                extent=np.tile([1.0, 3.0, 2.0], (6, 1, 1)),
                 energy=np.array([5.0, 5.0, 5.0, 4.0, 4.0, 4.0]),
                 collider_impulse=np.zeros((6, 0, 3)), body_names=["b"])  # fmt: skip
     m = compute_metrics(h)
     assert m["body0.rebound_ratio"] == pytest.approx(0.5)
     assert m["body0.rebound_height"] == pytest.approx(0.6)
     assert m["body0.sag"] == pytest.approx(0.55)
+    assert m["body0.aspect_final"] == 2.0  # 3 / ((1 + 2) / 2)
     assert (m["body0.volume_ratio_min"], m["body0.volume_ratio_final"]) == (0.5, 1.5)
     assert m["body0.settling_time"] == 3.0
     assert m["energy_drift"] == -1.0 and m["energy_drift_relative"] == -0.2

@@ -15,7 +15,7 @@ import numpy as np
 from softbody.sweep.spec import SweepSpec
 
 #: Metrics drawn by default (those present and not constant), body 0's first.
-DEFAULT = ("body0.sag", "body0.volume_ratio_final", "body0.rebound_ratio",
+DEFAULT = ("body0.sag", "body0.aspect_final", "body0.volume_ratio_final", "body0.rebound_ratio",
            "body0.settling_time", "body0.pressure_final", "energy_drift_relative")  # fmt: skip
 MAX_METRICS = 6
 

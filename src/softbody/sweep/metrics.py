@@ -28,6 +28,8 @@ class History:
     """Body gas pressures [Pa], shape (T, B)."""
     center_of_mass: np.ndarray
     """Body centres of mass [m], shape (T, B, 3)."""
+    extent: np.ndarray
+    """Size of each body's axis-aligned bounding box [m], shape (T, B, 3)."""
     kinetic: np.ndarray
     """Body kinetic energies [J], shape (T, B)."""
     energy: np.ndarray
@@ -71,6 +73,7 @@ def body_metrics(h: History, b: int) -> dict[str, float]:
     ratio = h.volume[:, b] / h.rest_volume[b]
     com = h.center_of_mass[:, b]
     apex, recovered = _rebound(com[:, 1])
+    size = h.extent[-1, b]
     return {
         "volume_ratio_final": float(ratio[-1]),
         "volume_ratio_min": float(np.min(ratio)),
@@ -81,6 +84,7 @@ def body_metrics(h: History, b: int) -> dict[str, float]:
         "com_y_final": float(com[-1, 1]),
         "com_z_final": float(com[-1, 2]),
         "sag": float(com[0, 1] - com[-1, 1]),
+        "aspect_final": float(size[1] / max(0.5 * (size[0] + size[2]), 1e-300)),
         "rebound_height": apex,
         "rebound_ratio": recovered,
         "settling_time": _settling_time(h.t, h.kinetic[:, b]),
@@ -98,6 +102,7 @@ BODY_METRICS = {
     "com_y_final": "centre of mass y (up) at the end [m]",
     "com_z_final": "centre of mass z at the end [m]",
     "sag": "fall of the centre of mass from start to end [m]",
+    "aspect_final": "height over mean width (y extent over the mean of x and z) at the end",
     "rebound_height": "apex of the centre of mass after its lowest point [m]",
     "rebound_ratio": "(apex - lowest) / (start - lowest) of the centre of mass height",
     "settling_time": "time after which the kinetic energy stays below 1e-3 of its peak [s]",

@@ -74,13 +74,18 @@ def run_one(
             build_s = time.perf_counter() - t_start
             state = model.state()
             t, vol, pres, com, kin, energy, impulse = [], [], [], [], [], [], []
+            extent = []
             collider_count = model.collider_count
+            owner = np.asarray(model.particle_body)
+            members = [np.flatnonzero(owner == b) for b in range(model.body_count)]
 
             def sample() -> None:
                 t.append(state.time)
                 vol.append(body_volume(model, state))
                 pres.append(body_pressure(model, state))
                 com.append(body_center_of_mass(model, state))
+                q = state.particle_q
+                extent.append([np.ptp(q[m], axis=0) for m in members])
                 e = energies(model, state)
                 kin.append(e.body_kinetic)
                 energy.append(e.total)
@@ -109,6 +114,7 @@ def run_one(
             "volume": np.asarray(vol, dtype=float).reshape(len(t), -1),
             "pressure": np.asarray(pres, dtype=float).reshape(len(t), -1),
             "center_of_mass": np.asarray(com, dtype=float).reshape(len(t), -1, 3),
+            "extent": np.asarray(extent, dtype=float).reshape(len(t), -1, 3),
             "kinetic": np.asarray(kin, dtype=float).reshape(len(t), -1),
             "energy": np.asarray(energy, dtype=float),
             "collider_impulse": np.asarray(impulse, dtype=float).reshape(len(t), -1, 3),
@@ -156,6 +162,8 @@ class SweepResult:
     errors: int
     wall_time: float
     """Seconds this call took, cluster start and figure included."""
+    cluster_start: float = 0.0
+    """Seconds from asking for the cluster to a client with workers (0 without Dask)."""
 
     def read(self):
         """The table as a ``pyarrow.Table`` (``.to_pandas()`` for a DataFrame)."""
@@ -247,11 +255,12 @@ def run_sweep(
                 last = time.perf_counter()
             bar.update(row["status"] != "ok")
 
+        started = 0.0
         if todo and workers == 0 and address is None:
             for run in todo:
                 arrived(*run_one(run, *args))
         elif todo:
-            _run_on_dask(todo, args, workers, address, arrived, progress)
+            started = _run_on_dask(todo, args, workers, address, arrived, progress)
         store.flush()
         rows = store.rows
     figure_path = None
@@ -274,15 +283,18 @@ def run_sweep(
         blew_up=status.count("blew up"),
         errors=status.count("error"),
         wall_time=time.perf_counter() - t_start,
+        cluster_start=started,
     )
 
 
-def _run_on_dask(todo: list[Run], args: tuple, workers, address, arrived, progress) -> None:
-    """Submit every run to a Dask cluster and hand each result to ``arrived`` as it comes."""
+def _run_on_dask(todo: list[Run], args: tuple, workers, address, arrived, progress) -> float:
+    """Submit every run to a Dask cluster and hand each result to ``arrived`` as it comes;
+    the seconds it took to have a client with workers."""
     import logging
 
     from dask.distributed import Client, LocalCluster, as_completed
 
+    t0 = time.perf_counter()
     cluster = None
     if address is None:
         n = workers or os.cpu_count() or 1
@@ -300,6 +312,8 @@ def _run_on_dask(todo: list[Run], args: tuple, workers, address, arrived, progre
         except OSError as exc:
             raise ValueError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
     try:
+        client.wait_for_workers(1, timeout=120)
+        started = time.perf_counter() - t0
         try:
             import bokeh  # noqa: F401 - Dask's dashboard needs it
 
@@ -326,3 +340,4 @@ def _run_on_dask(todo: list[Run], args: tuple, workers, address, arrived, progre
         client.close()
         if cluster is not None:
             cluster.close()
+    return started

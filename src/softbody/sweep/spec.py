@@ -288,6 +288,8 @@ def _scene_data(scene: str, folder: Path | None) -> tuple[str, str, dict, Path |
         raise SweepError(f"{scene}: not valid TOML ({exc})") from None
     except loader.SceneError as exc:
         raise SweepError(str(exc)) from None
+    if isinstance(data.get("name"), str) and data["name"]:
+        name = data["name"]  # the scene's own name, as `softbody run` shows it
     return scene, name, data, base
 
 
