@@ -10,9 +10,10 @@ each swept over its gas amount nRT, in this process without Dask (``workers=0``:
 runs one after another, no scheduler) and on a ``LocalCluster`` of 1 and 2 worker
 processes. For each it records the wall time of the whole sweep, the cluster's start
 (until a client has a worker),
-runs per minute (the cluster's start excluded), and from the table's timings the mean
-per run of the model build, the simulation (with its history samples) and the rest:
-scheduling, transfer and writing, (wall - start) x workers / runs - build - simulation,
+runs per minute over the span from the first submission to the last result (cluster
+start and stop excluded), and from the table's timings the mean per run of the model
+build, the simulation (with its history samples) and the rest: scheduling, transfer
+and writing, span x workers / runs - build - simulation,
 and the 1-minute load average before it (the machine is shared: other work takes cores).
 
 Writes results/sweep.{json,png}. Usage: python benchmarks/sweep.py
@@ -51,6 +52,9 @@ LARGE_RUNS = 8
 #: label: (icosphere subdivisions, runs, time step [s] under midpoint's stable estimate)
 SCENES = {"small": (1, SMALL_RUNS, 1e-3), "large": (4, LARGE_RUNS, 2e-4)}
 WORKERS = [0, 1, 2]
+#: Each sweep is done this many times; the one with the shortest span is kept (the
+#: machine is shared: the others are slowed by other work)
+REPEATS = 2
 
 
 def main() -> None:
@@ -64,14 +68,20 @@ def main() -> None:
                     str(scene), vary={"bodies.0.gas.nrt": list(np.linspace(5.0, 20.0, runs))}
                 )
                 load = os.getloadavg()[0]
-                out = Path(tmp) / f"{label}-{workers}"
-                result = sweeps.run_sweep(spec, out, workers=workers, figure=False, progress=None)
+                best = None
+                for k in range(REPEATS):
+                    out = Path(tmp) / f"{label}-{workers}-{k}"
+                    result = sweeps.run_sweep(spec, out, workers=workers, figure=False,
+                                              progress=None)  # fmt: skip
+                    if best is None or result.run_span < best.run_span:
+                        best = result
+                result = best
                 rows = result.read().to_pylist()
                 assert result.ok == runs, [r["message"] for r in rows if r["status"] != "ok"]
                 build = float(np.mean([r["build_time"] for r in rows]))
                 sim = float(np.mean([r["sim_time"] for r in rows]))
                 start = result.cluster_start
-                busy = max(result.wall_time - start, 1e-9)
+                busy = max(result.run_span, 1e-9)
                 per_run = busy * max(workers, 1) / runs
                 record = {
                     "scene": label,
@@ -81,6 +91,7 @@ def main() -> None:
                     "workers": workers,
                     "wall_s": result.wall_time,
                     "cluster_start_s": start,
+                    "run_span_s": result.run_span,
                     "runs_per_minute": 60.0 * runs / busy,
                     "build_s_per_run": build,
                     "simulation_s_per_run": sim,
@@ -125,7 +136,7 @@ def plot(data: dict, path: Path) -> None:
     ticks = [4 * k + i for k in range(len(SCENES)) for i in range(len(WORKERS))]
     for ax in axes:
         ax.set_xticks(ticks, [names[w] for _ in SCENES for w in WORKERS], fontsize=8)
-    axes[0].set_ylabel("runs per minute (cluster start excluded)")
+    axes[0].set_ylabel("runs per minute (first submission to last result)")
     axes[0].legend(fontsize=8)
     axes[1].set_ylabel("% of a run's time (busy time x workers / runs)")
     axes[1].legend(fontsize=8)

@@ -164,6 +164,8 @@ class SweepResult:
     """Seconds this call took, cluster start and figure included."""
     cluster_start: float = 0.0
     """Seconds from asking for the cluster to a client with workers (0 without Dask)."""
+    run_span: float = 0.0
+    """Seconds from the first run's start (its submission) to the last result's arrival."""
 
     def read(self):
         """The table as a ``pyarrow.Table`` (``.to_pandas()`` for a DataFrame)."""
@@ -255,12 +257,14 @@ def run_sweep(
                 last = time.perf_counter()
             bar.update(row["status"] != "ok")
 
-        started = 0.0
+        started = span = 0.0
         if todo and workers == 0 and address is None:
+            t0 = time.perf_counter()
             for run in todo:
                 arrived(*run_one(run, *args))
+            span = time.perf_counter() - t0
         elif todo:
-            started = _run_on_dask(todo, args, workers, address, arrived, progress)
+            started, span = _run_on_dask(todo, args, workers, address, arrived, progress)
         store.flush()
         rows = store.rows
     figure_path = None
@@ -284,12 +288,16 @@ def run_sweep(
         errors=status.count("error"),
         wall_time=time.perf_counter() - t_start,
         cluster_start=started,
+        run_span=span,
     )
 
 
-def _run_on_dask(todo: list[Run], args: tuple, workers, address, arrived, progress) -> float:
+def _run_on_dask(
+    todo: list[Run], args: tuple, workers, address, arrived, progress
+) -> tuple[float, float]:
     """Submit every run to a Dask cluster and hand each result to ``arrived`` as it comes;
-    the seconds it took to have a client with workers."""
+    (seconds to a client with workers, seconds from the first submission to the last
+    result)."""
     import logging
 
     from dask.distributed import Client, LocalCluster, as_completed
@@ -323,6 +331,7 @@ def _run_on_dask(todo: list[Run], args: tuple, workers, address, arrived, progre
         info = client.scheduler_info()
         _say(progress, f"sweep: {len(info.get('workers', {}))} Dask workers; dashboard {link}")
         futures = {}
+        t_submit = time.perf_counter()
         for run in todo:
             future = client.submit(run_one, run, *args, key=f"softbody-run-{run.run_id}",
                                    pure=False)  # fmt: skip
@@ -336,8 +345,9 @@ def _run_on_dask(todo: list[Run], args: tuple, workers, address, arrived, progre
                        "message": f"{type(exc).__name__}: {_one_line(exc)}"}  # fmt: skip
                 series = None
             arrived(row, series)
+        span = time.perf_counter() - t_submit
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
-    return started
+    return started, span
