@@ -140,6 +140,12 @@ def test_blow_up_and_error_are_rows(scene, tmp_path):
     row = next(iter(_table(tmp_path / "bad").values()))
     assert bad.errors == 1 and row["status"] == "error"
     assert row["message"] == "metric: ZeroDivisionError: no"
+    # the metric fixed, a rerun runs the error again and its row is replaced
+    fixed = sweeps.sweep(str(scene), tmp_path / "bad", vary={"bodies.0.mass": [1.0]},
+                         user_metrics={"broken": lambda h: 1.0}, workers=0, figure=False,
+                         progress=None)  # fmt: skip
+    rows = list(_table(tmp_path / "bad").values())
+    assert (fixed.executed, fixed.ok, len(rows), rows[0]["broken"]) == (1, 1, 1, 1.0)
 
 
 def test_killed_worker_run_is_retried(scene, tmp_path):

@@ -232,12 +232,32 @@ def run_sweep(
     (``tcp://host:8786``) to use instead. ``progress``: a text stream for progress lines
     (None: quiet).
     """
-    from softbody.sweep.store import FIGURE, SERIES, TABLE, SweepStore
-
     t_start = time.perf_counter()
     out = Path(out)
     if workers is not None and (isinstance(workers, bool) or workers < 0):
         raise ValueError(f"workers must be a whole number >= 0, got {workers!r}")
+    # a cluster given by address is reached first: an unreachable one writes nothing
+    remote = _connect(address) if address is not None else None
+    try:
+        return _sweep_into(spec, out, workers, remote, figure, progress, t_start)
+    finally:
+        if remote is not None:
+            remote.close()
+
+
+def _connect(address: str):
+    """A Dask client of the scheduler at ``address``; ValueError when it cannot be reached."""
+    from dask.distributed import Client
+
+    try:
+        return Client(address, timeout=10)
+    except (OSError, TimeoutError) as exc:
+        raise ValueError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+
+
+def _sweep_into(spec, out, workers, remote, figure, progress, t_start) -> SweepResult:
+    from softbody.sweep.store import FIGURE, SERIES, TABLE, SweepStore
+
     with SweepStore(out, spec) as store:
         finished = store.finished
         todo = [r for r in spec.runs if r.run_id not in finished]
@@ -258,13 +278,13 @@ def run_sweep(
             bar.update(row["status"] != "ok")
 
         started = span = 0.0
-        if todo and workers == 0 and address is None:
+        if todo and workers == 0 and remote is None:
             t0 = time.perf_counter()
             for run in todo:
                 arrived(*run_one(run, *args))
             span = time.perf_counter() - t0
         elif todo:
-            started, span = _run_on_dask(todo, args, workers, address, arrived, progress)
+            started, span = _run_on_dask(todo, args, workers, remote, arrived, progress)
         store.flush()
         rows = store.rows
     figure_path = None
@@ -293,18 +313,19 @@ def run_sweep(
 
 
 def _run_on_dask(
-    todo: list[Run], args: tuple, workers, address, arrived, progress
+    todo: list[Run], args: tuple, workers, remote, arrived, progress
 ) -> tuple[float, float]:
-    """Submit every run to a Dask cluster and hand each result to ``arrived`` as it comes;
-    (seconds to a client with workers, seconds from the first submission to the last
-    result)."""
+    """Submit every run to a Dask cluster (``remote``, a client, or else a new
+    ``LocalCluster`` of ``workers`` processes) and hand each result to ``arrived`` as it
+    comes; (seconds to a client with workers, seconds from the first submission to the
+    last result)."""
     import logging
 
     from dask.distributed import Client, LocalCluster, as_completed
 
     t0 = time.perf_counter()
     cluster = None
-    if address is None:
+    if remote is None:
         n = workers or os.cpu_count() or 1
         cluster = LocalCluster(
             n_workers=n,
@@ -315,10 +336,7 @@ def _run_on_dask(
         )
         client = Client(cluster)
     else:
-        try:
-            client = Client(address, timeout=10)
-        except OSError as exc:
-            raise ValueError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+        client = remote
     try:
         client.wait_for_workers(1, timeout=120)
         started = time.perf_counter() - t0
@@ -347,7 +365,7 @@ def _run_on_dask(
             arrived(row, series)
         span = time.perf_counter() - t_submit
     finally:
-        client.close()
-        if cluster is not None:
+        if cluster is not None:  # a remote client is closed by its opener
+            client.close()
             cluster.close()
     return started, span

@@ -142,13 +142,15 @@ class SweepStore:
     # -- writing -------------------------------------------------------------------------
     @property
     def finished(self) -> set[str]:
-        """Run ids already in the table."""
-        return {r["run_id"] for r in self.rows}
+        """Run ids in the table with a result (``ok`` or ``blew up``): a rerun skips these
+        and runs the errors again (a lost worker, a metric since fixed)."""
+        return {r["run_id"] for r in self.rows if r.get("status") != "error"}
 
     def add(self, row: dict, series: dict[str, np.ndarray] | None) -> None:
         """Queue one run's row and series (written at the next :meth:`flush`)."""
         self._pending_rows.append(row)
-        if series is not None:
+        # an error row keeps no series, so that its rerun replaces the row and nothing else
+        if series is not None and row.get("status") != "error":
             self._pending_series.append((row["run_id"], series))
 
     @property
@@ -177,7 +179,9 @@ class SweepStore:
             for r in rows:
                 r["series_file"] = name if r["run_id"] in with_series else None
         order = {run.run_id: i for i, run in enumerate(self.spec.runs)}
-        every = sorted(self.rows + rows, key=lambda r: order.get(r["run_id"], len(order)))
+        new = {r["run_id"] for r in rows}
+        kept = [r for r in self.rows if r["run_id"] not in new]  # errors that were rerun
+        every = sorted(kept + rows, key=lambda r: order.get(r["run_id"], len(order)))
         table = _table(every)
         _atomic(self.out / TABLE, lambda tmp: pq.write_table(table, tmp))
         self.rows = every
