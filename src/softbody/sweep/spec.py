@@ -163,7 +163,10 @@ def parse_values(text: str, where: str) -> list | dict:
 
 
 def _values(spec: Any, where: str) -> list:
-    """A grid entry of ``[vary]``: a list, or a range table {low, high, count, log}."""
+    """A grid entry of ``[vary]``: a list (a tuple or NumPy array is one too), or a range
+    table {low, high, count, log}."""
+    if isinstance(spec, np.ndarray | tuple):
+        spec = np.asarray(spec).tolist() if isinstance(spec, np.ndarray) else list(spec)
     if isinstance(spec, list):
         if not spec:
             raise SweepError(f"{where}: the list of values is empty")
