@@ -178,7 +178,7 @@ struct ExplicitBuffers {
     ContactBuffers contact;
 };
 
-/// The implicit schemes' multigrid hierarchy (softbody.integrators.multigrid.Multigrid):
+/// The implicit schemes' multigrid hierarchy (softbody.solvers.multigrid.Multigrid):
 /// views of the arrays Python built (module.cpp checks every offset and index once), and
 /// the V-cycle's scratch, owned by the solver. Level l has level_size[l] unknowns; its
 /// matrix A_l is CSR at rows a_row_offset[l] of a_indptr and entries a_nz_offset[l] of
@@ -242,8 +242,8 @@ struct ImplicitBuffers {
     ContactBuffers contact;
 };
 
-/// Projective dynamics' factored global matrix A = P^T L D L^T P (softbody.integrators.
-/// projective.Projective; module.cpp checks its structure once). perm[r] is the particle at
+/// Projective dynamics' factored global matrix A = P^T L D L^T P (softbody.solvers.
+/// factor.Projective; module.cpp checks its structure once). perm[r] is the particle at
 /// row r; inv_diag = 1 / diag(D). L (unit lower triangular) is stored by supernodes: node s
 /// holds columns [node_col[s], node_col[s + 1]), its rows node_row[node_row_ptr[s] ..
 /// node_row_ptr[s + 1]) (its own columns first, then those below), and its values a dense
@@ -274,7 +274,7 @@ struct ProjectiveBuffers {
     ContactBuffers contact;
 };
 
-/// Outcome of a run of steps (the codes of softbody.integrators.loop).
+/// Outcome of a run of steps (softbody.solvers.Status).
 enum Status : int {
     OK = 0,
     NONFINITE = 1,   // a position or velocity became NaN or infinite

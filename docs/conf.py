@@ -48,6 +48,8 @@ nb_merge_streams = True
 
 autodoc_default_options = {"members": True}
 autodoc_member_order = "bysource"
+# softbody.sweep's Dask and pyarrow come with the sweep extra, not with the docs one
+autodoc_mock_imports = ["dask", "distributed", "pyarrow"]
 autodoc_typehints = "description"
 # the docstrings give each parameter's type with its unit and shape; the hints only fill
 # in what a docstring leaves out, and NumPy's ArrayLike stays one word

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -86,6 +87,9 @@ def test_guide_code_blocks_run(page, tmp_path):
     """Every ```python block of the hand-written pages runs as written, each page's
     blocks in order in one fresh process (the tutorials' cells run in the build)."""
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / page).read_text(), flags=re.S)
+    # the sweep page's examples name the sweep files of examples/sweeps as if run there
+    for example in (ROOT / "examples" / "sweeps").glob("*.toml"):
+        shutil.copyfile(example, tmp_path / example.name)
     proc = subprocess.run(
         [sys.executable, "-c", "\n".join(blocks)], capture_output=True, text=True,
         timeout=300, cwd=tmp_path,

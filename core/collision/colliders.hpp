@@ -208,9 +208,27 @@ inline Hit contact(index kind, V3 c, const double* r, V3 h, V3 p, V3 p0) {
     return {true, c + lx * ax + ly * ay + lz * az, n};
 }
 
+/// A particle found at hit.x with normal hit.n: moved there, and its velocity relative to
+/// the surface (moving at u) reflected and scaled by the restitution e in the normal
+/// direction, its tangential part scaled by keep = 1 - friction; j gathers the impulse the
+/// collider receives [N s].
+inline void respond(const Model& m, index i, const Hit& hit, V3 u, double e, double keep,
+                    double* q, double* qd, V3& j) {
+    const V3 v_old = load(qd, i);
+    const V3 v = v_old - u;
+    const double vn = dot(v, hit.n);
+    store(q, i, hit.x);
+    if (vn >= 0.0) return;  // separating already: only the position is corrected
+    const V3 tangent = v - vn * hit.n;
+    const V3 v_new = u - (e * vn) * hit.n + keep * tangent;
+    j = j - m.particle_mass[i] * (v_new - v_old);
+    store(qd, i, v_new);
+}
+
 /// Resolve every particle against every collider, in collider order. q_start (N, 3) holds
 /// the positions at the start of the step; q, qd (N, 3) change in place; impulse (C, 3)
-/// [N s] accumulates what each collider receives.
+/// [N s] accumulates what each collider receives. A plane (the ground of most scenes)
+/// has a loop of its own: one dot product per particle, no path to trace.
 inline void contacts(const Model& m, const double* cq, const double* crot, const double* cv,
                      const double* cw, const double* q_start, double* q, double* qd,
                      double* impulse) {
@@ -223,20 +241,23 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
         const double e = m.collider_restitution[k];
         const double keep = 1.0 - m.collider_friction[k];
         V3 j{0.0, 0.0, 0.0};
-        for (index i = 0; i < m.particle_count; ++i) {
-            if (m.particle_inv_mass[i] == 0.0) continue;
-            const Hit hit = contact(kind, center, rot, size, load(q, i), load(q_start, i));
-            if (!hit.hit) continue;
-            const V3 u = vc + cross(wc, hit.x - center);  // the surface's velocity there
-            const V3 v_old = load(qd, i);
-            const V3 v = v_old - u;
-            const double vn = dot(v, hit.n);
-            store(q, i, hit.x);
-            if (vn >= 0.0) continue;  // separating already: only the position is corrected
-            const V3 tangent = v - vn * hit.n;
-            const V3 v_new = u - (e * vn) * hit.n + keep * tangent;
-            j = j - m.particle_mass[i] * (v_new - v_old);
-            store(qd, i, v_new);
+        if (kind == 0) {  // plane: local +y is the normal (contact() below, unrolled)
+            const V3 n{rot[1], rot[4], rot[7]};
+            for (index i = 0; i < m.particle_count; ++i) {
+                const V3 p = load(q, i);
+                const double dist = dot(p - center, n);
+                if (dist >= 0.0 || m.particle_inv_mass[i] == 0.0) continue;
+                const Hit hit{true, p - dist * n, n};
+                respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
+            }
+        } else {
+            for (index i = 0; i < m.particle_count; ++i) {
+                if (m.particle_inv_mass[i] == 0.0) continue;
+                const Hit hit = contact(kind, center, rot, size, load(q, i), load(q_start, i));
+                if (!hit.hit) continue;
+                // the surface's velocity at the contact
+                respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
+            }
         }
         add_to(impulse, k, j);
     }

@@ -199,8 +199,8 @@ inline TrianglePoint closest_point_on_triangle(V3 p, V3 a, V3 b, V3 c) {
     return {a + v * ab + w * ac, 1.0 - v - w, v, w};
 }
 
-/// floor(v) as a grid cell index. NaN and values outside int64 give INT64_MIN, what the
-/// x86 conversion the Numba kernels compile to gives (a plain cast would be undefined).
+/// floor(v) as a grid cell index. NaN and values outside int64 give INT64_MIN, the x86
+/// conversion's "integer indefinite" (a plain cast would be undefined behaviour).
 inline index cell_of(double v) {
     const double f = std::floor(v);
     if (!(f >= -9223372036854775808.0 && f < 9223372036854775808.0))
@@ -209,8 +209,7 @@ inline index cell_of(double v) {
 }
 
 /// Bucket in [0, table) of grid cell (ix, iy, iz): the usual three-prime hash with
-/// wrap-around int64 products (as the Numba kernels compute them), then a non-negative
-/// modulo (Python's).
+/// wrap-around int64 products, then a non-negative modulo (Python's).
 inline index cell_hash(index ix, index iy, index iz, index table) {
     auto times = [](index a, std::uint64_t prime) {
         return static_cast<index>(static_cast<std::uint64_t>(a) * prime);

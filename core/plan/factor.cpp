@@ -1,5 +1,5 @@
-// Projective dynamics' factor set-up (factor.hpp). Ported from the Numba code it replaces,
-// with the same arithmetic and order, so the order and the factor are the same bit for bit.
+// Projective dynamics' factor set-up (factor.hpp). The order is the one the engine's
+// first (Numba) version computed, bit for bit (tests/data/dissection-order-*.npy).
 #include "plan/factor.hpp"
 
 #include <algorithm>

@@ -1,6 +1,6 @@
 // Set-up of projective dynamics' factored matrix (run once per step size, not per step):
 // the nested-dissection order of the particles, the strictly lower part of the factor with
-// sorted rows, and its supernodes. The Python side (softbody.integrators.projective) builds
+// sorted rows, and its supernodes. The Python side (softbody.solvers.factor) builds
 // the matrix and factors it with SciPy; module.cpp checks the arrays given here.
 #pragma once
 

@@ -1,4 +1,4 @@
-// Backward Euler and BDF2 (softbody.integrators.implicit), one Newton step each, solved
+// Backward Euler and BDF2 (softbody.solvers.implicit), one Newton step each, solved
 // matrix-free by preconditioned CG, and their time loop.
 //
 // Backward Euler on M v' = f(x, v), linearised at the step's start:
@@ -7,9 +7,8 @@
 // h = 2/3 dt and y = (x0 - x_-1) / 3 + h v0 (BDF2, Choi & Ko 2002); then x1 = x0 + dt v1,
 // or x1 = (4 x0 - x_-1) / 3 + h v1. The products C p and K p come term by term (springs,
 // attachments, grab, gas); the preconditioner is one multigrid V-cycle (the true spring
-// blocks smoothed on the finest level, the Laplacian hierarchy below) or Jacobi. Same
-// operation order as the Numba kernels; only the start forces (vertex-major on SIMD paths)
-// differ in their last bits.
+// blocks smoothed on the finest level, the Laplacian hierarchy below) or Jacobi. The
+// start forces are vertex-major on the SIMD paths, term by term on the scalar one.
 #pragma once
 
 #include "model.hpp"

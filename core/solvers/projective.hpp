@@ -1,5 +1,5 @@
 // Projective dynamics: backward Euler by local-global iterations on a prefactored matrix
-// (Liu et al. 2013, Bouaziz et al. 2014; softbody.integrators.projective has the derivation).
+// (Liu et al. 2013, Bouaziz et al. 2014; softbody.solvers.factor has the derivation).
 // Backward Euler, x1 = x0 + h v1 with M (v1 - v0) = h f(x1, v1), is the minimum of
 //
 //     1 / (2 h^2) |x - y|_M^2 + sum_s [k_s / 2 |d_s - p_s|^2 + c_s / (2 h) |d_s - q_s|^2] - ...
@@ -12,9 +12,8 @@
 //
 // (the global step) by two triangular solves on the factor Python built for h. f is every
 // other force at the iterate, explicit within the iteration: gravity, external and grab
-// forces, the gas pressure and air drag. The same operations in the same order as the Numba
-// loop (softbody.integrators.loop.simulate_projective) on the scalar path, where the two
-// agree to the last bit.
+// forces, the gas pressure and air drag. Python's softbody.solvers.projective builds the
+// factor and caches one per step size.
 #pragma once
 
 #include "model.hpp"

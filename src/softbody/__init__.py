@@ -46,6 +46,16 @@ from softbody.volume import VolumeMethod
 
 __version__ = "0.1.0"
 
+
+def __getattr__(name: str):
+    # sweeps pull in Dask and pyarrow: imported on first use, never by `import softbody`
+    if name == "sweep":
+        import importlib
+
+        return importlib.import_module("softbody.sweep")
+    raise AttributeError(f"module 'softbody' has no attribute {name!r}")
+
+
 __all__ = [
     "GAS_CONSTANT",
     "ColliderBox",

@@ -3,6 +3,8 @@
     softbody scenes [--show NAME | --copy NAME DEST]
     softbody run SCENE_OR_FILE [--duration S] [--dt S] [--integrator NAME] [--out DIR]
                                [--set KEY=VALUE ...] [--meshes obj|ply] [--usd] ...
+    softbody sweep SWEEP_OR_SCENE [--vary KEY=VALUES ...] [--set KEY=VALUE ...] --out DIR
+                                  [--workers N | --address tcp://HOST:PORT] [--samples N]
     softbody info MESH
 
 User mistakes (unknown scene or key, invalid mesh, unstable settings, a run that blows
@@ -109,6 +111,56 @@ def _run(args) -> int:
     )
     for path in summary["files"]:
         print(f"wrote {path}")
+    return 0
+
+
+def _sweep(args) -> int:
+    import softbody.sweep as sweeps
+    from softbody.scenes.loader import parse_override
+
+    fixed = {}
+    for text in args.set or []:
+        path, value = parse_override(text)
+        fixed[".".join(path)] = value
+    vary: dict = {}
+    dists: dict = {}
+    for text in args.vary or []:
+        if "=" not in text:
+            raise ValueError(f"--vary {text[:200]!r} must look like key=values")
+        key, values = (part.strip() for part in text.split("=", 1))
+        parsed = sweeps.parse_values(values, f"--vary {key}")
+        (dists if isinstance(parsed, dict) else vary)[key] = parsed
+    if dists and args.samples is None:
+        raise ValueError("--vary with a distribution needs --samples N")
+    random = {"samples": args.samples, "seed": args.seed, "latin": args.latin, "vary": dists}
+    if sweeps.is_sweep_file(args.sweep):
+        if vary or dists:
+            raise ValueError("--vary is for a scene; a sweep file lists its own [vary]")
+        spec = sweeps.load_sweep_file(args.sweep, extra_set=fixed)
+    else:
+        spec = sweeps.build_spec(
+            args.sweep,
+            vary=vary,
+            set=fixed,
+            random=random if dists else None,
+            metrics=args.metric,
+            sample_rate=args.sample_rate,
+            label="softbody sweep",
+        )
+    sweeps._check_dependencies()
+    result = sweeps.run_sweep(
+        spec,
+        Path(args.out),
+        workers=args.workers,
+        address=args.address,
+        figure=not args.no_figure,
+        progress=sys.stdout,
+    )
+    print(
+        f"{result.total} runs: {result.executed} run now, {result.skipped} already done; "
+        f"{result.ok} ok, {result.blew_up} blew up, {result.errors} errors "
+        f"in {result.wall_time:.1f} s"
+    )
     return 0
 
 
@@ -276,6 +328,41 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"refuse a run of more rendered frames (default {MAX_FRAMES:,})",
     )
     run.set_defaults(func=_run)
+
+    sweep = sub.add_parser(
+        "sweep", help="run a scene over a grid or random sample of parameters (Dask)"
+    )
+    sweep.add_argument("sweep", help="sweep file (.toml), built-in scene name or scene file")
+    sweep.add_argument("--out", required=True, help="output folder (resumed when rerun)")
+    sweep.add_argument(
+        "--vary",
+        action="append",
+        metavar="KEY=VALUES",
+        help="a varied key: a list 1,4,16; a range low:high:count[:log]; or with --samples "
+        "uniform:low:high, loguniform:low:high, normal:mean:std (repeatable; a grid)",
+    )
+    sweep.add_argument(
+        "--set", action="append", metavar="KEY=VALUE", help="override a scene value (repeatable)"
+    )
+    sweep.add_argument("--samples", type=_count, help="random samples of the distributions")
+    sweep.add_argument("--seed", type=int, default=0, help="seed of the random samples")
+    sweep.add_argument("--latin", action="store_true", help="Latin hypercube samples")
+    sweep.add_argument(
+        "--metric", action="append", help="keep only these built-in metrics (repeatable)"
+    )
+    sweep.add_argument(
+        "--sample-rate",
+        type=_positive_float,
+        default=100.0,
+        help="history samples per simulated second (default 100)",
+    )
+    where = sweep.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers", type=int, help="local worker processes (default: one per core; 0: no Dask)"
+    )
+    where.add_argument("--address", help="a running Dask scheduler, e.g. tcp://host:8786")
+    sweep.add_argument("--no-figure", action="store_true", help="skip the summary figure")
+    sweep.set_defaults(func=_sweep)
 
     view = sub.add_parser("view", help="simulate a scene live in the browser")
     view.add_argument("scene", help="built-in scene name or .toml file")

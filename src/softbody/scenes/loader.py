@@ -133,29 +133,38 @@ def apply_overrides(data: dict, overrides: list[str]) -> dict:
     out = copy.deepcopy(data)
     for text in overrides:
         path, value = parse_override(text)
-        shown = text if len(text) <= 200 else text[:197] + "..."
-        node: Any = out
-        for depth, key in enumerate(path):
-            where = ".".join(path[: depth + 1])
-            last = depth == len(path) - 1
-            if isinstance(node, list):
-                if not key.isdigit() or int(key) >= len(node):
-                    raise SceneError(
-                        f"override {shown!r}: {where} is not an index of the {len(node)} entries"
-                    )
-                if last:
-                    node[int(key)] = value
-                else:
-                    node = node[int(key)]
-            elif isinstance(node, dict):
-                if last:
-                    node[key] = value
-                else:
-                    node = node.setdefault(key, {})
-            else:
-                parent = ".".join(path[:depth])
-                raise SceneError(f"override {shown!r}: {parent} is a value, not a table")
+        set_path(out, path, value, text)
     return out
+
+
+def set_path(data: dict, path: list[str], value: Any, text: str | None = None) -> None:
+    """Set ``value`` at the dotted ``path`` (``["bodies", "0", "gas", "nrt"]``) of scene
+    ``data`` in place, making missing tables; ``text`` names the override in errors
+    (default: the dotted path). A list index must exist; the key itself is checked when
+    the scene is validated."""
+    text = ".".join(path) if text is None else text
+    shown = text if len(text) <= 200 else text[:197] + "..."
+    node: Any = data
+    for depth, key in enumerate(path):
+        where = ".".join(path[: depth + 1])
+        last = depth == len(path) - 1
+        if isinstance(node, list):
+            if not key.isdigit() or int(key) >= len(node):
+                raise SceneError(
+                    f"override {shown!r}: {where} is not an index of the {len(node)} entries"
+                )
+            if last:
+                node[int(key)] = value
+            else:
+                node = node[int(key)]
+        elif isinstance(node, dict):
+            if last:
+                node[key] = value
+            else:
+                node = node.setdefault(key, {})
+        else:
+            parent = ".".join(path[:depth])
+            raise SceneError(f"override {shown!r}: {parent} is a value, not a table")
 
 
 # -- building ------------------------------------------------------------------------------
