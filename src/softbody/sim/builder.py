@@ -272,9 +272,9 @@ class ModelBuilder:
         drag_coefficient : float
             C_d [1] >= 0 of the quadratic air drag on every face,
             -1/2 rho C_d A (v_rel . n) |v_rel . n| n with v_rel the face's velocity
-            relative to the wind (:meth:`set_air`); 0 (default) means no drag. Drag is
-            stepped by the explicit integrators, and with threads=1 by projective and
-            (its force explicitly) by implicit_euler and bdf2 (``Simulator``).
+            relative to the wind (:meth:`set_air`); 0 (default) means no drag. Every
+            integrator steps it; implicit_euler and bdf2 take its force explicitly
+            (``Simulator``).
         """
         if not isinstance(gas, Gas):
             gas = Gas.isothermal(_number("gas nRT", gas))

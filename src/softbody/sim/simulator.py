@@ -93,7 +93,7 @@ class Simulator:
     projective_iterations : int
         ``projective``: local-global iterations per step, >= 1 (default 2); each costs a
         pass over the springs and the non-spring forces and two triangular solves. More
-        converge to backward Euler (``integrators.projective``).
+        converge to backward Euler (``softbody.solvers.factor``).
 
     A step that blows up raises :class:`SimulationError` naming the body or particle, the
     step and the time; the state is left at the last good step.
