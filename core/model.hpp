@@ -1,6 +1,6 @@
 // The plain views the kernels read and write: the model (constant), the control (per call),
 // the state (changing) and a solver's scratch. Pointers into NumPy arrays owned by Python
-// (module.cpp checks their shapes and indices once) or into buffers a solver owns. Rows of
+// (bindings/core_model.hpp checks their shapes and indices once) or into buffers a solver owns. Rows of
 // (n, 3) arrays are contiguous: x_i is p[3 i .. 3 i + 2].
 #pragma once
 
@@ -57,7 +57,7 @@ struct Model {
     double wind[3] = {0.0, 0.0, 0.0};               // [m/s], Control.wind may override it
     bool drag_active = false;  // rho > 0 and some C_d > 0 (else the drag term is skipped)
 
-    // Vertex-major neighbour tables (module.cpp derives them from the springs and triangles):
+    // Vertex-major neighbour tables (bindings/core_model.hpp derives them from the springs and triangles):
     // particles in groups of 8 lanes; group g's slots are [start[g], start[g + 1]), and slot
     // s holds, for lane l, entry 8 s + l. Each particle lists everything it belongs to, so a
     // pass over particles computes its own forces and writes nothing else's.
@@ -179,7 +179,7 @@ struct ExplicitBuffers {
 };
 
 /// The implicit schemes' multigrid hierarchy (softbody.solvers.multigrid.Multigrid):
-/// views of the arrays Python built (module.cpp checks every offset and index once), and
+/// views of the arrays Python built (bindings/implicit.cpp checks every offset and index once), and
 /// the V-cycle's scratch, owned by the solver. Level l has level_size[l] unknowns; its
 /// matrix A_l is CSR at rows a_row_offset[l] of a_indptr and entries a_nz_offset[l] of
 /// a_indices / a_data; P_l (level l to l + 1) likewise in p_*; its vectors sit at rows
@@ -243,7 +243,7 @@ struct ImplicitBuffers {
 };
 
 /// Projective dynamics' factored global matrix A = P^T L D L^T P (softbody.solvers.
-/// factor.Projective; module.cpp checks its structure once). perm[r] is the particle at
+/// factor.Projective; bindings/projective.cpp checks its structure once). perm[r] is the particle at
 /// row r; inv_diag = 1 / diag(D). L (unit lower triangular) is stored by supernodes: node s
 /// holds columns [node_col[s], node_col[s + 1]), its rows node_row[node_row_ptr[s] ..
 /// node_row_ptr[s + 1]) (its own columns first, then those below), and its values a dense

@@ -1,7 +1,7 @@
 // Set-up of projective dynamics' factored matrix (run once per step size, not per step):
 // the nested-dissection order of the particles, the strictly lower part of the factor with
 // sorted rows, and its supernodes. The Python side (softbody.solvers.factor) builds
-// the matrix and factors it with SciPy; module.cpp checks the arrays given here.
+// the matrix and factors it with SciPy; bindings/plan.cpp checks the arrays given here.
 #pragma once
 
 #include <vector>

@@ -1,4 +1,4 @@
-// The software rasteriser's loops (raster.cpp); module.cpp checks the arrays' shapes.
+// The software rasteriser's loops (raster.cpp); bindings/render.cpp checks the arrays' shapes.
 #pragma once
 
 #include <cstdint>

@@ -2,7 +2,7 @@
 // multigrid): Gauss-Seidel on the isotropic spring-Laplacian levels A_l = M + h C + h^2 K
 // (three right-hand sides at once), restriction by P^T, prolongation by P, and a dense
 // Cholesky solve (or Gauss-Seidel when coarsening stalled) on the coarsest level. Python
-// builds the hierarchy and sets its values for the step; module.cpp checks its offsets and
+// builds the hierarchy and sets its values for the step; bindings/implicit.cpp checks its offsets and
 // indices, so every read here is in bounds.
 #pragma once
 

@@ -1,0 +1,111 @@
+// A solver's scratch, allocated once, and a run's state arrays checked against the model.
+#pragma once
+
+#include "bindings/core_model.hpp"
+
+namespace softbody::bindings {
+
+/// Buckets of the surface contacts' spatial hash for T triangles: the smallest power of two
+/// >= 2 T, at least 16.
+inline Index hash_table_size(Index tris) {
+    Index table = 16;
+    while (table < 2 * std::max<Index>(tris, 1)) table <<= 1;
+    return table;
+}
+
+/// A solver's scratch, allocated once: (N, 3) rows, per-body and per-collider arrays, and
+/// for surface soft contacts (soft_contact_mode 2) the spatial hash with room for
+/// `hash_capacity` entries.
+class Buffers {
+public:
+    explicit Buffers(const softbody::Model& m, int rows, Index hash_capacity = 0) {
+        const size_t n3 = static_cast<size_t>(3 * m.particle_count);
+        const size_t b = static_cast<size_t>(m.body_count), c = static_cast<size_t>(m.collider_count);
+        rows_.assign(static_cast<size_t>(rows), std::vector<double>(n3, 0.0));
+        per_body_.assign(11, std::vector<double>(3 * b, 0.0));
+        per_collider_.assign(3, std::vector<double>(3 * c, 0.0));
+        gradient_.assign(n3, 0.0);
+        if (rows > 0) {  // the force pass's packed rows (a volume-only call needs none)
+            const size_t lanes = static_cast<size_t>(8 * m.group_count);
+            rows_buffer_.assign(8 * lanes, 0.0);  // padding rows stay zero
+            lane_pnet_.assign(lanes, 0.0);
+            lanes_view.rows = rows_buffer_.data();
+            lanes_view.lane_pnet = lane_pnet_.data();
+        }
+        gas.volume = per_body_[0].data();
+        gas.pressure = per_body_[1].data();
+        gas.lo = per_body_[2].data();
+        gas.hi = per_body_[3].data();
+        gas.volume_gradient = gradient_.data();
+        contact.body_lo = per_body_[4].data();
+        contact.body_hi = per_body_[5].data();
+        contact.body_velocity = per_body_[6].data();
+        contact.body_mass = per_body_[7].data();
+        contact.body_center = per_body_[8].data();
+        contact.body_axes = per_body_[9].data();
+        contact.body_dv = per_body_[10].data();
+        contact.collider_q_start = per_collider_[0].data();
+        contact.collider_v = per_collider_[1].data();
+        contact.collider_w = per_collider_[2].data();
+        if (m.soft_contact_mode == 2) {
+            const Index table = hash_table_size(m.tri_count);
+            hash_start_.assign(static_cast<size_t>(table + 1), 0);
+            hash_count_.assign(static_cast<size_t>(table), 0);
+            hash_entries_.assign(static_cast<size_t>(hash_capacity), 0);
+            contact.hash_table = table;
+            contact.hash_capacity = hash_capacity;
+            contact.hash_start = hash_start_.data();
+            contact.hash_count = hash_count_.data();
+            contact.hash_entries = hash_entries_.data();
+        }
+    }
+    double* row(int k) { return rows_[static_cast<size_t>(k)].data(); }
+    softbody::LaneBuffers lanes_view;
+    softbody::BodyGas gas;
+    softbody::ContactBuffers contact;
+
+private:
+    std::vector<std::vector<double>> rows_, per_body_, per_collider_;
+    std::vector<double> gradient_, rows_buffer_, lane_pnet_;
+    std::vector<Index> hash_start_, hash_count_, hash_entries_;
+};
+
+/// Entries of the surface contacts' hash: as asked, by default 8 per triangle (room for
+/// triangles up to a cell across); 0 without surface contacts.
+inline Index checked_capacity(const softbody::Model& m, std::optional<Index> asked) {
+    if (asked && *asked < 0) fail("hash_capacity must be >= 0, got " + std::to_string(*asked));
+    if (m.soft_contact_mode != 2) return 0;
+    return asked ? *asked : 8 * m.tri_count;
+}
+
+/// A run's state arrays and limits, checked against the model (views held for one call).
+struct CheckedRun {
+    F64 q, qd, collider_q, collider_rot, collider_impulse;
+    softbody::StateView state;
+    softbody::RunParams params;
+};
+
+inline CheckedRun checked_run(const softbody::Model& m, Index steps, double t0, double dt,
+                       nb::handle q, nb::handle qd, nb::handle collider_q,
+                       nb::handle collider_rot, nb::handle collider_impulse, double max_speed,
+                       double ratio_min, double ratio_max) {
+    if (steps < 0) fail("steps must be >= 0");
+    if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
+    CheckedRun run;
+    run.q = writable(q, "q", {m.particle_count, 3});
+    run.qd = writable(qd, "qd", {m.particle_count, 3});
+    run.collider_q = writable(collider_q, "collider_q", {m.collider_count, 3});
+    run.collider_rot = writable(collider_rot, "collider_rot", {m.collider_count, 3, 3});
+    run.collider_impulse = writable(collider_impulse, "collider_impulse", {m.collider_count, 3});
+    run.state = {run.q.data(), run.qd.data(), run.collider_q.data(), run.collider_rot.data(),
+                 run.collider_impulse.data()};
+    run.params.steps = steps;
+    run.params.t0 = t0;
+    run.params.dt = dt;
+    run.params.max_speed = max_speed;
+    run.params.ratio_min = ratio_min;
+    run.params.ratio_max = ratio_max;
+    return run;
+}
+
+}  // namespace softbody::bindings

@@ -1,0 +1,428 @@
+// softbody._core.Model: the checked views of a Model's arrays every solver steps, with
+// the vertex-major lane and ring tables built once; and the views of a Control.
+#pragma once
+
+#include "bindings/arrays.hpp"
+
+namespace softbody::bindings {
+
+/// softbody._core.Model: checked views of a softbody Model's arrays (kept alive here).
+class CoreModel {
+public:
+    explicit CoreModel(nb::handle d) {
+        softbody::Model& m = model_;
+        auto f64 = [&](const char* name, std::vector<Index> shape) {
+            ConstF64 a = attribute<ConstF64>(d, name, shape);
+            keep_f_.push_back(a);
+            return a.data();
+        };
+        auto i64 = [&](const char* name, std::vector<Index> shape) {
+            ConstI64 a = attribute<ConstI64>(d, name, shape);
+            keep_i_.push_back(a);
+            return a.data();
+        };
+        ConstF64 mass = attribute<ConstF64>(d, "particle_mass", {-1});
+        const Index n = static_cast<Index>(mass.shape(0));
+        ConstI64 springs = attribute<ConstI64>(d, "spring_indices", {-1, 2});
+        const Index s = static_cast<Index>(springs.shape(0));
+        ConstI64 tris = attribute<ConstI64>(d, "tri_indices", {-1, 3});
+        const Index t = static_cast<Index>(tris.shape(0));
+        ConstI64 ranges = attribute<ConstI64>(d, "body_particle_range", {-1, 2});
+        const Index b = static_cast<Index>(ranges.shape(0));
+        ConstI64 att = attribute<ConstI64>(d, "attachment_particle", {-1});
+        const Index a = static_cast<Index>(att.shape(0));
+        ConstI64 kinds = attribute<ConstI64>(d, "collider_kind", {-1});
+        const Index c = static_cast<Index>(kinds.shape(0));
+        ConstI64 pins = attribute<ConstI64>(d, "pin_particle", {-1});
+        ConstF64 samples = attribute<ConstF64>(d, "mc_samples", {-1, 2});
+        ConstF64 times = attribute<ConstF64>(d, "schedule_time", {-1});
+        keep_f_.insert(keep_f_.end(), {mass, samples, times});
+        keep_i_.insert(keep_i_.end(), {springs, tris, ranges, att, kinds, pins});
+
+        m.particle_count = n;
+        m.spring_count = s;
+        m.tri_count = t;
+        m.body_count = b;
+        m.attachment_count = a;
+        m.collider_count = c;
+        m.pin_count = static_cast<Index>(pins.shape(0));
+        m.mc_count = static_cast<Index>(samples.shape(0));
+        m.schedule_count = static_cast<Index>(times.shape(0));
+
+        m.particle_mass = mass.data();
+        m.particle_inv_mass = f64("particle_inv_mass", {n});
+        m.particle_body = i64("particle_body", {n});
+        const double* g = f64("gravity", {3});
+        for (int k = 0; k < 3; ++k) m.gravity[k] = g[k];
+        m.spring_indices = springs.data();
+        m.spring_rest_length = f64("spring_rest_length", {s});
+        m.spring_stiffness = f64("spring_stiffness", {s});
+        m.spring_damping = f64("spring_damping", {s});
+        m.attachment_particle = att.data();
+        m.attachment_rest_length = f64("attachment_rest_length", {a});
+        m.attachment_stiffness = f64("attachment_stiffness", {a});
+        m.attachment_damping = f64("attachment_damping", {a});
+        m.tri_indices = tris.data();
+        m.tri_body = i64("tri_body", {t});
+        m.body_particle_range = ranges.data();
+        m.body_tri_range = i64("body_tri_range", {b, 2});
+        m.body_volume_method = i64("body_volume_method", {b});
+        m.body_mc_range = i64("body_mc_range", {b, 2});
+        m.mc_samples = samples.data();
+        m.body_gas_law = i64("body_gas_law", {b});
+        m.body_gas_value = f64("body_gas_value", {b});
+        m.body_gas_gamma = f64("body_gas_gamma", {b});
+        m.body_gas_reference_volume = f64("body_gas_reference_volume", {b});
+        m.body_ambient_pressure = f64("body_ambient_pressure", {b});
+        m.body_schedule_range = i64("body_schedule_range", {b, 2});
+        m.schedule_time = times.data();
+        m.schedule_value = f64("schedule_value", {m.schedule_count});
+        m.body_rest_volume = f64("body_rest_volume", {b});
+        m.body_closed = i64("body_closed", {b});
+        m.body_contact_shape = i64("body_contact_shape", {b});
+        m.pin_particle = pins.data();
+        m.body_drag_coefficient = f64("body_drag_coefficient", {b});
+        m.air_density = nb::cast<double>(d.attr("air_density"));
+        const double* wind = f64("wind", {3});
+        for (int k = 0; k < 3; ++k) m.wind[k] = wind[k];
+        m.soft_contact_mode = nb::cast<int>(d.attr("soft_contact_mode"));
+        m.soft_contact_restitution = nb::cast<double>(d.attr("soft_contact_restitution"));
+        m.soft_contact_friction = nb::cast<double>(d.attr("soft_contact_friction"));
+        m.contact_margin = nb::cast<double>(d.attr("contact_margin"));
+        m.contact_cell_size = nb::cast<double>(d.attr("contact_cell_size"));
+        m.collider_kind = kinds.data();
+        m.collider_center = f64("collider_center", {c, 3});
+        m.collider_rotation = f64("collider_rotation", {c, 3, 3});
+        m.collider_size = f64("collider_size", {c, 3});
+        m.collider_restitution = f64("collider_restitution", {c});
+        m.collider_friction = f64("collider_friction", {c});
+        m.collider_motion = i64("collider_motion", {c});
+        m.collider_motion_vector = f64("collider_motion_vector", {c, 3});
+        m.collider_motion_pivot = f64("collider_motion_pivot", {c, 3});
+        m.collider_motion_frequency = f64("collider_motion_frequency", {c});
+        validate();
+        build_lanes();
+    }
+
+    const softbody::Model& model() const { return model_; }
+
+private:
+    // Indices and enumerations in range, so no kernel reads outside an array.
+    void validate() {
+        const softbody::Model& m = model_;
+        check_indices(m.spring_indices, 2 * m.spring_count, 0, m.particle_count, "spring_indices");
+        check_indices(m.tri_indices, 3 * m.tri_count, 0, m.particle_count, "tri_indices");
+        check_indices(m.tri_body, m.tri_count, 0, m.body_count, "tri_body");
+        check_indices(m.particle_body, m.particle_count, -1, m.body_count, "particle_body");
+        check_indices(m.attachment_particle, m.attachment_count, 0, m.particle_count,
+                      "attachment_particle");
+        check_indices(m.pin_particle, m.pin_count, 0, m.particle_count, "pin_particle");
+        check_ranges(m.body_particle_range, m.body_count, m.particle_count, "body_particle_range");
+        check_ranges(m.body_tri_range, m.body_count, m.tri_count, "body_tri_range");
+        check_ranges(m.body_mc_range, m.body_count, m.mc_count, "body_mc_range");
+        check_ranges(m.body_schedule_range, m.body_count, m.schedule_count, "body_schedule_range");
+        for (Index b = 0; b < m.body_count; ++b) {
+            // a body's triangles Index its own particles (the volume's reference point)
+            const Index p0 = m.body_particle_range[2 * b], p1 = m.body_particle_range[2 * b + 1];
+            if (m.body_tri_range[2 * b + 1] > m.body_tri_range[2 * b] && p1 == p0)
+                fail("body " + std::to_string(b) + " has triangles but no particles");
+        }
+        check_indices(m.body_volume_method, m.body_count, 0, 5, "body_volume_method");
+        check_indices(m.body_gas_law, m.body_count, 0, 3, "body_gas_law");
+        check_indices(m.body_contact_shape, m.body_count, 0, 4, "body_contact_shape");
+        check_indices(m.collider_kind, m.collider_count, 0, 4, "collider_kind");
+        check_indices(m.collider_motion, m.collider_count, 0, 4, "collider_motion");
+        if (m.soft_contact_mode < 0 || m.soft_contact_mode > 2)
+            fail("soft_contact_mode must be 0, 1 or 2");
+        if (m.soft_contact_mode == 2) {
+            // the surface contacts' grid: cells of a positive, finite size
+            if (!(std::isfinite(m.contact_cell_size) && m.contact_cell_size > 0.0))
+                fail("contact_cell_size must be finite and > 0, got " +
+                     std::to_string(m.contact_cell_size));
+            if (!(std::isfinite(m.contact_margin) && m.contact_margin >= 0.0))
+                fail("contact_margin must be finite and >= 0, got " +
+                     std::to_string(m.contact_margin));
+        }
+        check_drag();
+    }
+
+    // Air and drag coefficients physical (finite, >= 0); the drag term runs only when some
+    // body has drag in air of positive density.
+    void check_drag() {
+        softbody::Model& m = model_;
+        if (!(std::isfinite(m.air_density) && m.air_density >= 0.0))
+            fail("air_density must be finite and >= 0 kg/m^3, got " +
+                 std::to_string(m.air_density));
+        for (int k = 0; k < 3; ++k)
+            if (!std::isfinite(m.wind[k])) fail("wind must be 3 finite numbers [m/s]");
+        bool any = false;
+        for (Index b = 0; b < m.body_count; ++b) {
+            const double cd = m.body_drag_coefficient[b];
+            if (!(std::isfinite(cd) && cd >= 0.0))
+                fail("body_drag_coefficient holds " + std::to_string(cd) + " at " +
+                     std::to_string(b) + "; it must be finite and >= 0");
+            any = any || cd > 0.0;
+        }
+        m.drag_active = any && m.air_density > 0.0;
+    }
+
+    // A particle's faces (i, j, k) as directed pairs j -> k, in fan order: a closed fan is
+    // one cycle, a fan on an open surface's border one path (begun at its free end). False
+    // when they make neither (two fans meeting at a vertex), and the particle's faces go to
+    // the plain face slots instead. `ring` gets j_0, j_1, ...; `closed` says which.
+    static bool fan_order(const std::vector<std::pair<Index, Index>>& pairs,
+                          std::vector<Index>& ring, bool& closed) {
+        ring.clear();
+        closed = false;
+        if (pairs.empty()) return true;
+        // sorted by their first end (O(F log F) for a fan of F faces, however large)
+        std::vector<std::pair<Index, Index>> by_first(pairs), by_second;
+        std::sort(by_first.begin(), by_first.end());
+        for (const auto& [j, k] : pairs) by_second.push_back({k, j});
+        std::sort(by_second.begin(), by_second.end());
+        for (size_t a = 0; a < by_first.size(); ++a) {
+            if (by_first[a].first == by_first[a].second) return false;
+            if (a > 0 && (by_first[a].first == by_first[a - 1].first ||
+                          by_second[a].first == by_second[a - 1].first))
+                return false;  // two faces leave (or reach) one neighbour: not one fan
+        }
+        auto next_of = [&](Index j) -> Index {
+            auto it = std::lower_bound(by_first.begin(), by_first.end(),
+                                       std::pair<Index, Index>{j, std::numeric_limits<Index>::min()});
+            return it != by_first.end() && it->first == j ? it->second : -1;
+        };
+        auto has_incoming = [&](Index j) {
+            auto it = std::lower_bound(by_second.begin(), by_second.end(),
+                                       std::pair<Index, Index>{j, std::numeric_limits<Index>::min()});
+            return it != by_second.end() && it->first == j;
+        };
+        Index start = pairs[0].first;  // a closed fan: from its first face
+        for (const auto& [j, k] : pairs)
+            if (!has_incoming(j)) {
+                start = j;  // an open fan: from its free end
+                break;
+            }
+        Index at = start;
+        ring.push_back(at);
+        for (size_t step = 0; step < pairs.size(); ++step) {
+            const Index next = next_of(at);
+            if (next < 0) return false;
+            if (next == start) {
+                closed = step + 1 == pairs.size();
+                return closed;
+            }
+            ring.push_back(next);
+            at = next;
+        }
+        return ring.size() == pairs.size() + 1;  // an open fan: one node more than faces
+    }
+
+    // The vertex-major tables (model.hpp): for each group of 8 particles, as many slots as
+    // its busiest particle needs; every particle's own entries in order.
+    void build_lanes() {
+        softbody::Model& m = model_;
+        const Index n = m.particle_count, groups = (n + kGroup - 1) / kGroup;
+        const size_t lanes = static_cast<size_t>(kGroup * groups);
+        m.group_count = groups;
+        lane_mass_.assign(lanes, 0.0);
+        std::copy(m.particle_mass, m.particle_mass + n, lane_mass_.begin());
+        lane_reference_.resize(lanes);
+        for (size_t i = 0; i < lanes; ++i) lane_reference_[i] = static_cast<Index>(i);
+        for (Index b = 0; b < m.body_count; ++b)
+            for (Index i = m.body_particle_range[2 * b]; i < m.body_particle_range[2 * b + 1]; ++i)
+                lane_reference_[static_cast<size_t>(i)] = m.body_particle_range[2 * b];
+        m.lane_mass = lane_mass_.data();
+        m.lane_reference = lane_reference_.data();
+
+        // each particle's springs (other end, spring) and faces (j, k), in model order
+        std::vector<std::vector<std::pair<Index, Index>>> springs(static_cast<size_t>(n)),
+            faces(static_cast<size_t>(n));
+        for (Index s = 0; s < m.spring_count; ++s) {
+            const Index i = m.spring_indices[2 * s], j = m.spring_indices[2 * s + 1];
+            springs[static_cast<size_t>(i)].push_back({j, s});
+            springs[static_cast<size_t>(j)].push_back({i, s});
+        }
+        for (Index t = 0; t < m.tri_count; ++t)
+            for (int c = 0; c < 3; ++c)
+                faces[static_cast<size_t>(m.tri_indices[3 * t + c])].push_back(
+                    {m.tri_indices[3 * t + (c + 1) % 3], m.tri_indices[3 * t + (c + 2) % 3]});
+
+        // per particle: its ring (neighbour, spring or -1, face weight), its other springs
+        // and the faces of a broken fan
+        struct Ring {
+            std::vector<Index> other, spring;
+            std::vector<double> face;
+        };
+        std::vector<Ring> rings(static_cast<size_t>(n));
+        std::vector<std::vector<std::pair<Index, Index>>> extra_springs(static_cast<size_t>(n)),
+            extra_faces(static_cast<size_t>(n));
+        std::vector<Index> order;
+        for (Index i = 0; i < n; ++i) {
+            const size_t own = static_cast<size_t>(i);
+            bool closed = false;
+            std::vector<char> used(springs[own].size(), 0);
+            if (!fan_order(faces[own], order, closed)) {
+                extra_faces[own] = faces[own];
+                order.clear();
+            }
+            Ring& r = rings[own];
+            // the particle's springs sorted by other end (then spring): the ring takes the
+            // first spring to each neighbour, the rest stay extra springs
+            std::vector<std::pair<Index, Index>>& mine = springs[own];
+            std::sort(mine.begin(), mine.end());
+            for (size_t s = 0; s < order.size(); ++s) {
+                Index spring = -1;
+                auto it = std::lower_bound(mine.begin(), mine.end(),
+                                           std::pair<Index, Index>{order[s], std::numeric_limits<Index>::min()});
+                for (; it != mine.end() && it->first == order[s]; ++it) {
+                    const size_t k = static_cast<size_t>(it - mine.begin());
+                    if (!used[k]) {
+                        used[k] = 1;
+                        spring = it->second;
+                        break;
+                    }
+                }
+                r.other.push_back(order[s]);
+                r.spring.push_back(spring);
+                r.face.push_back(s > 0 || closed ? 1.0 : 0.0);  // slot 0: the closing face
+            }
+            for (size_t k = 0; k < springs[own].size(); ++k)
+                if (!used[k]) extra_springs[own].push_back(springs[own][k]);
+        }
+
+        auto starts = [&](auto count, std::vector<Index>& start) {
+            start.assign(static_cast<size_t>(groups + 1), 0);
+            for (Index g = 0; g < groups; ++g) {
+                size_t most = 0;
+                for (Index i = kGroup * g; i < std::min(n, kGroup * (g + 1)); ++i)
+                    most = std::max(most, count(static_cast<size_t>(i)));
+                start[static_cast<size_t>(g + 1)] = start[static_cast<size_t>(g)] + static_cast<Index>(most);
+            }
+            return static_cast<size_t>(kGroup * start.back());
+        };
+        const size_t ring_entries = starts([&](size_t i) { return rings[i].other.size(); }, ring_start_);
+        const size_t spring_entries = starts([&](size_t i) { return extra_springs[i].size(); }, spring_start_);
+        const size_t face_entries = starts([&](size_t i) { return extra_faces[i].size(); }, face_start_);
+        ring_other_.assign(ring_entries, 0);
+        ring_rest_.assign(ring_entries, 0.0);
+        ring_k_.assign(ring_entries, 0.0);
+        ring_c_.assign(ring_entries, 0.0);
+        ring_face_.assign(ring_entries, 0.0);
+        spring_other_.assign(spring_entries, 0);
+        spring_rest_.assign(spring_entries, 0.0);
+        spring_k_.assign(spring_entries, 0.0);
+        spring_c_.assign(spring_entries, 0.0);
+        face_next_.assign(face_entries, 0);
+        face_last_.assign(face_entries, 0);
+        for (Index g = 0; g < groups; ++g)
+            for (Index l = 0; l < kGroup; ++l) {
+                const Index i = kGroup * g + l;  // padding lanes (i >= N) list nothing
+                const bool real = i < n;
+                const size_t own = static_cast<size_t>(i);
+                const Index r0 = ring_start_[static_cast<size_t>(g)];
+                for (Index s = r0; s < ring_start_[static_cast<size_t>(g + 1)]; ++s) {
+                    const size_t e = static_cast<size_t>(kGroup * s + l), k = static_cast<size_t>(s - r0);
+                    const bool listed = real && k < rings[own].other.size();
+                    // padding repeats j_0 (no spring; its faces (j_0, j_0) have no area), or
+                    // the particle itself when it has no ring
+                    const bool has_ring = real && !rings[own].other.empty();
+                    ring_other_[e] = listed ? rings[own].other[k] : has_ring ? rings[own].other[0] : i;
+                    if (!listed) {
+                        // a closed ring padded with j_0: its first padding slot closes it
+                        const bool closes = has_ring && k == rings[own].other.size() &&
+                                            rings[own].face[0] == 1.0;
+                        ring_face_[e] = closes ? 1.0 : 0.0;
+                        continue;
+                    }
+                    ring_face_[e] = rings[own].face[k];
+                    const Index spring = rings[own].spring[k];
+                    if (spring >= 0) {
+                        ring_rest_[e] = m.spring_rest_length[spring];
+                        ring_k_[e] = m.spring_stiffness[spring];
+                        ring_c_[e] = m.spring_damping[spring];
+                    }
+                }
+                const Index s0 = spring_start_[static_cast<size_t>(g)];
+                for (Index s = s0; s < spring_start_[static_cast<size_t>(g + 1)]; ++s) {
+                    const size_t e = static_cast<size_t>(kGroup * s + l), k = static_cast<size_t>(s - s0);
+                    spring_other_[e] = i;  // padding: itself, no stiffness
+                    if (real && k < extra_springs[own].size()) {
+                        const auto [other, spring] = extra_springs[own][k];
+                        spring_other_[e] = other;
+                        spring_rest_[e] = m.spring_rest_length[spring];
+                        spring_k_[e] = m.spring_stiffness[spring];
+                        spring_c_[e] = m.spring_damping[spring];
+                    }
+                }
+                const Index f0 = face_start_[static_cast<size_t>(g)];
+                for (Index s = f0; s < face_start_[static_cast<size_t>(g + 1)]; ++s) {
+                    const size_t e = static_cast<size_t>(kGroup * s + l), k = static_cast<size_t>(s - f0);
+                    face_next_[e] = face_last_[e] = i;  // padding: a face of no area
+                    if (real && k < extra_faces[own].size()) {
+                        face_next_[e] = extra_faces[own][k].first;
+                        face_last_[e] = extra_faces[own][k].second;
+                    }
+                }
+            }
+        m.ring_slot_start = ring_start_.data();
+        m.ring_slot_other = ring_other_.data();
+        m.ring_slot_rest_length = ring_rest_.data();
+        m.ring_slot_stiffness = ring_k_.data();
+        m.ring_slot_damping = ring_c_.data();
+        m.ring_slot_face = ring_face_.data();
+        m.spring_slot_start = spring_start_.data();
+        m.spring_slot_other = spring_other_.data();
+        m.spring_slot_rest_length = spring_rest_.data();
+        m.spring_slot_stiffness = spring_k_.data();
+        m.spring_slot_damping = spring_c_.data();
+        m.face_slot_start = face_start_.data();
+        m.face_slot_next = face_next_.data();
+        m.face_slot_last = face_last_.data();
+    }
+
+    static constexpr Index kGroup = 8;  // the kernels' lane group (simd.hpp)
+    softbody::Model model_;
+    std::vector<double> lane_mass_, ring_rest_, ring_k_, ring_c_, ring_face_;
+    std::vector<double> spring_rest_, spring_k_, spring_c_;
+    std::vector<Index> lane_reference_, ring_start_, ring_other_;
+    std::vector<Index> spring_start_, spring_other_, face_start_, face_next_, face_last_;
+    std::vector<ConstF64> keep_f_;
+    std::vector<ConstI64> keep_i_;
+};
+
+/// Views of a ControlData bundle, checked against the model (held for one call).
+struct CoreControl {
+    CoreControl(const softbody::Model& m, nb::handle d) {
+        gas = attribute<ConstF64>(d, "gas_override", {m.body_count});
+        particle_f = attribute<ConstF64>(d, "particle_f", {m.particle_count, 3});
+        anchor = attribute<ConstF64>(d, "attachment_anchor", {m.attachment_count, 3});
+        pin = attribute<ConstF64>(d, "pin_target", {m.pin_count, 3});
+        target = attribute<ConstF64>(d, "collider_target", {m.collider_count, 3});
+        ConstF64 grab = attribute<ConstF64>(d, "grab_target", {3});
+        view.gas_override = gas.data();
+        view.particle_f = particle_f.data();
+        view.attachment_anchor = anchor.data();
+        view.pin_target = pin.data();
+        view.pin_active = nb::cast<bool>(d.attr("pin_active"));
+        view.collider_target = target.data();
+        view.grab_particle = nb::cast<Index>(d.attr("grab_particle"));
+        if (view.grab_particle < -1 || view.grab_particle >= m.particle_count)
+            fail("grab_particle must be -1 or a particle Index");
+        for (int k = 0; k < 3; ++k) view.grab_target[k] = grab.data()[k];
+        view.grab_stiffness = nb::cast<double>(d.attr("grab_stiffness"));
+        view.grab_damping = nb::cast<double>(d.attr("grab_damping"));
+        wind_from(m, attribute<ConstF64>(d, "wind", {3}).data());
+    }
+
+    // Control.wind: 3 finite numbers [m/s], or all NaN for the model's wind.
+    void wind_from(const softbody::Model& m, const double* w) {
+        const bool given = std::isfinite(w[0]) && std::isfinite(w[1]) && std::isfinite(w[2]);
+        const bool unset = std::isnan(w[0]) && std::isnan(w[1]) && std::isnan(w[2]);
+        if (!given && !unset) fail("Control wind must be 3 finite numbers [m/s] or all NaN");
+        for (int k = 0; k < 3; ++k) view.wind[k] = given ? w[k] : m.wind[k];
+    }
+    ConstF64 gas, particle_f, anchor, pin, target;
+    softbody::Control view;
+};
+
+}  // namespace softbody::bindings

@@ -1,0 +1,81 @@
+// softbody._core.ExplicitSolver: the explicit schemes (core/solvers/explicit.hpp).
+#include "bindings/bindings.hpp"
+#include "bindings/buffers.hpp"
+#include "bindings/threads.hpp"
+
+namespace softbody::bindings {
+namespace {
+
+/// softbody._core.ExplicitSolver: the explicit schemes' time loop and its scratch.
+class ExplicitSolver {
+public:
+    ExplicitSolver(nb::object model, std::optional<Index> hash_capacity, int threads)
+        : handle_(model),
+          model_(nb::cast<const CoreModel&>(model)),
+          buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)),
+          threads_(threads, model_.model().body_count) {
+        threads_.attach(buffers_.lanes_view);
+        w_.f = buffers_.row(0);
+        w_.q0 = buffers_.row(1);
+        w_.v0 = buffers_.row(2);
+        w_.qs = buffers_.row(3);
+        w_.vs = buffers_.row(4);
+        w_.acc_q = buffers_.row(5);
+        w_.acc_v = buffers_.row(6);
+        w_.gas = buffers_.gas;
+        w_.lanes = buffers_.lanes_view;
+        w_.contact = buffers_.contact;
+    }
+
+    std::tuple<int, Index, Index, double> simulate(int scheme, Index steps, double t0, double dt,
+                                                   nb::handle control, nb::handle q,
+                                                   nb::handle qd, nb::handle collider_q,
+                                                   nb::handle collider_rot,
+                                                   nb::handle collider_impulse, double max_speed,
+                                                   double ratio_min, double ratio_max) {
+        const softbody::Model& m = model_.model();
+        if (scheme < 0 || scheme > 4) fail("scheme must be an explicit Integrator (0-4)");
+        CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
+                                     collider_impulse, max_speed, ratio_min, ratio_max);
+        run.params.scheme = scheme;
+        CoreControl c(m, control);
+        softbody::RunResult r;
+        {
+            nb::gil_scoped_release release;
+            r = softbody::kernels().simulate_explicit(m, c.view, run.params, run.state, w_);
+        }
+        return {r.status, r.steps_done, r.where, r.value};
+    }
+
+    Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+    int threads() const { return threads_.count(); }
+
+private:
+    nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
+    const CoreModel& model_;
+    Buffers buffers_;
+    SolverThreads threads_;
+    softbody::ExplicitBuffers w_;
+};
+
+}  // namespace
+
+void bind_explicit(nb::module_& mod) {
+    nb::class_<ExplicitSolver>(mod, "ExplicitSolver",
+                               "The explicit schemes' time loop with its scratch buffers.")
+        .def(nb::init<nb::object, std::optional<Index>, int>(), nb::arg("model"),
+             nb::arg("hash_capacity") = nb::none(), nb::arg("threads") = 1,
+             "hash_capacity: entries of the surface contacts' spatial hash (default 8 per "
+             "triangle); a run that needs more returns NEED_HASH with the count needed. "
+             "threads: > 1 runs the force pass on that many threads, deterministically.")
+        .def_prop_ro("threads", &ExplicitSolver::threads, "Threads of the force pass.")
+        .def_prop_ro("hash_capacity", &ExplicitSolver::hash_capacity,
+                     "Entries the surface contacts' spatial hash holds (0 without them).")
+        .def("simulate", &ExplicitSolver::simulate, nb::arg("scheme"), nb::arg("steps"),
+             nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
+             nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
+             nb::arg("max_speed"), nb::arg("ratio_min"), nb::arg("ratio_max"),
+             "Advance q, qd in place; returns (status, steps_done, index, value).");
+}
+
+}  // namespace softbody::bindings

@@ -1,0 +1,168 @@
+// The physics terms outside a time loop: forces, volumes, pressures and Jacobian
+// products at a state, and one contact pass (diagnostics, the stability estimate, tests).
+#include "bindings/bindings.hpp"
+#include "bindings/buffers.hpp"
+
+namespace softbody::bindings {
+namespace {
+
+/// Forces, volumes, dV/dx and pressures at (q, qd, t): for diagnostics and tests.
+nb::tuple eval_forces(const CoreModel& core, nb::handle control, double t, ConstF64 q,
+                      ConstF64 qd) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particle_count, 3});
+    check_shape(qd, "qd", {m.particle_count, 3});
+    CoreControl c(m, control);
+    Buffers b(m, 1);
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().eval_forces(m, c.view, t, q.data(), qd.data(), b.gas,
+                                        b.lanes_view, b.row(0));
+    }
+    auto out = [](const double* data, std::vector<size_t> shape) {
+        size_t count = 1;
+        for (size_t s : shape) count *= s;
+        double* copy = new double[count];
+        std::copy(data, data + count, copy);
+        nb::capsule owner(copy, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+        return nb::ndarray<nb::numpy, double>(copy, shape.size(), shape.data(), owner);
+    };
+    const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
+    return nb::make_tuple(out(b.row(0), {n, 3}), out(b.gas.volume, {nb_}),
+                          out(b.gas.pressure, {nb_}), out(b.gas.volume_gradient, {n, 3}));
+}
+
+/// Every body's volume by its own method at q, with dV/dx when asked.
+nb::tuple eval_volumes(const CoreModel& core, nb::handle control, double t, ConstF64 q) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particle_count, 3});
+    CoreControl c(m, control);
+    Buffers b(m, 0);
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().eval_gas(m, c.view, t, q.data(), b.gas);
+    }
+    auto out = [](const double* data, std::vector<size_t> shape) {
+        size_t count = 1;
+        for (size_t s : shape) count *= s;
+        double* copy = new double[count];
+        std::copy(data, data + count, copy);
+        nb::capsule owner(copy, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+        return nb::ndarray<nb::numpy, double>(copy, shape.size(), shape.data(), owner);
+    };
+    const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
+    return nb::make_tuple(out(b.gas.volume, {nb_}), out(b.gas.pressure, {nb_}),
+                          out(b.gas.volume_gradient, {n, 3}));
+}
+
+/// One pass of the soft-soft contacts on q, qd in place (for tests of the response);
+/// returns the hash entries the surface contacts needed beyond hash_capacity, or 0.
+Index soft_contacts(const CoreModel& core, F64 q, F64 qd, std::optional<Index> hash_capacity) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particle_count, 3});
+    check_shape(qd, "qd", {m.particle_count, 3});
+    Buffers b(m, 0, checked_capacity(m, hash_capacity));
+    nb::gil_scoped_release release;
+    return softbody::kernels().soft_contacts(m, q.data(), qd.data(), b.contact);
+}
+
+/// The implicit schemes' matrix-free product, also behind the stability estimate.
+void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, ConstF64 p,
+                     double alpha_m, double alpha_c, double alpha_k, ConstF64 u, ConstF64 a,
+                     ConstF64 b, ConstF64 gradient, ConstF64 dpdv, ConstF64 pnet, F64 out,
+                     bool attachments) {
+    const softbody::Model& m = core.model();
+    const Index n = m.particle_count, s = m.spring_count, nb_ = m.body_count;
+    check_shape(q, "q", {n, 3});
+    check_shape(p, "p", {n, 3});
+    check_shape(u, "spring_u", {s, 3});
+    check_shape(a, "spring_a", {s});
+    check_shape(b, "spring_b", {s});
+    check_shape(gradient, "volume_gradient", {n, 3});
+    check_shape(dpdv, "body_dpdv", {nb_});
+    check_shape(pnet, "body_pnet", {nb_});
+    check_shape(out, "out", {n, 3});
+    CoreControl c(m, control);
+    nb::gil_scoped_release release;
+    softbody::kernels().apply_jacobians(m, c.view, q.data(), p.data(), alpha_m, alpha_c, alpha_k,
+                                        u.data(), a.data(), b.data(), gradient.data(),
+                                        dpdv.data(), pnet.data(), attachments, out.data());
+}
+
+/// Volumes of bodies given by plain arrays (before a Model exists, or by another method).
+nb::ndarray<nb::numpy, double> body_volumes(ConstF64 q, ConstI64 tri_indices,
+                                            ConstI64 body_particle_range, ConstI64 body_tri_range,
+                                            ConstI64 body_volume_method, ConstI64 body_mc_range,
+                                            ConstF64 mc_samples) {
+    softbody::Model m;
+    check_shape(q, "q", {-1, 3});
+    check_shape(tri_indices, "tri_indices", {-1, 3});
+    check_shape(body_particle_range, "body_particle_range", {-1, 2});
+    m.particle_count = static_cast<Index>(q.shape(0));
+    m.tri_count = static_cast<Index>(tri_indices.shape(0));
+    m.body_count = static_cast<Index>(body_particle_range.shape(0));
+    check_shape(body_tri_range, "body_tri_range", {m.body_count, 2});
+    check_shape(body_volume_method, "body_volume_method", {m.body_count});
+    check_shape(body_mc_range, "body_mc_range", {m.body_count, 2});
+    check_shape(mc_samples, "mc_samples", {-1, 2});
+    m.mc_count = static_cast<Index>(mc_samples.shape(0));
+    m.tri_indices = tri_indices.data();
+    m.body_particle_range = body_particle_range.data();
+    m.body_tri_range = body_tri_range.data();
+    m.body_volume_method = body_volume_method.data();
+    m.body_mc_range = body_mc_range.data();
+    m.mc_samples = mc_samples.data();
+    check_indices(m.tri_indices, 3 * m.tri_count, 0, m.particle_count, "tri_indices");
+    check_ranges(m.body_particle_range, m.body_count, m.particle_count, "body_particle_range");
+    check_ranges(m.body_tri_range, m.body_count, m.tri_count, "body_tri_range");
+    check_ranges(m.body_mc_range, m.body_count, m.mc_count, "body_mc_range");
+    check_indices(m.body_volume_method, m.body_count, 0, 5, "body_volume_method");
+    for (Index b = 0; b < m.body_count; ++b)
+        if (m.body_tri_range[2 * b + 1] > m.body_tri_range[2 * b] &&
+            m.body_particle_range[2 * b + 1] == m.body_particle_range[2 * b])
+            fail("body " + std::to_string(b) + " has triangles but no particles");
+    const size_t count = static_cast<size_t>(m.body_count);
+    double* volume = new double[count > 0 ? count : 1];
+    nb::capsule owner(volume, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+    std::vector<double> lo(3 * count), hi(3 * count);
+    softbody::BodyGas gas;
+    gas.volume = volume;
+    gas.lo = lo.data();
+    gas.hi = hi.data();
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().eval_volumes(m, q.data(), gas);
+    }
+    size_t shape[1] = {count};
+    return nb::ndarray<nb::numpy, double>(volume, 1, shape, owner);
+}
+
+}  // namespace
+
+void bind_terms(nb::module_& mod) {
+    mod.def("eval_forces", &eval_forces, nb::arg("model"), nb::arg("control"), nb::arg("t"),
+            nb::arg("q").noconvert(), nb::arg("qd").noconvert(),
+            "(f (N, 3) [N], volume (B,) [m^3], pressure (B,) [Pa], dV/dx (N, 3) [m^2]).");
+    mod.def("apply_jacobians", &apply_jacobians, nb::arg("model"), nb::arg("control"),
+            nb::arg("q").noconvert(), nb::arg("p").noconvert(), nb::arg("alpha_m"),
+            nb::arg("alpha_c"), nb::arg("alpha_k"), nb::arg("spring_u").noconvert(),
+            nb::arg("spring_a").noconvert(), nb::arg("spring_b").noconvert(),
+            nb::arg("volume_gradient").noconvert(), nb::arg("body_dpdv").noconvert(),
+            nb::arg("body_pnet").noconvert(), nb::arg("out").noconvert(),
+            nb::arg("attachments") = true,
+            "out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p (C = df/dv, K = df/dx).");
+    mod.def("soft_contacts", &soft_contacts, nb::arg("model"), nb::arg("q").noconvert(),
+            nb::arg("qd").noconvert(), nb::arg("hash_capacity") = nb::none(),
+            "One pass of the model's soft-soft contacts on q, qd (N, 3) in place; returns "
+            "the hash entries the surface contacts needed when they did not fit, else 0.");
+    mod.def("body_volumes", &body_volumes, nb::arg("q").noconvert(),
+            nb::arg("tri_indices").noconvert(), nb::arg("body_particle_range").noconvert(),
+            nb::arg("body_tri_range").noconvert(), nb::arg("body_volume_method").noconvert(),
+            nb::arg("body_mc_range").noconvert(), nb::arg("mc_samples").noconvert(),
+            "Volume (B,) [m^3] of each body by its method, from plain arrays.");
+    mod.def("eval_volumes", &eval_volumes, nb::arg("model"), nb::arg("control"), nb::arg("t"),
+            nb::arg("q").noconvert(),
+            "(volume (B,) [m^3], pressure (B,) [Pa], dV/dx (N, 3) [m^2]) at time t [s].");
+}
+
+}  // namespace softbody::bindings
