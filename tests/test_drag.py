@@ -379,11 +379,16 @@ def test_drag_without_air_runs_anywhere():
     ],
 )  # fmt: skip
 def test_builder_refuses_bad_air_and_coefficients(call, message):
+    """A negative or non-finite air density, a wind that is not 3 finite numbers, and a
+    negative or non-numeric drag coefficient are ValueErrors naming them, at the builder
+    call."""
     with pytest.raises(ValueError, match=message):
         call(sb.ModelBuilder())
 
 
 def test_control_refuses_a_bad_wind():
+    """Control.wind must be 3 finite numbers or all NaN (the model's wind): another shape,
+    or a NaN beside numbers, is a ValueError at the step, never a silent default."""
     model = drag_model(0.5)
     control = model.control()
     sim = sb.Simulator(model, integrator="rk4", dt=1e-4)

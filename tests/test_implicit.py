@@ -243,6 +243,8 @@ def test_pressure_jacobian_matches_finite_differences():
 
 
 def test_bad_solver_settings():
+    """A CG tolerance outside (0, 1) or an iteration limit below 1 is a ValueError naming
+    the option."""
     model = ball_model()
     with pytest.raises(ValueError, match="implicit_tolerance must lie in"):
         sb.Simulator(model, integrator="implicit_euler", dt=1e-2, implicit_tolerance=0.0)

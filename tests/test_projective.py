@@ -171,6 +171,8 @@ def test_too_long_a_step_for_the_gas_is_flagged():
 
 
 def test_bad_iteration_counts():
+    """projective_iterations must be an integer >= 1: zero, negatives, fractions, booleans
+    and strings are ValueErrors."""
     model = ball_model()
     for bad in (0, -1, 1.5, True, "2"):
         with pytest.raises(ValueError, match="projective_iterations must be an integer >= 1"):

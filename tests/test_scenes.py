@@ -97,6 +97,8 @@ def test_bad_overrides_name_the_key(override, match):
 
 
 def test_unknown_scene_lists_the_built_ins():
+    """A scene name that is neither built in nor a file is a SceneError that lists the
+    built-in scenes."""
     listed = "unknown scene 'bouncy'; built-in scenes: balloon-drop, bouncing"
     with pytest.raises(SceneError, match=listed):
         load_scene("bouncy")
