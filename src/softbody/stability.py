@@ -426,7 +426,7 @@ def largest_stable_step(
     rate = total if np.isinf(damping_rate) else max(total, damping_rate)
     if rate <= 0 or not integrator.explicit:
         # backward Euler: |1 / (1 - h lambda)| <= 1 whenever Re(lambda) <= 0 (projective
-        # dynamics: for its springs; mode_stable_step adds its pressure limit)
+        # dynamics: for its springs; its solver adds its pressure limit)
         return float("inf")
     if damping_per_stiffness is None:
         damping_per_stiffness = (2.0 * zeta / omega if omega > 0 else 0.0,) * 2
@@ -469,32 +469,12 @@ def largest_stable_step(
 
 
 def mode_stable_step(integrator: Integrator, mode: StiffestMode) -> float:
-    """Largest stable step [s] of ``integrator`` for the modes bounded by ``mode``, at
-    ``TOLERATED_GROWTH_RATE``.
+    """Largest stable step [s] of ``integrator`` for the modes bounded by ``mode``: the
+    rule of the solver that steps it (``softbody.solvers``: ``step_limit``)."""
+    from softbody.solvers import solver_class  # the solvers build on this module
 
-    Projective dynamics takes the springs implicitly and the pressure explicitly within
-    each iteration: on a pressure mode x'' = -omega^2 x resisted by the masses alone, one
-    iteration from y = x0 + h v0 is stable for (h omega)^2 < 4/3 and the iterations
-    contract for (h omega)^2 < 1, so its limit is 1 / omega_gas, the gas's volume mode.
-    The local part (P - P_a) d2V/dx2 of the pressure Hessian, of order P times an edge
-    length per particle, is not counted: the global matrix holds every spring's full
-    stiffness k against it (k = 500 N/m against about 1 N/m in the ball drop), so it is
-    resisted by the springs, not the masses; a model where it is not (springs far
-    softer than the pressure) is caught by the blow-up checks.
-    """
-    if integrator == Integrator.PROJECTIVE:
-        w = mode.omega_gas
-        return float("inf") if w <= 0 else 1.0 / w
-    return largest_stable_step(
-        integrator,
-        mode.omega_damped,
-        0.0,
-        omega_undamped=mode.omega_undamped,
-        omega_total=mode.omega,
-        damping_per_stiffness=mode.damping_per_stiffness,
-        damping_rate=mode.damping_rate,
-        growth_rate=TOLERATED_GROWTH_RATE,
-    )
+    integrator = Integrator.parse(integrator)
+    return solver_class(integrator).step_limit(integrator, mode)
 
 
 def stable_dt(

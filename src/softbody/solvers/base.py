@@ -14,7 +14,7 @@ from enum import IntEnum
 
 from softbody.core import core_model
 from softbody.integrators import Integrator
-from softbody.stability import StiffestMode, mode_stable_step
+from softbody.stability import StiffestMode
 
 
 class Status(IntEnum):
@@ -81,10 +81,15 @@ class Solver:
         """(mean, most) inner iterations per step over the last run; (0, 0) without."""
         return (0.0, 0)
 
+    @classmethod
+    def step_limit(cls, integrator: Integrator, mode: StiffestMode) -> float:
+        """The largest stable step [s] of ``integrator`` for the modes bounded by ``mode``
+        (``stability.stiffest_mode``): each solver's own rule."""
+        raise NotImplementedError
+
     def stable_step(self, mode: StiffestMode) -> float:
-        """The largest stable step [s] for the modes bounded by ``mode``
-        (``stability.mode_stable_step``)."""
-        return mode_stable_step(self.integrator, mode)
+        """This solver's largest stable step [s] for the modes bounded by ``mode``."""
+        return self.step_limit(self.integrator, mode)
 
     def grow_hash(self, entries: int) -> None:
         """Give the surface contacts' spatial hash room for ``entries`` entries (a run

@@ -6,6 +6,7 @@ from __future__ import annotations
 from softbody import _core
 from softbody.integrators import Integrator
 from softbody.solvers.base import RunLimits, RunResult, Solver
+from softbody.stability import TOLERATED_GROWTH_RATE, StiffestMode, largest_stable_step
 
 
 class ExplicitSolver(Solver):
@@ -14,6 +15,23 @@ class ExplicitSolver(Solver):
 
     integrators = (Integrator.EULER, Integrator.MIDPOINT, Integrator.RK4,
                    Integrator.SYMPLECTIC_EULER, Integrator.VELOCITY_VERLET)  # fmt: skip
+
+    @classmethod
+    def step_limit(cls, integrator: Integrator, mode: StiffestMode) -> float:
+        """The step at which no mode bounded by ``mode`` grows faster than
+        ``stability.TOLERATED_GROWTH_RATE``: the scheme's amplification over the damped
+        spring modes, the undamped (pressure, stretched-spring) ones and both together
+        (``stability.largest_stable_step``)."""
+        return largest_stable_step(
+            integrator,
+            mode.omega_damped,
+            0.0,
+            omega_undamped=mode.omega_undamped,
+            omega_total=mode.omega,
+            damping_per_stiffness=mode.damping_per_stiffness,
+            damping_rate=mode.damping_rate,
+            growth_rate=TOLERATED_GROWTH_RATE,
+        )
 
     def _make_core(self, hash_capacity):
         return _core.ExplicitSolver(

@@ -32,7 +32,7 @@ few iterations the stiff, local motion is resolved and the slow, global motion l
 ball bounces lower and settles more softly than under converged backward Euler; more
 iterations converge to it. The springs are implicit whatever the step; the pressure and
 the other forces are explicit within each iteration, which limits the step to about
-1 / omega_gas, the gas's volume mode (``stability.mode_stable_step``).
+1 / omega_gas, the gas's volume mode (``ProjectiveSolver.step_limit``).
 """
 
 from __future__ import annotations

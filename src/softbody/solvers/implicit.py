@@ -77,6 +77,13 @@ class ImplicitSolver(Solver):
         steps, total, most = self._stats
         return (total / steps if steps else 0.0, most)
 
+    @classmethod
+    def step_limit(cls, integrator: Integrator, mode) -> float:
+        """No limit: backward Euler and BDF2 are A-stable, |amplification| <= 1 for every
+        mode with Re(lambda) <= 0, whatever the step (the Newton step's linearisation is
+        the accuracy limit, not a stability one)."""
+        return float("inf")
+
     def _make_core(self, hash_capacity):
         return _core.ImplicitSolver(
             self._core_model(), multigrid=self._multigrid, hash_capacity=hash_capacity,
