@@ -126,7 +126,10 @@ def test_negative_nrt_pauses_clamped_and_reset_goes_on(viewer):
         client.set(viewer.gas_sliders[0], -50.0)
         assert wait_for(lambda: "nRT" in viewer.message)
         assert "outside" in viewer.message and not viewer.running
-        assert viewer.control.body_gas_nrt[0] == 0.0
+        # the handler pauses (the message) before it stores the clamped value, both under
+        # the viewer's lock: wait for the handler to finish rather than race it
+        with viewer.lock:
+            assert viewer.control.body_gas_nrt[0] == 0.0
         assert viewer.gas_sliders[0].value == 0.0
         time.sleep(0.5)
         assert viewer._thread.is_alive()
