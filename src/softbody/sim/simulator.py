@@ -85,7 +85,11 @@ class Simulator:
         adds the chunks' volume sums in a fixed order; the implicit solve and projective
         dynamics' triangular solves stay serial. Results agree with the serial ones to
         round-off and are the same in every run. Opt-in because a thread that loses its
-        core to another process stalls the whole step.
+        core to another process stalls the whole step, and because handing the pass to
+        the threads costs more than it saves on small meshes: measured on a 2-core
+        machine (``benchmarks/pressure_scaling.py``), symplectic Euler on 2 threads ran
+        0.03x as fast as on one at 162 particles, 0.4x at 2,562, and no faster at 10,242
+        and 40,962.
     implicit_preconditioner : str
         ``implicit_euler`` and ``bdf2``: ``"multigrid"`` (default; one algebraic-multigrid V-cycle
         of the spring Laplacian, built once, so the iteration count barely grows with mesh
