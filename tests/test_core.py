@@ -23,6 +23,7 @@ from conftest import ball_model
 from softbody import _core, core
 from softbody.core import core_model
 from softbody.sim.control import control_data
+from trajectory_cases import every_term_model, surface_model
 
 EXPLICIT = ["euler", "midpoint", "rk4", "symplectic_euler", "velocity_verlet"]
 STEPS = 150
@@ -46,85 +47,9 @@ def _tolerance(state, steps):
     return 1e-12 * scale * steps
 
 
-def _everything_model() -> tuple[sb.Model, sb.Control]:
-    """Every term the explicit core steps: each volume method and gas law, a schedule,
-    ambient pressure, attachments, pins driven to targets, a grab, external forces, each
-    collider kind with each motion, and bounding soft contacts."""
-    b = sb.ModelBuilder(gravity=(0.0, -9.81, 0.0))
-    b.add_soft_body(sb.icosphere(2, radius=0.3, center=(-0.5, 0.5, 0.0)), mass=1.0,
-                    stiffness=400.0, damping=0.5, gas=sb.Gas.isothermal(40.0),
-                    bend_stiffness=20.0, bend_damping=0.1)  # fmt: skip
-    b.add_soft_body(
-        sb.icosphere(2, radius=0.3, center=(0.2, 0.55, 0.0)), mass=1.0, stiffness=400.0,
-        damping=0.5, volume_method="bounding_ellipsoid",
-        gas=sb.Gas.adiabatic(30.0, ambient_pressure=5.0, schedule=[(0.0, 30.0), (0.05, 60.0)]),
-    )  # fmt: skip
-    b.add_soft_body(
-        sb.icosphere(1, radius=0.25, center=(0.8, 0.5, 0.1)), mass=0.5, stiffness=300.0,
-        damping=0.3, volume_method="monte_carlo", gas=sb.Gas.fixed_pressure(80.0),
-    )  # fmt: skip
-    b.add_soft_body(
-        sb.icosphere(1, radius=0.25, center=(0.0, 1.2, 0.0)), mass=0.5, stiffness=300.0,
-        damping=0.3, volume_method="bounding_box", gas=20.0, pinned=[0, 1],
-    )  # fmt: skip
-    b.add_soft_body(
-        sb.icosphere(1, radius=0.2, center=(-0.2, 1.0, 0.3)), mass=0.5, stiffness=300.0,
-        damping=0.3, volume_method="bounding_sphere", gas=15.0,
-    )  # fmt: skip
-    b.add_attachment(5, anchor=(-0.5, 1.0, 0.0), stiffness=50.0, damping=1.0)
-    b.add_spring(0, 170, stiffness=30.0, damping=0.2)  # between two bodies, off any ring
-    b.add_collider(sb.ColliderPlane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0),
-                                    restitution=0.5, friction=0.2))  # fmt: skip
-    b.add_collider(sb.ColliderSphere(center=(0.2, 0.1, 0.0), radius=0.2,
-                                     motion=sb.MotionOscillation(amplitude=(0.0, 0.1, 0.0),
-                                                                 frequency=3.0)))  # fmt: skip
-    b.add_collider(
-        sb.ColliderBox(
-            center=(0.8, 0.1, 0.0),
-            half_extents=(0.2, 0.1, 0.2),
-            motion=sb.MotionRotation(angular_velocity=(0.0, 2.0, 0.0)),
-        )
-    )
-    b.add_collider(
-        sb.ColliderBox(
-            center=(0.0, 0.8, 0.0),
-            half_extents=(1.5, 1.2, 1.0),
-            container=True,
-            motion=sb.MotionTranslation(velocity=(0.0, 0.1, 0.0)),
-        )
-    )
-    b.set_soft_contact("bounding", restitution=0.4, friction=0.1)
-    model = b.finalize()
-    control = model.control()
-    control.particle_f[10] = (0.0, 2.0, 0.0)
-    control.grab_particle = 20
-    control.grab_target = np.array([-0.4, 0.9, 0.0])
-    control.grab_stiffness, control.grab_damping = 30.0, 0.5
-    control.pin_target = model.particle_q[model.pin_particle] + (0.0, 0.05, 0.0)
-    return model, control
-
-
-def _surface_model(cloth: bool) -> sb.Model:
-    """Surface soft contacts: two balls meeting head on at +-2 m/s from 2 cm apart, or
-    (``cloth``) a falling ball hitting a cloth pinned at its corners, at 3 m/s."""
-    b = sb.ModelBuilder(gravity=(0.0, 0.0, -9.81) if cloth else (0.0, 0.0, 0.0))
-    b.set_soft_contact("surface", restitution=0.5, friction=0.3)
-    if cloth:
-        b.add_cloth(sb.rectangle((1.0, 1.0), (8, 8)), mass=2.0, stiffness=2000.0, damping=0.5,
-                    pinned=[0, 8, 72, 80])  # fmt: skip
-        centers, velocities = [(0.05, -0.03, 0.27)], [(0.0, 0.0, -3.0)]
-    else:
-        centers, velocities = [(-0.31, 0.0, 0.0), (0.31, 0.02, 0.0)], [(2, 0, 0), (-2, 0, 0)]
-    for center, velocity in zip(centers, velocities, strict=True):
-        b.add_soft_body(sb.icosphere(2, radius=0.3 if not cloth else 0.25, center=center),
-                        mass=1.0, stiffness=400.0, damping=0.5, gas=40.0,
-                        velocity=velocity)  # fmt: skip
-    return b.finalize()
-
-
 def _surface_run(small_hash: bool) -> tuple[sb.State, sb.Simulator]:
     """150 midpoint steps of the two balls, the hash starting at 1 entry or at its default."""
-    model = _surface_model(cloth=False)
+    model = surface_model(cloth=False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sb.StabilityWarning)
         sim = sb.Simulator(model, integrator="midpoint", dt=2e-4)
@@ -151,7 +76,7 @@ def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
 def test_a_solver_reports_the_hash_room_it_needs():
     """One step of the balls already touching with a 1-entry hash: NEED_HASH (6), no step
     done, the needed entry count as the value, and the state as it was."""
-    model = _surface_model(cloth=False)
+    model = surface_model(cloth=False)
     state = model.state()
     shift = np.zeros_like(state.particle_q)
     shift[slice(*model.body_particle_range[0]), 0] = 0.03  # 1 cm into the other ball
@@ -175,9 +100,9 @@ def test_every_instruction_set_gives_the_same_run(contacts):
     paths = core.simd_paths()
     assert paths[0] == "scalar"
     if contacts == "bounding":
-        model, control = _everything_model()
+        model, control = every_term_model()
     else:
-        model, control = _surface_model(cloth=True), None
+        model, control = surface_model(cloth=True), None
     before = core.simd_path()
     runs = {}
     try:

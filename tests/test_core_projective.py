@@ -17,7 +17,7 @@ from softbody import _core, core
 from softbody.core import core_model
 from softbody.sim.control import control_data
 from softbody.solvers.factor import build_projective
-from test_core import _surface_model
+from trajectory_cases import surface_model
 
 STEPS = 60
 
@@ -87,7 +87,7 @@ def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
     """Surface contacts with a 1-entry hash: the core stops with NEED_HASH (the step
     undone), the Simulator rebuilds it with twice the room and re-points the factor, and
     the run equals one with the default room to the last bit."""
-    model = _surface_model(cloth=False)
+    model = surface_model(cloth=False)
     runs = []
     for small in (False, True):
         sim = _sim(model, 5e-4)
