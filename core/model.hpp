@@ -162,6 +162,15 @@ struct LaneBuffers {
     double* lane_pnet = nullptr;  // (8 G,) P - P_ambient of each particle's body [Pa], 0 free
     const Parallel* parallel = nullptr;  // opt-in threads (null: serial)
     double* chunk_volume = nullptr;      // (chunks, B) each chunk's share of the volumes
+    // The float32 force pass (set: the pass runs in float32; null: float64). Its rows hold
+    // x - x_ref (the particle's body's first particle: body-local, so float32 keeps
+    // 2^-24 of the body's size) and v; the ring tables are float copies of the model's.
+    float* rows_f = nullptr;                    // (8 G, 8) x - x_ref, v, 0, 0 per particle
+    const float* ring_rest_length_f = nullptr;  // (slots, 8) as Model.ring_slot_* [m]
+    const float* ring_stiffness_f = nullptr;    // [N/m]
+    const float* ring_damping_f = nullptr;      // [N s/m]
+    const float* ring_face_f = nullptr;         // 1 where (j_{s-1}, j_s) is a face
+    bool extra_slots = false;  // the model has springs off the rings or broken fans
 };
 
 /// Scratch for the explicit schemes, owned by softbody::ExplicitSolver.

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstring>
+#include <type_traits>
 
 #include "config.hpp"
 
@@ -66,6 +67,76 @@ inline vd vrsqrt(vd x) {
     return y1 * (1.5 - half_x * y1 * y1);
 #else
     return splat(1.0) / vsqrt(x);
+#endif
+}
+
+// Lanes of floats for the float32 force pass (LaneBuffers.rows_f): 8 particles at once in a
+// 256-bit register on AVX2 and AVX-512 alike (on Zen 4 two 256-bit operations issue per
+// cycle, twice the lanes of one 512-bit double operation), 1 on the scalar path.
+#if defined(__AVX512F__) || defined(__AVX2__)
+constexpr int kLanesF = 8;
+#else
+constexpr int kLanesF = 1;
+#endif
+
+typedef float vf __attribute__((vector_size(sizeof(float) * kLanesF)));
+typedef std::int32_t vfi __attribute__((vector_size(sizeof(float) * kLanesF)));
+
+inline vf splatf(float x) { return vf{} + x; }
+
+/// x in every lane of a vector of type V (doubles or floats), rounded to its element type.
+template <class V>
+inline V lanes_of(double x) {
+    using T = std::remove_reference_t<decltype(V{}[0])>;
+    return V{} + static_cast<T>(x);
+}
+
+inline vf load_lanes_f(const float* p) {
+    vf v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+}
+
+/// 1 / sqrt(x) per float lane: the 12-bit estimate and one Newton step (about 23 correct
+/// bits, float precision); scalar: 1 / sqrt(x), rounded. Callers mask x = 0.
+inline vf vrsqrt(vf x) {
+#if defined(__AVX512F__) || defined(__AVX2__)
+    const vf y = _mm256_rsqrt_ps(x);
+    return y * (1.5f - (0.5f * x) * y * y);
+#else
+    return vf{1.0f / std::sqrt(x[0])};
+#endif
+}
+
+/// Where a float lane's mask is set, a; else 0.
+inline vf select(vfi mask, vf a) { return mask ? a : vf{}; }
+
+/// Six float lanes of a particle row each: positions (body-local) and velocities.
+struct RowsF {
+    vf x, y, z, vx, vy, vz;
+};
+
+/// The float rows (8 floats each: x, y, z, vx, vy, vz, 0, 0) of particles idx[0 ..
+/// kLanesF-1], one lane each: an 8 x 8 transpose in registers.
+inline RowsF load_rows_f(const float* rows, const index* idx) {
+#if defined(__AVX512F__) || defined(__AVX2__)
+    __m256 r[8];
+    for (int l = 0; l < 8; ++l) r[l] = _mm256_loadu_ps(rows + 8 * idx[l]);
+    const __m256 t0 = _mm256_unpacklo_ps(r[0], r[1]), t1 = _mm256_unpackhi_ps(r[0], r[1]);
+    const __m256 t2 = _mm256_unpacklo_ps(r[2], r[3]), t3 = _mm256_unpackhi_ps(r[2], r[3]);
+    const __m256 t4 = _mm256_unpacklo_ps(r[4], r[5]), t5 = _mm256_unpackhi_ps(r[4], r[5]);
+    const __m256 t6 = _mm256_unpacklo_ps(r[6], r[7]), t7 = _mm256_unpackhi_ps(r[6], r[7]);
+    // s_k: element k (and k + 4 in the upper half) of rows 0-3, likewise u_k of rows 4-7
+    const __m256 s0 = _mm256_shuffle_ps(t0, t2, 0x44), s1 = _mm256_shuffle_ps(t0, t2, 0xEE);
+    const __m256 s2 = _mm256_shuffle_ps(t1, t3, 0x44), s3 = _mm256_shuffle_ps(t1, t3, 0xEE);
+    const __m256 u0 = _mm256_shuffle_ps(t4, t6, 0x44), u1 = _mm256_shuffle_ps(t4, t6, 0xEE);
+    const __m256 u2 = _mm256_shuffle_ps(t5, t7, 0x44), u3 = _mm256_shuffle_ps(t5, t7, 0xEE);
+    return {_mm256_permute2f128_ps(s0, u0, 0x20), _mm256_permute2f128_ps(s1, u1, 0x20),
+            _mm256_permute2f128_ps(s2, u2, 0x20), _mm256_permute2f128_ps(s3, u3, 0x20),
+            _mm256_permute2f128_ps(s0, u0, 0x31), _mm256_permute2f128_ps(s1, u1, 0x31)};
+#else
+    const float* r = rows + 8 * idx[0];
+    return {vf{r[0]}, vf{r[1]}, vf{r[2]}, vf{r[3]}, vf{r[4]}, vf{r[5]}};
 #endif
 }
 

@@ -9,7 +9,8 @@ namespace {
 /// softbody._core.ExplicitSolver: the explicit schemes' time loop and its scratch.
 class ExplicitSolver {
 public:
-    ExplicitSolver(nb::object model, std::optional<Index> hash_capacity, int threads)
+    ExplicitSolver(nb::object model, std::optional<Index> hash_capacity, int threads,
+                   bool float32)
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
           buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)),
@@ -25,6 +26,7 @@ public:
         w_.gas = buffers_.gas;
         w_.lanes = buffers_.lanes_view;
         w_.contact = buffers_.contact;
+        if (float32) use_float32();
     }
 
     std::tuple<int, Index, Index, double> simulate(int scheme, Index steps, double t0, double dt,
@@ -48,14 +50,36 @@ public:
     }
 
     Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+    bool float32() const { return w_.lanes.rows_f != nullptr; }
     int threads() const { return threads_.count(); }
 
 private:
+    /// The float32 force pass: its rows and float copies of the model's ring tables.
+    void use_float32() {
+        const softbody::Model& m = model_.model();
+        const size_t lanes = static_cast<size_t>(8 * m.group_count);
+        const size_t slots = static_cast<size_t>(8 * m.ring_slot_start[m.group_count]);
+        rows_f_.assign(8 * lanes, 0.0f);  // padding rows stay zero
+        auto copy = [slots](const double* from, std::vector<float>& to) {
+            to.resize(slots);
+            for (size_t k = 0; k < slots; ++k) to[k] = static_cast<float>(from[k]);
+            return to.data();
+        };
+        softbody::LaneBuffers& l = w_.lanes;
+        l.rows_f = rows_f_.data();
+        l.ring_rest_length_f = copy(m.ring_slot_rest_length, rest_f_);
+        l.ring_stiffness_f = copy(m.ring_slot_stiffness, stiffness_f_);
+        l.ring_damping_f = copy(m.ring_slot_damping, damping_f_);
+        l.ring_face_f = copy(m.ring_slot_face, face_f_);
+        l.extra_slots = m.spring_slot_start[m.group_count] > 0 || m.face_slot_start[m.group_count] > 0;
+    }
+
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
     const CoreModel& model_;
     Buffers buffers_;
     SolverThreads threads_;
     softbody::ExplicitBuffers w_;
+    std::vector<float> rows_f_, rest_f_, stiffness_f_, damping_f_, face_f_;
 };
 
 }  // namespace
@@ -63,12 +87,17 @@ private:
 void bind_explicit(nb::module_& mod) {
     nb::class_<ExplicitSolver>(mod, "ExplicitSolver",
                                "The explicit schemes' time loop with its scratch buffers.")
-        .def(nb::init<nb::object, std::optional<Index>, int>(), nb::arg("model"),
+        .def(nb::init<nb::object, std::optional<Index>, int, bool>(), nb::arg("model"),
              nb::arg("hash_capacity") = nb::none(), nb::arg("threads") = 1,
+             nb::arg("float32") = false,
              "hash_capacity: entries of the surface contacts' spatial hash (default 8 per "
              "triangle); a run that needs more returns NEED_HASH with the count needed. "
-             "threads: > 1 runs the force pass on that many threads, deterministically.")
+             "threads: > 1 runs the force pass on that many threads, deterministically. "
+             "float32: the ring's springs and faces in float32 (positions, velocities and "
+             "the integration stay float64).")
         .def_prop_ro("threads", &ExplicitSolver::threads, "Threads of the force pass.")
+        .def_prop_ro("float32", &ExplicitSolver::float32,
+                     "Whether the force pass runs its springs and faces in float32.")
         .def_prop_ro("hash_capacity", &ExplicitSolver::hash_capacity,
                      "Entries the surface contacts' spatial hash holds (0 without them).")
         .def("simulate", &ExplicitSolver::simulate, nb::arg("scheme"), nb::arg("steps"),

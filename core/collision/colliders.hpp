@@ -225,13 +225,26 @@ inline void respond(const Model& m, index i, const Hit& hit, V3 u, double e, dou
     store(qd, i, v_new);
 }
 
+/// What a pass saw of the values it wrote: whether one was not finite, and the largest
+/// velocity component [m/s] (the particle checks' filter, loop::check_particles).
+struct Seen {
+    bool bad = false;
+    double most = 0.0;
+    void add(V3 x, V3 v) {
+        bad |= !(std::isfinite(x.x) && std::isfinite(x.y) && std::isfinite(x.z) &&
+                 std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z));
+        most = std::max(most, std::max(std::fabs(v.x), std::max(std::fabs(v.y), std::fabs(v.z))));
+    }
+};
+
 /// Resolve every particle against every collider, in collider order. q_start (N, 3) holds
 /// the positions at the start of the step; q, qd (N, 3) change in place; impulse (C, 3)
 /// [N s] accumulates what each collider receives. A plane (the ground of most scenes)
-/// has a loop of its own: one dot product per particle, no path to trace.
+/// has a loop of its own: one dot product per particle, no path to trace. With `seen`,
+/// the particles a collider moved are added to it.
 inline void contacts(const Model& m, const double* cq, const double* crot, const double* cv,
                      const double* cw, const double* q_start, double* q, double* qd,
-                     double* impulse) {
+                     double* impulse, Seen* seen = nullptr) {
     for (index k = 0; k < m.collider_count; ++k) {
         const index kind = m.collider_kind[k];
         const V3 center = load(cq, k);
@@ -249,6 +262,7 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
                 if (dist >= 0.0 || m.particle_inv_mass[i] == 0.0) continue;
                 const Hit hit{true, p - dist * n, n};
                 respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
+                if (seen != nullptr) seen->add(load(q, i), load(qd, i));
             }
         } else {
             for (index i = 0; i < m.particle_count; ++i) {
@@ -257,6 +271,7 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
                 if (!hit.hit) continue;
                 // the surface's velocity at the contact
                 respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
+                if (seen != nullptr) seen->add(load(q, i), load(qd, i));
             }
         }
         add_to(impulse, k, j);

@@ -45,6 +45,15 @@ inline RunResult first_bad_particle(const Model& m, const double* q, const doubl
     return {};
 }
 
+/// The particle checks after a filter: none can fail when no value was seen not finite and
+/// 3 squares of the largest velocity component are within the limit (speed^2 <= 3 max
+/// component^2); otherwise the exact pass decides.
+inline RunResult check_seen(const Model& m, const double* q, const double* qd, double max_speed,
+                            bool any_bad, double most) {
+    if (!any_bad && 3.0 * most * most <= max_speed * max_speed) return {};
+    return first_bad_particle(m, q, qd, max_speed);
+}
+
 /// A particle with a non-finite position or velocity, or faster than max_speed [m/s]. Every
 /// step asks, and almost always none is: a first pass over the flat arrays, kLanes values
 /// at a time with no early exit, finds whether any value is not finite (x - x is then not
@@ -72,8 +81,7 @@ inline RunResult check_particles(const Model& m, const double* q, const double* 
         any_bad |= !(std::isfinite(q[k]) && std::isfinite(qd[k]));
         most = std::max(most, std::fabs(qd[k]));
     }
-    if (!any_bad && 3.0 * most * most <= max_speed * max_speed) return {};
-    return first_bad_particle(m, q, qd, max_speed);
+    return check_seen(m, q, qd, max_speed, any_bad, most);
 }
 
 inline void copy(const double* from, double* to, index count) {
@@ -98,7 +106,8 @@ inline void begin_run(const Model& m, const Control& c, const RunParams& p, cons
 /// entries surface soft contacts need when w.hash_capacity is too small: then the colliders
 /// have moved but no contact was resolved, and the caller undoes the step.
 inline index contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
-                      const StateView& s, const double* q_start, const ContactBuffers& w) {
+                      const StateView& s, const double* q_start, const ContactBuffers& w,
+                      colliders::Seen* seen = nullptr) {
     if (m.collider_count > 0) {
         const double fraction = (static_cast<double>(step) + 1.0) / static_cast<double>(p.steps);
         colliders::poses(m, c, fraction, static_cast<double>(p.steps) * p.dt, t,
@@ -113,7 +122,7 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
     }
     if (m.collider_count > 0)
         colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
-                            s.q, s.qd, s.collider_impulse);
+                            s.q, s.qd, s.collider_impulse, seen);
     return 0;
 }
 

@@ -17,6 +17,26 @@
 
 namespace softbody::SOFTBODY_KERNELS::explicit_solver {
 
+/// Sums into body_six_v (B,) in particle order, in a register while the particles' body
+/// stays the same (a store and reload per particle would chain each sum on the last).
+struct VolumeSums {
+    double* body_six_v;
+    index body = -1;
+    double sum = 0.0;
+    void add(index b, double value) {
+        if (b != body) {
+            flush();
+            body = b;
+            if (b >= 0) sum = body_six_v[b];
+        }
+        if (b >= 0) sum += value;
+    }
+    void flush() {
+        if (body >= 0) body_six_v[body] = sum;
+        body = -1;
+    }
+};
+
 /// The vertex-major pass over groups [g0, g1): for every particle, kLanes at a time, its
 /// weight, its springs (kSprings; projective dynamics solves them implicitly) and dV/dx
 /// from its faces, with its share of its body's exact volume (each face seen from its three
@@ -27,6 +47,7 @@ template <bool kSprings>
 inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas& gas, double* f,
                                index g0, index g1, double* body_six_v) {
     const index n = m.particle_count;
+    VolumeSums sums{body_six_v};
     for (index g = g0; g < g1; ++g)
         for (int lane0 = 0; lane0 < kGroup; lane0 += kLanes) {
             const index first = kGroup * g + lane0;
@@ -68,10 +89,102 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
                 const index i = first + l;
                 store(f, i, {fx[l], fy[l], fz[l]});
                 store(gas.volume_gradient, i, {gx[l], gy[l], gz[l]});
-                const index body = m.particle_body[i];
-                if (body >= 0) body_six_v[body] += six_v[l];
+                sums.add(m.particle_body[i], six_v[l]);
             }
         }
+    sums.flush();
+}
+
+/// The float32 vertex-major pass over groups [g0, g1) (lanes.rows_f set): the ring's springs
+/// and faces as in vertex_pass_groups, in float lanes from body-local float rows, with
+/// float copies of the ring tables; the weight, the sums into f, dV/dx and the volumes, the
+/// springs off the rings and the faces of broken fans (from the float64 rows) in float64.
+/// Positions, velocities and the integration stay float64: the float32 part only perturbs
+/// the forces by the rounding of x - x_ref and v to float32 (2^-24 of their size).
+inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, const BodyGas& gas,
+                                   double* f, index g0, index g1, double* body_six_v) {
+    const index n = m.particle_count;
+    VolumeSums sums{body_six_v};
+    for (index g = g0; g < g1; ++g)
+        for (int lane0 = 0; lane0 < kGroup; lane0 += kLanesF) {
+            const index first = kGroup * g + lane0;
+            if (first >= n) break;
+            index own[kLanesF];
+            for (int l = 0; l < kLanesF; ++l) own[l] = first + l;
+            const RowsF self = load_rows_f(lanes.rows_f, own);
+            vf fx{}, fy{}, fz{}, gx{}, gy{}, gz{}, six_v{};
+            vf ux0{}, uy0{}, uz0{}, ux{}, uy{}, uz{};
+            for (index s = m.ring_slot_start[g]; s < m.ring_slot_start[g + 1]; ++s) {
+                const index e = kGroup * s + lane0;
+                const RowsF o = load_rows_f(lanes.rows_f, m.ring_slot_other + e);
+                const vf dx = o.x - self.x, dy = o.y - self.y, dz = o.z - self.z;
+                springs::lane_pair(self, o, dx, dy, dz, load_lanes_f(lanes.ring_rest_length_f + e),
+                                   load_lanes_f(lanes.ring_stiffness_f + e),
+                                   load_lanes_f(lanes.ring_damping_f + e), fx, fy, fz);
+                if (s == m.ring_slot_start[g]) {
+                    ux0 = dx, uy0 = dy, uz0 = dz;  // the face closing the ring comes last
+                } else {
+                    gas::lane_face(ux, uy, uz, dx, dy, dz, load_lanes_f(lanes.ring_face_f + e),
+                                   self.x, self.y, self.z, gx, gy, gz, six_v);
+                }
+                ux = dx, uy = dy, uz = dz;
+            }
+            if (m.ring_slot_start[g + 1] > m.ring_slot_start[g])
+                gas::lane_face(ux, uy, uz, ux0, uy0, uz0,
+                               load_lanes_f(lanes.ring_face_f + kGroup * m.ring_slot_start[g] + lane0),
+                               self.x, self.y, self.z, gx, gy, gz, six_v);
+            for (int l = 0; l < kLanesF && first + l < n; ++l) {
+                const index i = first + l;
+                const double mass = m.lane_mass[i];
+                f[3 * i] = mass * m.gravity[0] + static_cast<double>(fx[l]);
+                f[3 * i + 1] = mass * m.gravity[1] + static_cast<double>(fy[l]);
+                f[3 * i + 2] = mass * m.gravity[2] + static_cast<double>(fz[l]);
+                store(gas.volume_gradient, i,
+                      {static_cast<double>(gx[l]), static_cast<double>(gy[l]),
+                       static_cast<double>(gz[l])});
+                sums.add(m.particle_body[i], static_cast<double>(six_v[l]));
+            }
+        }
+    sums.flush();
+    if (!lanes.extra_slots) return;
+    // springs off the rings and faces of broken fans: in float64, added to what is there
+    for (index g = g0; g < g1; ++g) {
+        if (m.spring_slot_start[g + 1] == m.spring_slot_start[g] &&
+            m.face_slot_start[g + 1] == m.face_slot_start[g])
+            continue;
+        for (int lane0 = 0; lane0 < kGroup; lane0 += kLanes) {
+            const index first = kGroup * g + lane0;
+            if (first >= n) break;
+            index own[kLanes];
+            for (int l = 0; l < kLanes; ++l) own[l] = first + l;
+            const Rows self = load_rows(lanes.rows, own);
+            const Rows ref = load_rows(lanes.rows, m.lane_reference + first);
+            const vd rx = self.x - ref.x, ry = self.y - ref.y, rz = self.z - ref.z;
+            vd fx{}, fy{}, fz{}, gx{}, gy{}, gz{}, six_v{};
+            springs::lane_force(m, lanes.rows, g, lane0, self, fx, fy, fz);
+            gas::lane_faces(m, lanes.rows, g, lane0, self, rx, ry, rz, gx, gy, gz, six_v);
+            for (int l = 0; l < kLanes && first + l < n; ++l) {
+                const index i = first + l;
+                add_to(f, i, {fx[l], fy[l], fz[l]});
+                add_to(gas.volume_gradient, i, {gx[l], gy[l], gz[l]});
+                sums.add(m.particle_body[i], six_v[l]);
+            }
+        }
+    }
+    sums.flush();
+}
+
+/// The float rows of particles [i0, i1): x - x_ref (x_ref the position of the particle's
+/// lane_reference, its body's first particle) and v, rounded to float32.
+inline void pack_rows_f32(const Model& m, const double* q, const double* qd, float* rows,
+                          index i0, index i1) {
+    for (index i = i0; i < i1; ++i) {
+        const index r = m.lane_reference[i];
+        for (int k = 0; k < 3; ++k) {
+            rows[kRow * i + k] = static_cast<float>(q[3 * i + k] - q[3 * r + k]);
+            rows[kRow * i + 3 + k] = static_cast<float>(qd[3 * i + k]);
+        }
+    }
 }
 
 /// The packed rows (8 G, 8) of the vertex-major pass: x, v of particles [i0, i1) on one line
@@ -84,6 +197,17 @@ inline void pack_rows(const double* q, const double* qd, double* rows, index i0,
         }
 }
 
+/// The rows the pass reads for particles [i0, i1): the float32 ones when it runs in float32
+/// (with the float64 ones too when it has slots off the rings), else the float64 ones.
+inline void pack(const Model& m, const double* q, const double* qd, const LaneBuffers& lanes,
+                 index i0, index i1) {
+    if (lanes.rows_f != nullptr) {
+        pack_rows_f32(m, q, qd, lanes.rows_f, i0, i1);
+        if (!lanes.extra_slots) return;
+    }
+    pack_rows(q, qd, lanes.rows, i0, i1);
+}
+
 /// The vertex-major pass over every particle (see vertex_pass_groups), on the opt-in threads
 /// when there are: chunk c takes a fixed run of groups and keeps its own volume sums, added
 /// in chunk order, so a run repeats to the bit whatever the threads' timing.
@@ -92,10 +216,14 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
                         const LaneBuffers& lanes, double* f) {
     const int chunks = lanes.parallel != nullptr ? lanes.parallel->chunks : 1;
     const index bodies = m.body_count, groups = m.group_count;
+    const bool f32 = kSprings && lanes.rows_f != nullptr;  // the float32 force pass
     if (chunks <= 1) {
-        pack_rows(q, qd, lanes.rows, 0, m.particle_count);
+        pack(m, q, qd, lanes, 0, m.particle_count);
         for (index b = 0; b < bodies; ++b) gas.volume[b] = 0.0;
-        vertex_pass_groups<kSprings>(m, lanes.rows, gas, f, 0, groups, gas.volume);
+        if (f32)
+            vertex_pass_groups_f32(m, lanes, gas, f, 0, groups, gas.volume);
+        else
+            vertex_pass_groups<kSprings>(m, lanes.rows, gas, f, 0, groups, gas.volume);
     } else {
         struct Work {
             const Model* m;
@@ -110,15 +238,19 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
             // chunk c's groups: a fixed share of them, whatever the timing
             const index g0 = w.m->group_count * c / w.chunks;
             const index g1 = w.m->group_count * (c + 1) / w.chunks;
-            pack_rows(w.q, w.qd, w.lanes->rows, std::min(kGroup * g0, w.m->particle_count),
-                      std::min(kGroup * g1, w.m->particle_count));
+            pack(*w.m, w.q, w.qd, *w.lanes, std::min(kGroup * g0, w.m->particle_count),
+                 std::min(kGroup * g1, w.m->particle_count));
         }, &work);
         lanes.parallel->run(*lanes.parallel, [](void* context, int c) {
             const Work& w = *static_cast<const Work*>(context);
             double* six_v = w.lanes->chunk_volume + c * w.m->body_count;
             for (index b = 0; b < w.m->body_count; ++b) six_v[b] = 0.0;
-            vertex_pass_groups<kSprings>(*w.m, w.lanes->rows, *w.gas, w.f, w.m->group_count * c / w.chunks,
-                               w.m->group_count * (c + 1) / w.chunks, six_v);
+            const index g0 = w.m->group_count * c / w.chunks;
+            const index g1 = w.m->group_count * (c + 1) / w.chunks;
+            if (kSprings && w.lanes->rows_f != nullptr)
+                vertex_pass_groups_f32(*w.m, *w.lanes, *w.gas, w.f, g0, g1, six_v);
+            else
+                vertex_pass_groups<kSprings>(*w.m, w.lanes->rows, *w.gas, w.f, g0, g1, six_v);
         }, &work);
         for (index b = 0; b < bodies; ++b) {
             double six_v = 0.0;
@@ -129,10 +261,27 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
     for (index b = 0; b < bodies; ++b) gas.volume[b] /= 18.0;  // each face thrice: 3 x 6 V
 }
 
-/// Whether the force pass runs vertex-major: with SIMD lanes, or on threads (each thread
-/// then writes only its own particles' rows).
+/// Whether the force pass runs vertex-major: with SIMD lanes, in float32, or on threads
+/// (each thread then writes only its own particles' rows).
 inline bool use_vertex_pass(const LaneBuffers& lanes) {
-    return kLanes > 1 || (lanes.parallel != nullptr && lanes.parallel->chunks > 1);
+    return kLanes > 1 || lanes.rows_f != nullptr ||
+           (lanes.parallel != nullptr && lanes.parallel->chunks > 1);
+}
+
+/// The weight and springs into f (N, 3) [N], the volumes, dV/dx and pressures into gas, at
+/// time t [s] for q, qd (N, 3): what eval_forces starts with, and what the fused symplectic
+/// Euler step takes before its pass adds the rest.
+inline void eval_body(const Model& m, const Control& c, double t, const double* q,
+                      const double* qd, const BodyGas& gas, const LaneBuffers& lanes, double* f) {
+    if (use_vertex_pass(lanes)) {
+        vertex_pass(m, q, qd, gas, lanes, f);  // weight, springs, dV/dx, exact volumes
+        volume::evaluate(m, q, gas, true);     // bounding and Monte Carlo volumes
+    } else {
+        gravity::force(m, f);           // weight m g (initialises the accumulator)
+        springs::force(m, q, qd, f);    // damped Hooke springs: edges, bending, user
+        volume::evaluate(m, q, gas);    // volumes and dV/dx
+    }
+    gas::pressures(m, c, t, gas);        // the gas law's P(V, t)
 }
 
 /// All forces at time t [s] for q, qd (N, 3) into f (N, 3) [N]: the list of physics terms.
@@ -143,15 +292,7 @@ inline bool use_vertex_pass(const LaneBuffers& lanes) {
 inline void eval_forces(const Model& m, const Control& c, double t, const double* q,
                         const double* qd, const BodyGas& gas, const LaneBuffers& lanes,
                         double* f) {
-    if (use_vertex_pass(lanes)) {
-        vertex_pass(m, q, qd, gas, lanes, f);  // weight, springs, dV/dx, exact volumes
-        volume::evaluate(m, q, gas, true);     // bounding and Monte Carlo volumes
-    } else {
-        gravity::force(m, f);           // weight m g (initialises the accumulator)
-        springs::force(m, q, qd, f);    // damped Hooke springs: edges, bending, user
-        volume::evaluate(m, q, gas);    // volumes and dV/dx
-    }
-    gas::pressures(m, c, t, gas);        // the gas law's P(V, t)
+    eval_body(m, c, t, q, qd, gas, lanes, f);
     gas::force(m, gas, f);               // (P - P_ambient) dV/dx
     attachments::force(m, c, q, qd, f);  // springs to anchor points
     external::force(m, c, f);            // per-step forces from Control
@@ -239,6 +380,118 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
     }
 }
 
+/// Whether symplectic Euler can end its steps in one fused pass (symplectic_pass): no term
+/// that reads or writes other particles' rows after the body's forces (attachments, the
+/// grab spring, drag) and no soft contacts between the integration and the colliders, and
+/// bodies whose particle ranges follow one another.
+inline bool fused_symplectic(const Model& m, const Control& c, int scheme) {
+    if (scheme != 3 || m.soft_contact_mode != 0 || m.attachment_count > 0 || m.drag_active ||
+        c.grab_particle >= 0)
+        return false;
+    index end = 0;
+    for (index b = 0; b < m.body_count; ++b) {
+        if (m.body_particle_range[2 * b] < end) return false;
+        end = m.body_particle_range[2 * b + 1];
+    }
+    return true;
+}
+
+/// Symplectic Euler's step in one pass over the flat (N, 3) arrays, kLanes values at a time:
+/// f + (P - P_ambient) dV/dx + Control.particle_f (the terms eval_forces adds after
+/// eval_body, in its order), v = v0 + h f with h = dt / m (h3 (N, 3), per component),
+/// x = x0 + dt v, the start state kept in q0, v0 (N, 3) and the new one written to q, qd.
+/// `seen` gets the particle checks' filter of what was written.
+inline void symplectic_pass(const Model& m, const Control& c, double dt, const double* h3,
+                            const BodyGas& gas, const double* f, double* q, double* qd,
+                            double* q0, double* v0, colliders::Seen& seen) {
+    vi bad{};
+    vd largest{};
+    bool bad_tail = false;
+    double most_tail = 0.0;
+    const double* pf = c.particle_f;
+    const double* g = gas.volume_gradient;
+    // flat components [k0, k1), their body's pressure p (or none)
+    auto run = [&](index k0, index k1, bool with_gas, double p) {
+        index k = k0;
+        const vd pv = splat(p), dtv = splat(dt);
+        for (; k + kLanes <= k1; k += kLanes) {
+            vd force = load_lanes(f + k);
+            if (with_gas) force += pv * load_lanes(g + k);
+            force += load_lanes(pf + k);
+            const vd x0 = load_lanes(q + k), u0 = load_lanes(qd + k);
+            const vd v = u0 + load_lanes(h3 + k) * force;
+            const vd x = x0 + dtv * v;
+            store_lanes(q0 + k, x0);
+            store_lanes(v0 + k, u0);
+            store_lanes(q + k, x);
+            store_lanes(qd + k, v);
+            bad |= (x - x != 0.0) | (v - v != 0.0);
+            const vd a = v < 0.0 ? -v : v;
+            largest = a > largest ? a : largest;
+        }
+        for (; k < k1; ++k) {
+            double force = f[k];
+            if (with_gas) force += p * g[k];
+            force += pf[k];
+            const double x0 = q[k], u0 = qd[k];
+            const double v = u0 + h3[k] * force;
+            const double x = x0 + dt * v;
+            q0[k] = x0, v0[k] = u0, q[k] = x, qd[k] = v;
+            bad_tail |= !(std::isfinite(x) && std::isfinite(v));
+            most_tail = std::max(most_tail, std::fabs(v));
+        }
+    };
+    index at = 0;  // particles between bodies feel no pressure
+    for (index b = 0; b < m.body_count; ++b) {
+        const index p0 = m.body_particle_range[2 * b], p1 = m.body_particle_range[2 * b + 1];
+        run(3 * at, 3 * p0, false, 0.0);
+        run(3 * p0, 3 * p1, true, gas.pressure[b] - m.body_ambient_pressure[b]);
+        at = p1;
+    }
+    run(3 * at, 3 * m.particle_count, false, 0.0);
+    seen.bad |= bad_tail;
+    seen.most = std::max(seen.most, most_tail);
+    for (int l = 0; l < kLanes; ++l) {
+        seen.bad |= bad[l] != 0;
+        seen.most = std::max(seen.most, largest[l]);
+    }
+}
+
+/// Symplectic Euler's steps with the end of each fused (fused_symplectic): the body's forces
+/// (eval_body), the volume check, one pass for the rest of the forces, the kick, the drift
+/// and the copies of the start state, then the colliders, and the particle checks filtered
+/// by what the pass and the colliders wrote. The same arithmetic as step() and end_step():
+/// the same results.
+inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, const RunParams& p,
+                                           const StateView& s, const ExplicitBuffers& w) {
+    const index n = m.particle_count;
+    double* h3 = w.acc_q;  // dt / m per component (RK4's sums are free)
+    for (index i = 0; i < n; ++i) {
+        const double h = p.dt * m.particle_inv_mass[i];
+        for (int k = 0; k < 3; ++k) h3[3 * i + k] = h;
+    }
+    for (index step_index = 0; step_index < p.steps; ++step_index) {
+        const double t = p.t0 + static_cast<double>(step_index) * p.dt;
+        eval_body(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);
+        RunResult r = loop::check_volumes(m, w.gas.volume, p.ratio_min, p.ratio_max);
+        if (r.status != OK) {
+            r.steps_done = step_index;
+            return r;
+        }
+        colliders::Seen seen;
+        symplectic_pass(m, c, p.dt, h3, w.gas, w.f, s.q, s.qd, w.q0, w.v0, seen);
+        loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact, &seen);
+        r = loop::check_seen(m, s.q, s.qd, p.max_speed, seen.bad, seen.most);
+        if (r.status != OK) {
+            loop::copy(w.q0, s.q, 3 * n);
+            loop::copy(w.v0, s.qd, 3 * n);
+            r.steps_done = step_index;
+            return r;
+        }
+    }
+    return {OK, p.steps, -1, 0.0};
+}
+
 /// Advance s.q, s.qd by p.steps steps of p.dt from p.t0. On a particle failure the state goes
 /// back to the failing step's start; on a volume failure it is the state whose volume failed.
 /// NEED_HASH (value: the entries needed) also leaves the state at the failing step's start.
@@ -246,6 +499,7 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const ExplicitBuffers& w) {
     const index n3 = 3 * m.particle_count;
     loop::begin_run(m, c, p, s, w.contact);
+    if (fused_symplectic(m, c, p.scheme)) return simulate_symplectic_fused(m, c, p, s, w);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
         loop::copy(s.q, w.q0, n3);

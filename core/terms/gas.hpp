@@ -70,12 +70,14 @@ inline void force(const Model& m, const BodyGas& gas, double* f) {
 /// w = x_k - x_i, times `weight` (1, or 0 for no face): its n / 6 = (u x w) / 6 added to
 /// dV/dx (gx, gy, gz) [m^2], and its (x_i - r) . n to six_v, a third of the face's share of
 /// 6 V seen from each corner (r: the body's reference point; sum over corners is exact).
-inline void lane_face(vd ux, vd uy, vd uz, vd wx, vd wy, vd wz, vd weight, vd rx, vd ry, vd rz,
-                      vd& gx, vd& gy, vd& gz, vd& six_v) {
-    const vd nx = weight * (uy * wz - uz * wy);
-    const vd ny = weight * (uz * wx - ux * wz);
-    const vd nz = weight * (ux * wy - uy * wx);
-    const vd sixth = splat(volume::kSixth);
+/// V: lanes of doubles, or of floats for the float32 force pass.
+template <class V>
+inline void lane_face(V ux, V uy, V uz, V wx, V wy, V wz, V weight, V rx, V ry, V rz, V& gx,
+                      V& gy, V& gz, V& six_v) {
+    const V nx = weight * (uy * wz - uz * wy);
+    const V ny = weight * (uz * wx - ux * wz);
+    const V nz = weight * (ux * wy - uy * wx);
+    const V sixth = lanes_of<V>(volume::kSixth);
     gx += sixth * nx;
     gy += sixth * ny;
     gz += sixth * nz;

@@ -31,20 +31,22 @@ inline void force(const Model& m, const double* q, const double* qd, double* f) 
     }
 }
 
-/// Vertex-major: the damped force at kLanes particles `self` of springs to `o` (rest length,
-/// stiffness, damping per lane), added to fx, fy, fz [N]. Each spring is met at both ends,
-/// with d, u and the magnitude negated exactly at the other end, so its two forces are equal
-/// and opposite. d = o - self is passed in (the ring pass shares it with the faces). Lanes
-/// with d = 0 (padding that points at the particle itself) get nothing.
-inline void lane_pair(const Rows& self, const Rows& o, vd dx, vd dy, vd dz, vd rest,
-                      vd stiffness, vd damping, vd& fx, vd& fy, vd& fz) {
-    const vd length2 = dx * dx + dy * dy + dz * dz;
-    const vd inv = vrsqrt(length2);
-    const vd length = length2 * inv;
-    const vd ux = inv * dx, uy = inv * dy, uz = inv * dz;
-    const vd rel = (o.vx - self.vx) * ux + (o.vy - self.vy) * uy + (o.vz - self.vz) * uz;
-    const vd mag = stiffness * (length - rest) + damping * rel;
-    const vi live = length2 != 0.0;
+/// Vertex-major: the damped force at the lanes' particles `self` of springs to `o` (rest
+/// length, stiffness, damping per lane), added to fx, fy, fz [N]. Each spring is met at both
+/// ends, with d, u and the magnitude negated exactly at the other end, so its two forces are
+/// equal and opposite. d = o - self is passed in (the ring pass shares it with the faces).
+/// Lanes with d = 0 (padding that points at the particle itself) get nothing. V: lanes of
+/// doubles (Rows), or of floats (RowsF) for the float32 force pass.
+template <class V, class R>
+inline void lane_pair(const R& self, const R& o, V dx, V dy, V dz, V rest, V stiffness,
+                      V damping, V& fx, V& fy, V& fz) {
+    const V length2 = dx * dx + dy * dy + dz * dz;
+    const V inv = vrsqrt(length2);
+    const V length = length2 * inv;
+    const V ux = inv * dx, uy = inv * dy, uz = inv * dz;
+    const V rel = (o.vx - self.vx) * ux + (o.vy - self.vy) * uy + (o.vz - self.vz) * uz;
+    const V mag = stiffness * (length - rest) + damping * rel;
+    const auto live = length2 != V{};
     fx += select(live, mag * ux);
     fy += select(live, mag * uy);
     fz += select(live, mag * uz);

@@ -14,6 +14,7 @@ from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
 from softbody.sim.state import State
 from softbody.solvers import RunLimits, Solver, Status, solver_class
+from softbody.solvers.explicit import check_force_precision
 from softbody.solvers.implicit import check_options as check_implicit_options
 from softbody.solvers.projective import check_iterations as check_projective_iterations
 from softbody.stability import stiffest_mode
@@ -98,6 +99,15 @@ class Simulator:
         ``projective``: local-global iterations per step, >= 1 (default 2); each costs a
         pass over the springs and the non-spring forces and two triangular solves. More
         converge to backward Euler (``softbody.solvers.factor``).
+    force_precision : str
+        The explicit schemes: ``"float64"`` (default) or ``"float32"``, the precision of
+        the force pass's mesh springs, dV/dx and volume shares. Positions, velocities,
+        the integration, the pressure and every sum stay float64; float32 perturbs the
+        forces as if each position moved by 2^-24 of its body's size (60 nm on a 1 m
+        ball); a step runs 1.3-1.9x as fast with AVX2 or AVX-512 (0.5x on the scalar
+        path). ``benchmarks/float32.py`` measures its drift against float64 (user guide:
+        "Choosing an integrator"). Another integrator with ``"float32"`` is a
+        ``ValueError``.
 
     A step that blows up raises :class:`SimulationError` naming the body or particle, the
     step and the time; the state is left at the last good step.
@@ -122,6 +132,7 @@ class Simulator:
         implicit_preconditioner: str = "multigrid",
         threads: int = 1,
         projective_iterations: int = 2,
+        force_precision: str = "float64",
     ):
         if not isinstance(model, Model):
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
@@ -153,6 +164,12 @@ class Simulator:
             implicit_tolerance, implicit_max_iterations, implicit_preconditioner
         )  # fmt: skip
         self.projective_iterations = check_projective_iterations(projective_iterations)
+        self.force_precision = check_force_precision(force_precision)
+        if self.force_precision != "float64" and not self.integrator.explicit:
+            raise ValueError(
+                f"force_precision={self.force_precision!r} is for the explicit schemes; "
+                f"{self.integrator.name.lower()} runs its force pass in float64"
+            )
         available = available_threads()
         if (
             isinstance(threads, bool)
@@ -192,6 +209,7 @@ class Simulator:
             "implicit_max_iterations": self.implicit_max_iterations,
             "implicit_preconditioner": self.implicit_preconditioner,
             "projective_iterations": self.projective_iterations,
+            "force_precision": self.force_precision,
             "threads": self.threads,
         }
 

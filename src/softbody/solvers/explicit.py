@@ -8,13 +8,42 @@ from softbody.integrators import Integrator
 from softbody.solvers.base import RunLimits, RunResult, Solver
 from softbody.stability import TOLERATED_GROWTH_RATE, StiffestMode, largest_stable_step
 
+#: The precisions of the explicit schemes' force pass (``force_precision``).
+FORCE_PRECISIONS = ("float64", "float32")
+
+
+def check_force_precision(precision) -> str:
+    """``force_precision`` checked: ``"float64"`` or ``"float32"``, else a ``ValueError``."""
+    if not isinstance(precision, str) or precision not in FORCE_PRECISIONS:
+        raise ValueError(f"force_precision must be 'float64' or 'float32', got {precision!r}")
+    return precision
+
 
 class ExplicitSolver(Solver):
     """The five explicit schemes; their stable step is bounded by the stiffest spring and
-    gas modes (``stability``), so :class:`Simulator` warns above it."""
+    gas modes (``stability``), so :class:`Simulator` warns above it.
+
+    Option: ``force_precision`` (``"float64"``, default, or ``"float32"``): the precision
+    of the force pass's springs and faces (its ring pass). In float32 each particle's row
+    holds its position relative to its body's first particle and its velocity, rounded to
+    float32, and the ring's springs, dV/dx and volume shares run in float32 lanes (twice as
+    many per instruction); the weight, the springs off the rings, the sums into the forces,
+    dV/dx and the volumes, the pressure, the integration and every position and velocity
+    stay float64. The forces are those of a state perturbed by 2^-24 of each body's size
+    and of each velocity (``docs``: where that is safe).
+    """
 
     integrators = (Integrator.EULER, Integrator.MIDPOINT, Integrator.RK4,
                    Integrator.SYMPLECTIC_EULER, Integrator.VELOCITY_VERLET)  # fmt: skip
+    option_names = ("force_precision",)
+
+    def __init__(self, model, integrator, *, threads=1, force_precision="float64"):
+        self.force_precision = check_force_precision(force_precision)
+        super().__init__(model, integrator, threads=threads)
+
+    @property
+    def options(self) -> dict:
+        return {"force_precision": self.force_precision}
 
     @classmethod
     def step_limit(cls, integrator: Integrator, mode: StiffestMode) -> float:
@@ -35,8 +64,9 @@ class ExplicitSolver(Solver):
 
     def _make_core(self, hash_capacity):
         return _core.ExplicitSolver(
-            self._core_model(), hash_capacity=hash_capacity, threads=self.threads
-        )
+            self._core_model(), hash_capacity=hash_capacity, threads=self.threads,
+            float32=self.force_precision == "float32",
+        )  # fmt: skip
 
     def simulate(self, state, steps, dt, control, limits: RunLimits) -> RunResult:
         return self._result(
