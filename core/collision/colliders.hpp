@@ -264,6 +264,19 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
                 respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
                 if (seen != nullptr) seen->add(load(q, i), load(qd, i));
             }
+        } else if (kind == 1) {  // container: inside the box is free (contact(), unrolled)
+            const V3 ax{rot[0], rot[3], rot[6]}, ay{rot[1], rot[4], rot[7]}, az{rot[2], rot[5], rot[8]};
+            for (index i = 0; i < m.particle_count; ++i) {
+                const V3 d = load(q, i) - center;
+                if (std::fabs(dot(ax, d)) <= size.x && std::fabs(dot(ay, d)) <= size.y &&
+                    std::fabs(dot(az, d)) <= size.z)
+                    continue;
+                if (m.particle_inv_mass[i] == 0.0) continue;
+                const Hit hit = contact(kind, center, rot, size, load(q, i), load(q_start, i));
+                if (!hit.hit) continue;
+                respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
+                if (seen != nullptr) seen->add(load(q, i), load(qd, i));
+            }
         } else {
             for (index i = 0; i < m.particle_count; ++i) {
                 if (m.particle_inv_mass[i] == 0.0) continue;

@@ -381,12 +381,11 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
 }
 
 /// Whether symplectic Euler can end its steps in one fused pass (symplectic_pass): no term
-/// that reads or writes other particles' rows after the body's forces (attachments, the
-/// grab spring, drag) and no soft contacts between the integration and the colliders, and
-/// bodies whose particle ranges follow one another.
+/// added after the body's forces other than the pressure and Control forces (attachments,
+/// the grab spring and drag would change the order of the sums), and bodies whose particle
+/// ranges follow one another.
 inline bool fused_symplectic(const Model& m, const Control& c, int scheme) {
-    if (scheme != 3 || m.soft_contact_mode != 0 || m.attachment_count > 0 || m.drag_active ||
-        c.grab_particle >= 0)
+    if (scheme != 3 || m.attachment_count > 0 || m.drag_active || c.grab_particle >= 0)
         return false;
     index end = 0;
     for (index b = 0; b < m.body_count; ++b) {
@@ -459,9 +458,9 @@ inline void symplectic_pass(const Model& m, const Control& c, double dt, const d
 
 /// Symplectic Euler's steps with the end of each fused (fused_symplectic): the body's forces
 /// (eval_body), the volume check, one pass for the rest of the forces, the kick, the drift
-/// and the copies of the start state, then the colliders, and the particle checks filtered
-/// by what the pass and the colliders wrote. The same arithmetic as step() and end_step():
-/// the same results.
+/// and the copies of the start state, then the contacts, and the particle checks, filtered
+/// by what the pass and the colliders wrote when no soft contact moved particles between
+/// them. The same arithmetic as step() and end_step(): the same results.
 inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, const RunParams& p,
                                            const StateView& s, const ExplicitBuffers& w) {
     const index n = m.particle_count;
@@ -480,8 +479,13 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
         }
         colliders::Seen seen;
         symplectic_pass(m, c, p.dt, h3, w.gas, w.f, s.q, s.qd, w.q0, w.v0, seen);
-        loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact, &seen);
-        r = loop::check_seen(m, s.q, s.qd, p.max_speed, seen.bad, seen.most);
+        const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact, &seen);
+        if (needed > 0)
+            r = {NEED_HASH, step_index, -1, static_cast<double>(needed)};
+        else if (m.soft_contact_mode != 0)  // soft contacts moved particles unseen
+            r = loop::check_particles(m, s.q, s.qd, p.max_speed);
+        else
+            r = loop::check_seen(m, s.q, s.qd, p.max_speed, seen.bad, seen.most);
         if (r.status != OK) {
             loop::copy(w.q0, s.q, 3 * n);
             loop::copy(w.v0, s.qd, 3 * n);
