@@ -3,7 +3,8 @@
 The case: the ball drop's ball (``ball_drop.ball_drop``: an icosphere of radius 1 m,
 inflated, over the ground) at 2,562 to 40,962 vertices, stepped by symplectic Euler and
 by midpoint at 1e-5 s. For each size and scheme the C++ core runs on each instruction set
-this CPU has (scalar, AVX2, AVX-512), and with ``--baseline SRC`` the Numba loop of an
+this CPU has (scalar, AVX2, AVX-512; the SIMD ones also with the float32 force pass,
+``-f32``), and with ``--baseline SRC`` the Numba loop of an
 earlier version (the last with Numba: commit 91e398b, its core built in place) runs in a
 worker process beside this one (``versions.py``); the runs alternate, each timed over at
 least ``MIN_SECONDS`` of wall time, best of ``ROUNDS``. Reported: million vertex-steps
@@ -55,16 +56,18 @@ def _rate(sim: sb.Simulator, model: sb.Model) -> float:
 _SIMULATORS: dict = {}
 
 
-def rate(subdivisions: int, scheme: str, simd: str | None) -> float:
+def rate(subdivisions: int, scheme: str, simd: str | None, precision: str = "float64") -> float:
     """Vertex-steps per second of ``scheme`` on the ball of ``subdivisions``, in the
-    version this process runs: this one's core on instruction set ``simd``, or the
-    baseline's Numba loop (its Simulator's core set aside, as that version allowed)."""
-    key = (subdivisions, scheme)
+    version this process runs: this one's core on instruction set ``simd`` with its force
+    pass in ``precision``, or the baseline's Numba loop (its Simulator's core set aside, as
+    that version allowed)."""
+    key = (subdivisions, scheme, precision)
     if key not in _SIMULATORS:
         model = ball_drop(subdivisions)
+        options = {} if precision == "float64" else {"force_precision": precision}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", sb.StabilityWarning)
-            sim = sb.Simulator(model, integrator=scheme, dt=DT)
+            sim = sb.Simulator(model, integrator=scheme, dt=DT, **options)
         if softbody_version() == "baseline":
             from softbody import _kernel_cache
 
@@ -84,9 +87,11 @@ def main() -> None:
     args = parser.parse_args()
     workers = versions(args.baseline)
     paths = core.simd_paths()
-    engines = {f"core-{p}": (workers[0], p) for p in paths}
+    engines = {f"core-{p}": (workers[0], p, "float64") for p in paths}
+    # the float32 force pass (force_precision="float32") on the SIMD paths
+    engines.update({f"core-{p}-f32": (workers[0], p, "float32") for p in paths if p != "scalar"})
     if args.baseline:
-        engines["numba"] = (workers[1], None)
+        engines["numba"] = (workers[1], None, "float64")
     results = []
     for subdivisions in range(4, args.max_subdivisions + 1):
         vertices = ball_drop(subdivisions).particle_count
@@ -95,9 +100,10 @@ def main() -> None:
             ratios = {e: [] for e in engines if e != "numba"}
             for _ in range(ROUNDS):
                 rates = {}
-                for e, (worker, simd) in engines.items():
+                for e, (worker, simd, precision) in engines.items():
+                    options = {} if precision == "float64" else {"precision": precision}
                     rates[e] = worker.call("engine:rate", subdivisions=subdivisions,
-                                           scheme=scheme, simd=simd)  # fmt: skip
+                                           scheme=scheme, simd=simd, **options)  # fmt: skip
                     best[e] = max(best[e], rates[e])
                 for e in ratios:
                     if "numba" in rates:

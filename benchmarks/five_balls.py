@@ -34,7 +34,9 @@ ENERGY_RATIO = 1.5
 RUNS = [
     ("midpoint", "scene dt", {}),
     ("symplectic_euler", "0.9 x stable", {}),
+    ("symplectic_euler", "0.9 x stable", {"force_precision": "float32"}),
     ("velocity_verlet", "0.9 x stable", {}),
+    ("velocity_verlet", "0.9 x stable", {"force_precision": "float32"}),
     ("implicit_euler", "1/60 s", {"implicit_preconditioner": "jacobi"}),
     ("implicit_euler", "1/60 s", {"implicit_preconditioner": "multigrid"}),
     ("bdf2", "1/60 s", {"implicit_preconditioner": "multigrid"}),
@@ -82,6 +84,8 @@ def run(integrator: str, step: str, options: dict, reference_energy: float) -> d
         name += f" ({options['implicit_preconditioner']}, cg {options['implicit_tolerance']:g})"
     if "projective_iterations" in options:
         name += f" ({options['projective_iterations']} it.)"
+    if "force_precision" in options:
+        name += f" ({options['force_precision']} forces)"
     sim.run(model.state(), 2)  # compile
     best = np.inf
     try:
