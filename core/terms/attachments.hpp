@@ -1,6 +1,12 @@
 // Damped springs tying particles to anchor points (the paper's hanging ball). The anchors
 // come from Control and do not move during a step. Force on particle i with
-// u = (anchor - x_i) / L: [k (L - L0) - c v_i . u] u.
+// u = (anchor - x_i) / L: [k (L - L0) - c v_i . u] u. Energy 1/2 k (L - L0)^2.
+//
+// Forms: force; energies (per body of the tied particle); jacobian_product;
+// add_smoother_blocks; project (projective dynamics, through springs::projection);
+// bound_weights, add_root_sums, row_bounds and damping_ratios (the stability estimate's
+// Gershgorin bound: an attachment adds sqrt(w) to its particle's row sum R_i, shared with
+// the springs, and its row sqrt(w) R_i / m_i).
 #pragma once
 
 #include "model.hpp"

@@ -1,5 +1,10 @@
 // Forces given from outside each call through Control: per-particle forces, and a damped
 // grab spring pulling one particle toward a target (interactive use).
+//
+// Forms: force (Control.particle_f: given, with no energy, Jacobian or bound); grab_force,
+// grab_energy (1/2 k |target - x_g|^2, which softbody.diagnostics leaves out: the hand
+// does work), grab_jacobian_product and add_grab_block (the implicit solvers). The grab
+// is no part of the stability estimate, which describes the model, not the interaction.
 #pragma once
 
 #include "model.hpp"

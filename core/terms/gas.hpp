@@ -7,6 +7,14 @@
 // The force on particle i is (P - P_ambient) dV/dx_i: each face's (P - P_a) A n shared by its
 // three corners. With the exact volume it is minus the gradient of E + P_a V, with zero net
 // force and torque. The driving value (nRT or P0) follows a schedule or a Control override.
+//
+// Forms: value_at, pressure(s), evaluate (volumes by volume.hpp, then P); force and
+// lane_face / lane_faces (dV/dx in the vertex-major pass); law_energy and energies (per
+// body, at its volume by its own method; 0 for an open surface); pressure_slopes +
+// jacobian_product (P'(V) g g^T + (P - P_a) d2V/dx2, the implicit solvers); bound_slopes,
+// add_pressure_rows and rank_one_bound (the stability estimate: the local term's Gershgorin
+// rows and the breathing mode's rank-one eigenvalue). No projection: projective dynamics
+// takes the pressure explicitly within its iteration.
 #pragma once
 
 #include "model.hpp"

@@ -1,4 +1,8 @@
 // Uniform gravity: f_i = m_i g. Energy -m_i g . x_i; no Jacobian (constant force).
+//
+// Forms: force, lane_force (the vertex-major pass), energies (per body). No Jacobian
+// product, smoother block, projection or stiffness bound: a constant force, which every
+// solver takes as it is (projective dynamics explicitly within its iteration).
 #pragma once
 
 #include "model.hpp"

@@ -5,6 +5,13 @@
 // whose elastic part is -dE/dx_i for E = 1/2 k (L - L0)^2. Its stiffness K = df/dx is
 // k [u u^T + max(0, 1 - L0/L) (I - u u^T)] between the two ends (the compressive part of the
 // geometric stiffness dropped, so -K stays positive semi-definite), its damping C = c u u^T.
+//
+// Forms: force (edge-major) and lane_pair / lane_force (the vertex-major pass); energy and
+// energies (per body, by Model::spring_body); prepare + jacobian_product (the implicit
+// solvers' K p and C p); smoother_blocks (their multigrid smoother); projection + project
+// (projective dynamics' local step and right-hand side); bound_weights, add_root_sums,
+// row_bounds and damping_ratios (the stability estimate's Gershgorin bound: per part the
+// largest sqrt(w) (R_i / m_i + R_j / m_j), R_i the sum of sqrt(w) at i).
 #pragma once
 
 #include "model.hpp"

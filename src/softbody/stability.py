@@ -15,6 +15,12 @@ separately and added (Weyl's inequality), split by whether spring damping acts o
   rows); and the rank-one term -P'(V) g g^T with g = dV/dx (the breathing mode), whose
   one nonzero eigenvalue |P'(V)| sum_i |g_i|^2 / m_i adds to the bound.
 
+Each term computes its own pieces of these bounds in its file of the compiled core
+(``core/terms/springs.hpp``, ``attachments.hpp``, ``gas.hpp``: ``bound_weights``,
+``add_root_sums``, ``row_bounds``, ``damping_ratios``; ``bound_slopes``,
+``add_pressure_rows``, ``rank_one_bound``), returned by ``softbody._core.stiffness_bounds``;
+:func:`stiffest_mode` adds and compares them.
+
 Gershgorin bounds hold for any spring directions but overestimate: on a triangle mesh
 the largest eigenvalue of the spring matrix is about half their bound (a flat triangular
 lattice: 6 k / m against 12 k / m). So each of these four bounds (damped, undamped, whole,
