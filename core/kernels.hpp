@@ -32,8 +32,9 @@ struct StiffnessBounds {
     double attachments[4] = {0.0, 0.0, 0.0, 0.0};
     double pressure_rows = 0.0;  // max_i of the pressure term's rows
     double gas_rank_one = 0.0;   // max over bodies of |P'(V)| sum_i |g_i|^2 / m_i
+    // c / k [s]; +inf and -inf where no spring or attachment has k > 0
     double ratio_min = std::numeric_limits<double>::infinity();
-    double ratio_max = -std::numeric_limits<double>::infinity();  // both inf-signed: none
+    double ratio_max = -std::numeric_limits<double>::infinity();
     bool pure_dampers = false;  // some spring or attachment has c > 0 and k = 0
 };
 
