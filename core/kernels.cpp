@@ -2,11 +2,18 @@
 // into its KernelTable. CMake compiles this file once per set with that set's flags.
 #include "kernels.hpp"
 
+#include <algorithm>
+
 #include "solvers/explicit.hpp"
 #include "solvers/implicit.hpp"
 #include "solvers/multigrid.hpp"
 #include "solvers/projective.hpp"
+#include "terms/attachments.hpp"
+#include "terms/external.hpp"
 #include "terms/gas.hpp"
+#include "terms/gravity.hpp"
+#include "terms/springs.hpp"
+#include "terms/volume.hpp"
 
 #define SOFTBODY_STRING2(x) #x
 #define SOFTBODY_STRING(x) SOFTBODY_STRING2(x)
@@ -81,6 +88,42 @@ index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers&
     return 0;
 }
 
+void eval_energies(const Model& m, const Control& c, double t, const double* q,
+                   const BodyGas& gas, TermEnergies& out) {
+    for (double* body : {out.body_gravity, out.body_springs, out.body_attachments})
+        std::fill(body, body + m.body_count, 0.0);
+    out.gravity = gravity::energies(m, q, out.body_gravity);
+    out.springs = springs::energies(m, q, out.body_springs);
+    out.attachments = attachments::energies(m, c, q, out.body_attachments);
+    out.grab = external::grab_energy(c, q);
+    volume::evaluate(m, q, gas);  // gas.volume_gradient null: no dV/dx needed
+    out.gas = gas::energies(m, c, t, gas, out.body_gas);
+}
+
+// The estimate's Gershgorin bounds, term by term: the spring-like terms' row sums first
+// (a particle's row holds its springs and its attachments), then each term's rows.
+StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double* q,
+                                 const BoundBuffers& w) {
+    StiffnessBounds out;
+    springs::bound_weights(m, q, w.spring_weight);
+    attachments::bound_weights(m, c, q, w.attachment_weight);
+    std::fill(w.root_sum, w.root_sum + springs::kBoundParts * m.particle_count, 0.0);
+    springs::add_root_sums(m, w.spring_weight, w.root_sum);
+    attachments::add_root_sums(m, w.attachment_weight, w.root_sum);
+    springs::row_bounds(m, w.spring_weight, w.root_sum, out.springs);
+    attachments::row_bounds(m, w.attachment_weight, w.root_sum, out.attachments);
+    springs::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
+    attachments::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
+    std::fill(w.volume_gradient, w.volume_gradient + 3 * m.particle_count, 0.0);
+    gas::bound_slopes(m, q, w.body_pnet, w.body_dpdv, w.volume_gradient);
+    std::fill(w.pressure_row, w.pressure_row + m.particle_count, 0.0);
+    gas::add_pressure_rows(m, q, w.body_pnet, w.pressure_row);
+    for (index i = 0; i < m.particle_count; ++i)
+        out.pressure_rows = std::max(out.pressure_rows, w.pressure_row[i]);
+    out.gas_rank_one = gas::rank_one_bound(m, w.body_dpdv, w.volume_gradient);
+    return out;
+}
+
 }  // namespace
 
 const KernelTable& kernel_table() {
@@ -88,7 +131,8 @@ const KernelTable& kernel_table() {
                                    simulate_implicit, apply_preconditioner, apply_multigrid, simulate_projective,
                                    projective_solve, eval_forces,
                                    eval_gas, eval_volumes,
-                                   apply_jacobians, soft_contacts};
+                                   apply_jacobians, soft_contacts,
+                                   eval_energies, stiffness_bounds};
     return table;
 }
 

@@ -2,12 +2,52 @@
 // compiled once per set; dispatch.cpp chooses a table for the CPU at run time).
 #pragma once
 
+#include <limits>
 #include <string>
 #include <vector>
 
 #include "model.hpp"
 
 namespace softbody {
+
+/// Each conservative term's energy at a state [J] (softbody.diagnostics.energies): its
+/// total over the model and, where the term belongs to bodies, each body's share (B,)
+/// (a free particle's weight, a user's spring or an attachment of a free particle counts in
+/// the total only). Drag and Control.particle_f have none.
+struct TermEnergies {
+    double gravity = 0.0, springs = 0.0, attachments = 0.0, gas = 0.0, grab = 0.0;
+    double* body_gravity = nullptr;      // (B,) -m g . x
+    double* body_springs = nullptr;      // (B,) 1/2 k (L - L0)^2 by Model::spring_body
+    double* body_attachments = nullptr;  // (B,) 1/2 k (L - L0)^2 by the tied particle's body
+    double* body_gas = nullptr;          // (B,) E(V) + P_a V at each body's own volume
+};
+
+/// The stability estimate's Gershgorin pieces (softbody.stability.stiffest_mode), each
+/// term's own. Per part (springs::BoundPart: damped, transverse, whole, damping) the
+/// largest row bound of the springs and of the attachments, over row sums both add to
+/// [1/s^2] (damping: [1/s]); the gas's local pressure rows and its rank-one term [1/s^2];
+/// the range of c / k [s] over springs and attachments with k > 0.
+struct StiffnessBounds {
+    double springs[4] = {0.0, 0.0, 0.0, 0.0};
+    double attachments[4] = {0.0, 0.0, 0.0, 0.0};
+    double pressure_rows = 0.0;  // max_i of the pressure term's rows
+    double gas_rank_one = 0.0;   // max over bodies of |P'(V)| sum_i |g_i|^2 / m_i
+    // c / k [s]; +inf and -inf where no spring or attachment has k > 0
+    double ratio_min = std::numeric_limits<double>::infinity();
+    double ratio_max = -std::numeric_limits<double>::infinity();
+    bool pure_dampers = false;  // some spring or attachment has c > 0 and k = 0
+};
+
+/// Scratch and outputs of KernelTable::stiffness_bounds.
+struct BoundBuffers {
+    double* spring_weight = nullptr;      // (S, 4) scratch
+    double* attachment_weight = nullptr;  // (A, 4) scratch
+    double* root_sum = nullptr;           // (N, 4) scratch
+    double* pressure_row = nullptr;       // (N,) scratch
+    double* body_pnet = nullptr;          // (B,) out: P - P_a at the largest scheduled gas [Pa]
+    double* body_dpdv = nullptr;          // (B,) out: P'(V) [Pa/m^3]
+    double* volume_gradient = nullptr;    // (N, 3) out: exact dV/dx [m^2], 0 off bodies
+};
 
 struct KernelTable {
     const char* name;  // "scalar", "avx2", "avx512"
@@ -55,6 +95,13 @@ struct KernelTable {
     /// One pass of the soft-soft contacts (the model's mode) on q, qd (N, 3) in place;
     /// returns the hash entries the surface contacts needed (0 if they fit, or none).
     index (*soft_contacts)(const Model&, double* q, double* qd, const ContactBuffers& w);
+    /// Every conservative term's energy at q and time t (TermEnergies), each body's gas at
+    /// its volume by its own method (into gas.volume, with gas.lo/hi as scratch).
+    void (*eval_energies)(const Model&, const Control&, double t, const double* q,
+                          const BodyGas& gas, TermEnergies& out);
+    /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors.
+    StiffnessBounds (*stiffness_bounds)(const Model&, const Control&, const double* q,
+                                        const BoundBuffers& w);
 };
 
 namespace isa_scalar {

@@ -24,6 +24,7 @@ struct Model {
     const double* spring_rest_length = nullptr;   // (S,) [m]
     const double* spring_stiffness = nullptr;     // (S,) [N/m]
     const double* spring_damping = nullptr;       // (S,) [N s/m]
+    const index* spring_body = nullptr;           // (S,) its body, -1 for a user's spring
 
     const index* attachment_particle = nullptr;       // (A,)
     const double* attachment_rest_length = nullptr;   // (A,) [m]

@@ -1,6 +1,7 @@
 """The engine core built with AddressSanitizer and UndefinedBehaviorSanitizer
 (``tools/build_core.py --sanitize``) running the core's fast tests
-(test_core.py, test_core_projective.py, test_core_implicit.py, test_trajectories.py).
+(test_core.py, test_core_projective.py, test_core_implicit.py, test_trajectories.py,
+test_terms.py).
 Reference: the
 sanitizers' own checks; a read or write outside an array, a use after free or undefined
 behaviour (overflow, misalignment, a bad shift) in the C++ aborts the run with its
@@ -22,7 +23,7 @@ ROOT = Path(__file__).resolve().parent.parent
 #: the core's test files and the reference trajectories, and among their tests the fast
 #: ones (a fresh process per run, or runs on one instruction set only, add nothing here)
 CORE_TESTS = ("test_core.py", "test_core_projective.py", "test_core_implicit.py",
-              "test_trajectories.py")  # fmt: skip
+              "test_trajectories.py", "test_terms.py")  # fmt: skip
 FAST = "not without_compiling"
 
 

@@ -58,6 +58,7 @@ public:
         m.spring_rest_length = f64("spring_rest_length", {s});
         m.spring_stiffness = f64("spring_stiffness", {s});
         m.spring_damping = f64("spring_damping", {s});
+        m.spring_body = i64("spring_body", {s});
         m.attachment_particle = att.data();
         m.attachment_rest_length = f64("attachment_rest_length", {a});
         m.attachment_stiffness = f64("attachment_stiffness", {a});
@@ -114,6 +115,7 @@ private:
         check_indices(m.tri_indices, 3 * m.tri_count, 0, m.particle_count, "tri_indices");
         check_indices(m.tri_body, m.tri_count, 0, m.body_count, "tri_body");
         check_indices(m.particle_body, m.particle_count, -1, m.body_count, "particle_body");
+        check_indices(m.spring_body, m.spring_count, -1, m.body_count, "spring_body");
         check_indices(m.attachment_particle, m.attachment_count, 0, m.particle_count,
                       "attachment_particle");
         check_indices(m.pin_particle, m.pin_count, 0, m.particle_count, "pin_particle");

@@ -1,5 +1,6 @@
-// The physics terms outside a time loop: forces, volumes, pressures and Jacobian
-// products at a state, and one contact pass (diagnostics, the stability estimate, tests).
+// The physics terms outside a time loop: forces, volumes, pressures, energies, Jacobian
+// products and the stability estimate's bounds at a state, and one contact pass
+// (diagnostics, the stability estimate, tests).
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
 
@@ -137,9 +138,96 @@ nb::ndarray<nb::numpy, double> body_volumes(ConstF64 q, ConstI64 tri_indices,
     return nb::ndarray<nb::numpy, double>(volume, 1, shape, owner);
 }
 
+
+/// A copy of data (count,) as a NumPy array.
+nb::ndarray<nb::numpy, double> copy_array(const double* data, size_t count) {
+    return to_numpy(std::vector<double>(data, data + count));
+}
+
+/// Each conservative term's energy at (q, t), per term its total and each body's share.
+nb::dict eval_energies(const CoreModel& core, nb::handle control, double t, ConstF64 q) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particle_count, 3});
+    CoreControl c(m, control);
+    const size_t nb_ = static_cast<size_t>(m.body_count);
+    std::vector<double> per_body(4 * nb_, 0.0), volume(nb_), lo(3 * nb_), hi(3 * nb_);
+    softbody::TermEnergies e;
+    e.body_gravity = per_body.data();
+    e.body_springs = e.body_gravity + nb_;
+    e.body_attachments = e.body_springs + nb_;
+    e.body_gas = e.body_attachments + nb_;
+    softbody::BodyGas gas;
+    gas.volume = volume.data();
+    gas.lo = lo.data();
+    gas.hi = hi.data();
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().eval_energies(m, c.view, t, q.data(), gas, e);
+    }
+    nb::dict out;
+    out["gravity"] = nb::make_tuple(e.gravity, copy_array(e.body_gravity, nb_));
+    out["springs"] = nb::make_tuple(e.springs, copy_array(e.body_springs, nb_));
+    out["attachments"] = nb::make_tuple(e.attachments, copy_array(e.body_attachments, nb_));
+    out["gas"] = nb::make_tuple(e.gas, copy_array(e.body_gas, nb_));
+    out["grab"] = e.grab;
+    out["volume"] = copy_array(volume.data(), nb_);
+    return out;
+}
+
+/// The stability estimate's Gershgorin pieces at q, each term's, and the gas's state there.
+nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particle_count, 3});
+    CoreControl c(m, control);
+    const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
+    std::vector<double> spring_weight(4 * static_cast<size_t>(m.spring_count)),
+        attachment_weight(4 * static_cast<size_t>(m.attachment_count)), root_sum(4 * n),
+        pressure_row(n), pnet(nb_), dpdv(nb_), gradient(3 * n);
+    softbody::BoundBuffers w;
+    w.spring_weight = spring_weight.data();
+    w.attachment_weight = attachment_weight.data();
+    w.root_sum = root_sum.data();
+    w.pressure_row = pressure_row.data();
+    w.body_pnet = pnet.data();
+    w.body_dpdv = dpdv.data();
+    w.volume_gradient = gradient.data();
+    softbody::StiffnessBounds b;
+    {
+        nb::gil_scoped_release release;
+        b = softbody::kernels().stiffness_bounds(m, c.view, q.data(), w);
+    }
+    auto parts = [](const double* v) { return nb::make_tuple(v[0], v[1], v[2], v[3]); };
+    nb::dict out;
+    out["springs"] = parts(b.springs);
+    out["attachments"] = parts(b.attachments);
+    out["pressure_rows"] = b.pressure_rows;
+    out["gas_rank_one"] = b.gas_rank_one;
+    out["damping_ratio"] = nb::make_tuple(b.ratio_min, b.ratio_max);
+    out["pure_dampers"] = b.pure_dampers;
+    out["body_pnet"] = to_numpy(std::move(pnet));
+    out["body_dpdv"] = to_numpy(std::move(dpdv));
+    size_t shape[2] = {n, 3};
+    auto* owned = new std::vector<double>(std::move(gradient));
+    nb::capsule owner(owned, [](void* p) noexcept { delete static_cast<std::vector<double>*>(p); });
+    out["volume_gradient"] = nb::ndarray<nb::numpy, double>(owned->data(), 2, shape, owner);
+    return out;
+}
+
 }  // namespace
 
 void bind_terms(nb::module_& mod) {
+    mod.def("eval_energies", &eval_energies, nb::arg("model"), nb::arg("control"), nb::arg("t"),
+            nb::arg("q").noconvert(),
+            "Energies [J] of the conservative terms at q (N, 3), time t [s]: a dict of "
+            "'gravity', 'springs', 'attachments', 'gas' -> (total, per body (B,)), 'grab' -> "
+            "total, and 'volume' (B,) [m^3], each body's by its method (the gas's).");
+    mod.def("stiffness_bounds", &stiffness_bounds, nb::arg("model"), nb::arg("control"),
+            nb::arg("q").noconvert(),
+            "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'springs', "
+            "'attachments' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
+            "'pressure_rows', 'gas_rank_one' [1/s^2], 'damping_ratio' (min, max c / k [s]), "
+            "'pure_dampers', and the gas at its largest scheduled value: 'body_pnet' (B,) "
+            "[Pa], 'body_dpdv' (B,) [Pa/m^3], 'volume_gradient' (N, 3) [m^2].");
     mod.def("eval_forces", &eval_forces, nb::arg("model"), nb::arg("control"), nb::arg("t"),
             nb::arg("q").noconvert(), nb::arg("qd").noconvert(),
             "(f (N, 3) [N], volume (B,) [m^3], pressure (B,) [Pa], dV/dx (N, 3) [m^2]).");

@@ -1,6 +1,12 @@
 // Damped springs tying particles to anchor points (the paper's hanging ball). The anchors
 // come from Control and do not move during a step. Force on particle i with
-// u = (anchor - x_i) / L: [k (L - L0) - c v_i . u] u.
+// u = (anchor - x_i) / L: [k (L - L0) - c v_i . u] u. Energy 1/2 k (L - L0)^2.
+//
+// Forms: force; energies (per body of the tied particle); jacobian_product;
+// add_smoother_blocks; project (projective dynamics, through springs::projection);
+// bound_weights, add_root_sums, row_bounds and damping_ratios (the stability estimate's
+// Gershgorin bound: an attachment adds sqrt(w) to its particle's row sum R_i, shared with
+// the springs, and its row sqrt(w) R_i / m_i).
 #pragma once
 
 #include "model.hpp"
@@ -86,6 +92,78 @@ inline void add_smoother_blocks(const Model& m, const Control& c, double h, cons
             for (int col = 0; col < 3; ++col)
                 if (length > 0.0) b[3 * r + col] += alpha * d[r] * d[col] / (length * length);
             b[4 * r] += h * h * iso;
+        }
+    }
+}
+
+/// Elastic energy 1/2 k (L - L0)^2 [J] of every attachment at q (N, 3) with the anchors of
+/// c, each added to its particle's body's entry of body_energy (B,) (a free particle's
+/// counts in the total only); returns the total [J].
+inline double energies(const Model& m, const Control& c, const double* q, double* body_energy) {
+    double total = 0.0;
+    for (index a = 0; a < m.attachment_count; ++a) {
+        const index i = m.attachment_particle[a];
+        const V3 d = load(c.attachment_anchor, a) - load(q, i);
+        const double stretch = std::sqrt(dot(d, d)) - m.attachment_rest_length[a];
+        const double e = 0.5 * m.attachment_stiffness[a] * stretch * stretch;
+        total += e;
+        if (m.particle_body[i] >= 0) body_energy[m.particle_body[i]] += e;
+    }
+    return total;
+}
+
+/// Stiffness bound: the norms of each attachment's block by part (springs::BoundPart: k,
+/// k |1 - L0/L|, k max(1, |1 - L0/L|), c) into w (A, kBoundParts), at q with c's anchors.
+/// An attachment is a spring whose other end does not move.
+inline void bound_weights(const Model& m, const Control& c, const double* q, double* w) {
+    using namespace springs;
+    for (index a = 0; a < m.attachment_count; ++a) {
+        const V3 d = load(c.attachment_anchor, a) - load(q, m.attachment_particle[a]);
+        const double k = m.attachment_stiffness[a];
+        const double stretch = stretch_factor(std::sqrt(dot(d, d)), m.attachment_rest_length[a]);
+        double* wa = w + kBoundParts * a;
+        wa[kDamped] = k;
+        wa[kTransverse] = k * stretch;
+        wa[kWhole] = k * std::max(1.0, stretch);
+        wa[kDamping] = m.attachment_damping[a];
+    }
+}
+
+/// The attachments' share of the Gershgorin row sums R_i (springs::add_root_sums): sqrt(w)
+/// added into root_sum (N, kBoundParts) at the tied particle.
+inline void add_root_sums(const Model& m, const double* w, double* root_sum) {
+    using springs::kBoundParts;
+    for (index a = 0; a < m.attachment_count; ++a) {
+        double* ri = root_sum + kBoundParts * m.attachment_particle[a];
+        for (int part = 0; part < kBoundParts; ++part)
+            ri[part] += std::sqrt(w[kBoundParts * a + part]);
+    }
+}
+
+/// The attachments' Gershgorin rows, max over attachments of sqrt(w) R_i / m_i [1/s^2]
+/// (damping part: [1/s]), into bound (kBoundParts,) where larger.
+inline void row_bounds(const Model& m, const double* w, const double* root_sum, double* bound) {
+    using springs::kBoundParts;
+    for (index a = 0; a < m.attachment_count; ++a) {
+        const index i = m.attachment_particle[a];
+        for (int part = 0; part < kBoundParts; ++part) {
+            const double row = std::sqrt(w[kBoundParts * a + part]) *
+                               root_sum[kBoundParts * i + part] * m.particle_inv_mass[i];
+            bound[part] = std::max(bound[part], row);
+        }
+    }
+}
+
+/// c / k [s] of the attachments with k > 0 folded into [lo, hi]; pure_damper set by one
+/// with c > 0 and k = 0.
+inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_damper) {
+    for (index a = 0; a < m.attachment_count; ++a) {
+        const double k = m.attachment_stiffness[a], c = m.attachment_damping[a];
+        if (k > 0.0) {
+            lo = std::min(lo, c / k);
+            hi = std::max(hi, c / k);
+        } else if (k == 0.0 && c > 0.0) {
+            pure_damper = true;
         }
     }
 }

@@ -10,7 +10,10 @@
 // 1/2 rho C_d |v|^2 pi R^2, the usual definition on the frontal area (tests/test_drag.py
 // derives it). F_t is shared equally by the three corners. C_d [1] is per body.
 //
-// Drag is dissipative: it has no energy. The power it delivers is
+// Forms: face_force, force, power. No Jacobian, projection or stiffness bound: every
+// solver takes drag explicitly, and the stability estimate leaves it out (its damping
+// bound, below). Drag is dissipative: it has no energy (power, for diagnostics, instead).
+// The power it delivers is
 //     P = sum_i F_i . v_i = sum_t F_t . v_t
 //       = -sum_t 1/2 rho C_d A_t |v_rel . n_t|^3 + sum_t F_t . wind,
 // never positive in still air (the wind can do work on a body).

@@ -1,5 +1,10 @@
 // Forces given from outside each call through Control: per-particle forces, and a damped
 // grab spring pulling one particle toward a target (interactive use).
+//
+// Forms: force (Control.particle_f: given, with no energy, Jacobian or bound); grab_force,
+// grab_energy (1/2 k |target - x_g|^2, which softbody.diagnostics leaves out: the hand
+// does work), grab_jacobian_product and add_grab_block (the implicit solvers). The grab
+// is no part of the stability estimate, which describes the model, not the interaction.
 #pragma once
 
 #include "model.hpp"
@@ -37,6 +42,20 @@ inline void add_grab_block(const Control& c, double h, double* block) {
     const index g = c.grab_particle;
     if (g < 0) return;
     for (int r = 0; r < 3; ++r) block[9 * g + 4 * r] += h * h * c.grab_stiffness + h * c.grab_damping;
+}
+
+/// Elastic energy 1/2 k |target - x_g|^2 [J] of the grab spring at q (0 when nothing is
+/// grabbed). softbody.diagnostics.energies leaves it out: the user's hand does work on the
+/// body, and Control.particle_f, given from outside each call, has no energy at all.
+inline double grab_energy(const Control& c, const double* q) {
+    const index g = c.grab_particle;
+    if (g < 0) return 0.0;
+    double e = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        const double d = c.grab_target[k] - q[3 * g + k];
+        e += d * d;
+    }
+    return 0.5 * c.grab_stiffness * e;
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::external

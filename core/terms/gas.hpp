@@ -7,6 +7,14 @@
 // The force on particle i is (P - P_ambient) dV/dx_i: each face's (P - P_a) A n shared by its
 // three corners. With the exact volume it is minus the gradient of E + P_a V, with zero net
 // force and torque. The driving value (nRT or P0) follows a schedule or a Control override.
+//
+// Forms: value_at, pressure(s), evaluate (volumes by volume.hpp, then P); force and
+// lane_face / lane_faces (dV/dx in the vertex-major pass); law_energy and energies (per
+// body, at its volume by its own method; 0 for an open surface); pressure_slopes +
+// jacobian_product (P'(V) g g^T + (P - P_a) d2V/dx2, the implicit solvers); bound_slopes,
+// add_pressure_rows and rank_one_bound (the stability estimate: the local term's Gershgorin
+// rows and the breathing mode's rank-one eigenvalue). No projection: projective dynamics
+// takes the pressure explicitly within its iteration.
 #pragma once
 
 #include "model.hpp"
@@ -142,6 +150,106 @@ inline void jacobian_product(const Model& m, const double* q, const double* grad
             add_to(out, ic, h);
         }
     }
+}
+
+/// Potential energy E(V) + P_a V [J] of a gas law (the table above) at volume v [m^3]
+/// with driving value `value` (nRT [J] or P0 [Pa]); NaN or inf where the law has none
+/// (V <= 0 for isothermal and adiabatic), as its pressure.
+inline double law_energy(index law, double value, double gamma, double reference_volume,
+                         double ambient_pressure, double v) {
+    double e;
+    if (law == 0)
+        e = -value * std::log(v);
+    else if (law == 1)
+        e = -value * v;
+    else
+        e = value * std::pow(reference_volume, gamma - 1.0) * std::pow(v, 1.0 - gamma) /
+            (gamma - 1.0);
+    return e + ambient_pressure * v;
+}
+
+/// Gas energy E(V) + P_a V [J] of every body at time t from its volume gas.volume (B,)
+/// [m^3] (its own method's), into body_energy (B,) (set, not added); 0 for an open surface,
+/// which holds no gas (the work of its pressure is not counted). Returns the total [J].
+inline double energies(const Model& m, const Control& c, double t, const BodyGas& gas,
+                       double* body_energy) {
+    double total = 0.0;
+    for (index b = 0; b < m.body_count; ++b) {
+        const double e =
+            m.body_closed[b] == 1
+                ? law_energy(m.body_gas_law[b], value_at(m, c, b, t), m.body_gas_gamma[b],
+                             m.body_gas_reference_volume[b], m.body_ambient_pressure[b],
+                             gas.volume[b])
+                : 0.0;
+        body_energy[b] = e;
+        total += e;
+    }
+    return total;
+}
+
+/// Stiffness bound, the gas's state: every body's exact volume at q and dV/dx into gradient
+/// (N, 3) [m^2], P - P_a into pnet (B,) [Pa] and P'(V) into dpdv (B,) [Pa/m^3], with the gas
+/// at its largest scheduled value (max of the value, its schedule's points and 0), so that
+/// the bound holds for the whole run; open surfaces alike (a gust on a cloth).
+inline void bound_slopes(const Model& m, const double* q, double* pnet, double* dpdv,
+                         double* gradient) {
+    for (index b = 0; b < m.body_count; ++b) {
+        const double v = volume::exact(m, b, q, gradient);
+        double value = std::max(m.body_gas_value[b], 0.0);
+        for (index s = m.body_schedule_range[2 * b]; s < m.body_schedule_range[2 * b + 1]; ++s)
+            value = std::max(value, m.schedule_value[s]);
+        double p, slope;
+        if (m.body_gas_law[b] == 1) {
+            p = value, slope = 0.0;  // fixed pressure
+        } else if (m.body_gas_law[b] == 0) {
+            p = value / v, slope = -value / (v * v);  // isothermal
+        } else {
+            const double gamma = m.body_gas_gamma[b];
+            p = value * std::pow(m.body_gas_reference_volume[b], gamma - 1.0) / std::pow(v, gamma);
+            slope = -gamma * p / v;  // adiabatic
+        }
+        pnet[b] = p - m.body_ambient_pressure[b];
+        dpdv[b] = slope;
+    }
+}
+
+/// Stiffness bound, the local pressure term (P - P_a) d2V/dx2: for a face (i, j, l) its
+/// block coupling i to j has norm |P - P_a| |x_l - x_i| / 6, so Gershgorin on
+/// M^-1/2 K M^-1/2 adds |P - P_a| / 6 (|x_l - x_i| / sqrt(m_i m_j) + |x_j - x_i| /
+/// sqrt(m_i m_l)) to row i, per corner of every face, into rows (N,) [1/s^2]. pnet from
+/// bound_slopes.
+inline void add_pressure_rows(const Model& m, const double* q, const double* pnet, double* rows) {
+    const double* inv = m.particle_inv_mass;
+    for (index b = 0; b < m.body_count; ++b) {
+        const double coef = std::abs(pnet[b]) / 6.0;
+        for (index t = m.body_tri_range[2 * b]; t < m.body_tri_range[2 * b + 1]; ++t) {
+            const index* tri = m.tri_indices + 3 * t;
+            for (int corner = 0; corner < 3; ++corner) {
+                const index i = tri[corner], j = tri[(corner + 1) % 3], l = tri[(corner + 2) % 3];
+                const V3 xi = load(q, i);
+                const V3 dj = load(q, j) - xi, dl = load(q, l) - xi;
+                rows[i] += coef * (std::sqrt(dot(dl, dl)) * std::sqrt(inv[i] * inv[j]) +
+                                   std::sqrt(dot(dj, dj)) * std::sqrt(inv[i] * inv[l]));
+            }
+        }
+    }
+}
+
+/// Stiffness bound, the rank-one term P'(V) g g^T of each body (g = dV/dx: the breathing
+/// mode, the gas's resistance to a change of volume): its one nonzero eigenvalue against
+/// the masses, |P'(V)| sum_i |g_i|^2 / m_i [1/s^2], largest over bodies. dpdv and gradient
+/// from bound_slopes.
+inline double rank_one_bound(const Model& m, const double* dpdv, const double* gradient) {
+    double bound = 0.0;
+    for (index b = 0; b < m.body_count; ++b) {
+        double sum = 0.0;
+        for (index i = m.body_particle_range[2 * b]; i < m.body_particle_range[2 * b + 1]; ++i) {
+            const V3 g = load(gradient, i);
+            sum += m.particle_inv_mass[i] * dot(g, g);
+        }
+        bound = std::max(bound, std::abs(dpdv[b]) * sum);
+    }
+    return bound;
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::gas

@@ -1,4 +1,8 @@
 // Uniform gravity: f_i = m_i g. Energy -m_i g . x_i; no Jacobian (constant force).
+//
+// Forms: force, lane_force (the vertex-major pass), energies (per body). No Jacobian
+// product, smoother block, projection or stiffness bound: a constant force, which every
+// solver takes as it is (projective dynamics explicitly within its iteration).
 #pragma once
 
 #include "model.hpp"
@@ -24,6 +28,21 @@ inline void lane_force(const Model& m, index first, vd& fx, vd& fy, vd& fz) {
     fx = mass * m.gravity[0];
     fy = mass * m.gravity[1];
     fz = mass * m.gravity[2];
+}
+
+/// Potential energy -m_i g . x_i [J] of every particle at q (N, 3), each added to its
+/// body's entry of body_energy (B,) (a free particle's counts in the total only); returns
+/// the total [J]. Pinned particles count too: their weight is balanced, not absent.
+inline double energies(const Model& m, const double* q, double* body_energy) {
+    const double gx = m.gravity[0], gy = m.gravity[1], gz = m.gravity[2];
+    double total = 0.0;
+    for (index i = 0; i < m.particle_count; ++i) {
+        const double e =
+            -m.particle_mass[i] * (q[3 * i] * gx + q[3 * i + 1] * gy + q[3 * i + 2] * gz);
+        total += e;
+        if (m.particle_body[i] >= 0) body_energy[m.particle_body[i]] += e;
+    }
+    return total;
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::gravity

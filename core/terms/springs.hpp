@@ -5,6 +5,13 @@
 // whose elastic part is -dE/dx_i for E = 1/2 k (L - L0)^2. Its stiffness K = df/dx is
 // k [u u^T + max(0, 1 - L0/L) (I - u u^T)] between the two ends (the compressive part of the
 // geometric stiffness dropped, so -K stays positive semi-definite), its damping C = c u u^T.
+//
+// Forms: force (edge-major) and lane_pair / lane_force (the vertex-major pass); energy and
+// energies (per body, by Model::spring_body); prepare + jacobian_product (the implicit
+// solvers' K p and C p); smoother_blocks (their multigrid smoother); projection + project
+// (projective dynamics' local step and right-hand side); bound_weights, add_root_sums,
+// row_bounds and damping_ratios (the stability estimate's Gershgorin bound: per part the
+// largest sqrt(w) (R_i / m_i + R_j / m_j), R_i the sum of sqrt(w) at i).
 #pragma once
 
 #include "model.hpp"
@@ -183,6 +190,93 @@ inline double energy(const Model& m, const double* q) {
         e += 0.5 * m.spring_stiffness[s] * stretch * stretch;
     }
     return e;
+}
+
+/// Elastic energy 1/2 k (L - L0)^2 [J] of every spring at q (N, 3), each added to its body's
+/// entry of body_energy (B,) (Model::spring_body: a body's edge and bending springs; a
+/// user's spring, body -1, counts in the total only); returns the total [J].
+inline double energies(const Model& m, const double* q, double* body_energy) {
+    double total = 0.0;
+    for (index s = 0; s < m.spring_count; ++s) {
+        const V3 d = load(q, m.spring_indices[2 * s + 1]) - load(q, m.spring_indices[2 * s]);
+        const double stretch = std::sqrt(dot(d, d)) - m.spring_rest_length[s];
+        const double e = 0.5 * m.spring_stiffness[s] * stretch * stretch;
+        total += e;
+        if (m.spring_body[s] >= 0) body_energy[m.spring_body[s]] += e;
+    }
+    return total;
+}
+
+/// Stiffness bound (softbody.stability): the norms of a spring's blocks by part, the weights
+/// its Gershgorin rows add up. Part kDamped is the axial block k u u^T (spring damping acts
+/// on it), kTransverse the geometric k |1 - L0/L| (I - u u^T) (k at L = 0, no direction),
+/// kWhole the whole block k max(1, |1 - L0/L|) (the two parts are orthogonal) and kDamping
+/// the damper c u u^T (its rows bound a damping rate [1/s], not a squared frequency).
+enum BoundPart { kDamped = 0, kTransverse = 1, kWhole = 2, kDamping = 3, kBoundParts = 4 };
+
+/// |1 - L0 / L| for a spring (or attachment) of length L, rest length L0 [m]; 1 at L = 0.
+inline double stretch_factor(double length, double rest_length) {
+    return length > 0.0 ? std::abs(1.0 - rest_length / length) : 1.0;
+}
+
+/// The weights w (S, kBoundParts) [N/m] (kDamping: [N s/m]) of every spring at q (N, 3).
+inline void bound_weights(const Model& m, const double* q, double* w) {
+    for (index s = 0; s < m.spring_count; ++s) {
+        const V3 d = load(q, m.spring_indices[2 * s + 1]) - load(q, m.spring_indices[2 * s]);
+        const double k = m.spring_stiffness[s];
+        const double stretch = stretch_factor(std::sqrt(dot(d, d)), m.spring_rest_length[s]);
+        double* ws = w + kBoundParts * s;
+        ws[kDamped] = k;
+        ws[kTransverse] = k * stretch;
+        ws[kWhole] = k * std::max(1.0, stretch);
+        ws[kDamping] = m.spring_damping[s];
+    }
+}
+
+/// Gershgorin on the spring-by-spring matrix M^-1/2 K M^-1/2 (for any directions u): the
+/// row sums R_i = sum of sqrt(w) over the springs at i, added into root_sum
+/// (N, kBoundParts) at both ends of every spring.
+inline void add_root_sums(const Model& m, const double* w, double* root_sum) {
+    for (index s = 0; s < m.spring_count; ++s) {
+        double* ri = root_sum + kBoundParts * m.spring_indices[2 * s];
+        double* rj = root_sum + kBoundParts * m.spring_indices[2 * s + 1];
+        for (int part = 0; part < kBoundParts; ++part) {
+            const double r = std::sqrt(w[kBoundParts * s + part]);
+            ri[part] += r;
+            rj[part] += r;
+        }
+    }
+}
+
+/// The springs' Gershgorin bound of each part, max over springs (i, j) of
+/// sqrt(w) (R_i / m_i + R_j / m_j) [1/s^2] (kDamping: [1/s]), into bound (kBoundParts,)
+/// where larger: exact for one spring, the Anderson-Morley bound for equal springs.
+/// root_sum from every spring-like term's add_root_sums; pinned ends (1 / m = 0) add none.
+inline void row_bounds(const Model& m, const double* w, const double* root_sum, double* bound) {
+    const double* inv = m.particle_inv_mass;
+    for (index s = 0; s < m.spring_count; ++s) {
+        const index i = m.spring_indices[2 * s], j = m.spring_indices[2 * s + 1];
+        for (int part = 0; part < kBoundParts; ++part) {
+            const double row = std::sqrt(w[kBoundParts * s + part]) *
+                               (root_sum[kBoundParts * i + part] * inv[i] +
+                                root_sum[kBoundParts * j + part] * inv[j]);
+            bound[part] = std::max(bound[part], row);
+        }
+    }
+}
+
+/// The damping per stiffness c / k [s] of the springs with k > 0, folded into [lo, hi];
+/// pure_damper set where a spring has c > 0 and k = 0 (it may damp any mode).
+inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_damper) {
+    for (index s = 0; s < m.spring_count; ++s) {
+        const double k = m.spring_stiffness[s], c = m.spring_damping[s];
+        if (k > 0.0) {
+            lo = std::min(lo, c / k);
+            hi = std::max(hi, c / k);
+        } else if (k == 0.0 && c > 0.0) {
+            pure_damper = true;
+        }
+    }
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::springs

@@ -1,6 +1,7 @@
 // Body volume by each method (softbody.volume): exact by the divergence theorem with its
 // gradient dV/dx (the area-weighted vertex normals the pressure force uses), the paper's
 // bounding box, sphere and ellipsoid, and Monte Carlo along seeded vertical lines.
+// Geometry, not a force: gas.hpp turns volumes into pressures, forces and energies.
 #pragma once
 
 #include "model.hpp"

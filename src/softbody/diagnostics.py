@@ -8,10 +8,7 @@ import numpy as np
 
 from softbody import _core
 from softbody.core import core_model
-from softbody.reference import attachments as ref_attachments
 from softbody.reference import gas as ref_gas
-from softbody.reference import gravity as ref_gravity
-from softbody.reference import springs as ref_springs
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
 from softbody.sim.state import State, kernel_input
@@ -147,37 +144,29 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
     """Kinetic, gravitational (-m g.x), spring (edges, bending, attachments) and gas energy.
 
     ``control`` supplies gas overrides and attachment anchors when they differ from the
-    model's.
+    model's. Each term's energy comes from its own file of the compiled core
+    (``core/terms/``: ``gravity``, ``springs``, ``attachments``, ``gas``;
+    ``softbody.reference`` holds the same formulas in NumPy). Drag and the control's
+    forces have no energy; the grab spring's is left out (the user's hand does work).
     """
     state.conform(model)
     q, qd = state.particle_q, state.particle_qd
     m = model.particle_mass
     bodies = model.body_count
     pb = model.particle_body
-    in_body = pb >= 0
 
     kin = 0.5 * m * np.einsum("ij,ij->i", qd, qd)
-    data = _control(model, control)
-    grav = ref_gravity.energies(model, q)
-    spr = ref_springs.energies(model, q)
-    att = ref_attachments.energies(model, data, q)
-    att_body = pb[model.attachment_particle]
-
-    def per_body(values, owner):
-        keep = owner >= 0
-        return np.bincount(owner[keep], weights=values[keep], minlength=bodies)
-
     # each body's gas energy at its volume by its own method; an open surface (cloth)
     # holds no gas: the work of its wind pressure is not counted
-    volume = _gas(model, state, control)[0]
-    gas = ref_gas.energies(model, data, float(state.time), volume)
+    terms = _core.eval_energies(core_model(model), _control(model, control), float(state.time), q)
+    grav, spr, att, gas = (terms[name] for name in ("gravity", "springs", "attachments", "gas"))
     return Energies(
         kinetic=float(kin.sum()),
-        gravitational=float(grav.sum()),
-        spring=float(spr.sum() + att.sum()),
-        gas=float(gas.sum()),
-        body_kinetic=per_body(kin, np.where(in_body, pb, -1)),
-        body_gravitational=per_body(grav, np.where(in_body, pb, -1)),
-        body_spring=per_body(spr, model.spring_body) + per_body(att, att_body),
-        body_gas=gas,
+        gravitational=grav[0],
+        spring=spr[0] + att[0],
+        gas=gas[0],
+        body_kinetic=np.bincount(pb[pb >= 0], weights=kin[pb >= 0], minlength=bodies),
+        body_gravitational=grav[1],
+        body_spring=spr[1] + att[1],
+        body_gas=gas[1],
     )

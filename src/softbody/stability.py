@@ -15,6 +15,12 @@ separately and added (Weyl's inequality), split by whether spring damping acts o
   rows); and the rank-one term -P'(V) g g^T with g = dV/dx (the breathing mode), whose
   one nonzero eigenvalue |P'(V)| sum_i |g_i|^2 / m_i adds to the bound.
 
+Each term computes its own pieces of these bounds in its file of the compiled core
+(``core/terms/springs.hpp``, ``attachments.hpp``, ``gas.hpp``: ``bound_weights``,
+``add_root_sums``, ``row_bounds``, ``damping_ratios``; ``bound_slopes``,
+``add_pressure_rows``, ``rank_one_bound``), returned by ``softbody._core.stiffness_bounds``;
+:func:`stiffest_mode` adds and compares them.
+
 Gershgorin bounds hold for any spring directions but overestimate: on a triangle mesh
 the largest eigenvalue of the spring matrix is about half their bound (a flat triangular
 lattice: 6 k / m against 12 k / m). So each of these four bounds (damped, undamped, whole,
@@ -50,7 +56,6 @@ import numpy as np
 
 from softbody import _core
 from softbody.core import core_model
-from softbody.gas import GasLaw
 from softbody.integrators import Integrator
 from softbody.sim.control import control_data
 from softbody.sim.state import kernel_array
@@ -98,27 +103,6 @@ class StiffestMode:
     omega_gas: float = 0.0
     """Part of that from the rank-one term dP/dV g g^T alone, the gas's resistance to a
     change of volume, against the masses [rad/s]."""
-
-
-def _gershgorin_springs(root_sum, stiffness, i, j, inv):
-    """max over springs of sqrt(k) (R_i / m_i + R_j / m_j) (squared frequency bound)."""
-    if len(stiffness) == 0:
-        return 0.0
-    return float((np.sqrt(stiffness) * (root_sum[i] * inv[i] + root_sum[j] * inv[j])).max())
-
-
-def _spring_bound(n, inv, ends, stiffness, anchored, anchored_stiffness):
-    """Squared frequency bound of springs ``ends`` (S, 2) and anchored springs on
-    particles ``anchored`` (A,), stiffness per spring [N/m]."""
-    root_sum = np.zeros(n)
-    np.add.at(root_sum, ends[:, 0], np.sqrt(stiffness))
-    np.add.at(root_sum, ends[:, 1], np.sqrt(stiffness))
-    np.add.at(root_sum, anchored, np.sqrt(anchored_stiffness))
-    w2 = _gershgorin_springs(root_sum, stiffness, ends[:, 0], ends[:, 1], inv)
-    if len(anchored):
-        rows = np.sqrt(anchored_stiffness) * root_sum[anchored] * inv[anchored]
-        w2 = max(w2, float(rows.max()))
-    return w2
 
 
 def _stretch(length, rest_length):
@@ -228,73 +212,22 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
     (:func:`spectral_bounds`), about half the Gershgorin bound on a triangle mesh.
     """
     q = model.particle_q if q is None else np.asarray(q, dtype=np.float64)
-    inv = model.particle_inv_mass
-    n = model.particle_count
-    idx = model.spring_indices.reshape(-1, 2)
-    k = model.spring_stiffness
-    a = model.attachment_particle
-    ka = model.attachment_stiffness
-    w2_damped = _spring_bound(n, inv, idx, k, a, ka)
-    length = np.linalg.norm(q[idx[:, 1]] - q[idx[:, 0]], axis=1)
-    anchor_length = np.linalg.norm(model.attachment_anchor - q[a], axis=1)
-    stretch = _stretch(length, model.spring_rest_length)
-    anchor_stretch = _stretch(anchor_length, model.attachment_rest_length)
-    w2_transverse = _spring_bound(n, inv, idx, k * stretch, a, ka * anchor_stretch)
-    # a spring's block has norm k max(1, |1 - L0/L|) (axial and transverse parts are
-    # orthogonal), so bounding the springs whole is tighter than adding the two parts
-    w2_springs = _spring_bound(
-        n, inv, idx, k * np.maximum(1.0, stretch), a, ka * np.maximum(1.0, anchor_stretch)
+    # each term's Gershgorin pieces from its own file of the core (core/terms/): springs
+    # and attachments share the row sums R_i, so the two terms' rows are bounded together
+    pieces = _core.stiffness_bounds(core_model(model), control_data(model), kernel_array(q))
+    springs, attached = pieces["springs"], pieces["attachments"]
+    w2_damped, w2_transverse, w2_springs, damping_rate = (
+        max(s, a) for s, a in zip(springs, attached, strict=True)
     )
-    ratios = np.concatenate(
-        [model.spring_damping[k > 0] / k[k > 0], model.attachment_damping[ka > 0] / ka[ka > 0]]
-    )
-    beta = (float(ratios.min()), float(ratios.max())) if len(ratios) else (0.0, 0.0)
-    dampers = np.any(model.spring_damping[k == 0] > 0) or np.any(
-        model.attachment_damping[ka == 0] > 0
-    )
-    if dampers:
+    low, high = pieces["damping_ratio"]
+    beta = (low, high) if low <= high else (0.0, 0.0)  # no spring with stiffness: none
+    if pieces["pure_dampers"]:
         beta = (beta[0], np.inf)
-    damping_rate = _spring_bound(n, inv, idx, model.spring_damping, a, model.attachment_damping)
-
-    pressure_rows = np.zeros(n)
-    rank_one = 0.0
-    body_pnet, body_dpdv = np.zeros(model.body_count), np.zeros(model.body_count)
-    volume_gradient = np.zeros((n, 3))
-    for b in range(model.body_count):
-        t0, t1 = model.body_tri_range[b]
-        tri = model.tri_indices[t0:t1]
-        x = q[tri]  # (F, 3, 3)
-        n_scaled = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
-        volume = np.einsum("ij,ij->", x[:, 0] - x[:, 0].mean(axis=0), n_scaled) / 6.0
-        s0, s1 = model.body_schedule_range[b]
-        value = max(model.body_gas_value[b], *model.schedule_value[s0:s1], 0.0)
-        law = GasLaw(int(model.body_gas_law[b]))
-        if law == GasLaw.FIXED_PRESSURE:
-            pressure, dp_dv = value, 0.0
-        elif law == GasLaw.ISOTHERMAL:
-            pressure, dp_dv = value / volume, -value / volume**2
-        else:
-            g = model.body_gas_gamma[b]
-            pressure = value * model.body_gas_reference_volume[b] ** (g - 1.0) / volume**g
-            dp_dv = -g * pressure / volume
-        body_pnet[b], body_dpdv[b] = pressure - model.body_ambient_pressure[b], dp_dv
-        p_net = abs(body_pnet[b])
-        for c in range(3):
-            ci, cj, cl = tri[:, c], tri[:, (c + 1) % 3], tri[:, (c + 2) % 3]
-            lij = np.linalg.norm(x[:, (c + 1) % 3] - x[:, c], axis=1)
-            lil = np.linalg.norm(x[:, (c + 2) % 3] - x[:, c], axis=1)
-            row = (
-                p_net / 6.0 * (lil * np.sqrt(inv[ci] * inv[cj]) + lij * np.sqrt(inv[ci] * inv[cl]))
-            )
-            np.add.at(pressure_rows, ci, row)
-        grad = np.zeros((n, 3))
-        for c in range(3):
-            np.add.at(grad, tri[:, c], n_scaled / 6.0)
-        rank_one = max(rank_one, abs(dp_dv) * float(np.sum(inv * np.sum(grad**2, axis=1))))
-        volume_gradient += grad
-
+    body_pnet, body_dpdv = pieces["body_pnet"], pieces["body_dpdv"]
+    volume_gradient = pieces["volume_gradient"]
+    rank_one = pieces["gas_rank_one"]
     # Weyl: the largest eigenvalue of a sum is at most the sum of the largest eigenvalues
-    w2_pressure = float(pressure_rows.max(initial=0.0)) + rank_one
+    w2_pressure = pieces["pressure_rows"] + rank_one
     w2_undamped = w2_transverse + w2_pressure
     w2_total = min(w2_damped + w2_undamped, w2_springs + w2_pressure)
     if spectral and model.particle_count > 0:

@@ -21,6 +21,7 @@ class ModelData(NamedTuple):
     spring_rest_length: np.ndarray
     spring_stiffness: np.ndarray
     spring_damping: np.ndarray
+    spring_body: np.ndarray
     attachment_particle: np.ndarray
     attachment_rest_length: np.ndarray
     attachment_stiffness: np.ndarray
