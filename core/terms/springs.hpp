@@ -181,17 +181,6 @@ inline void project(const Model& m, double h, const double* x, const double* x0,
     }
 }
 
-/// Elastic energy sum 1/2 k (L - L0)^2 [J].
-inline double energy(const Model& m, const double* q) {
-    double e = 0.0;
-    for (index s = 0; s < m.spring_count; ++s) {
-        const V3 d = load(q, m.spring_indices[2 * s + 1]) - load(q, m.spring_indices[2 * s]);
-        const double stretch = std::sqrt(dot(d, d)) - m.spring_rest_length[s];
-        e += 0.5 * m.spring_stiffness[s] * stretch * stretch;
-    }
-    return e;
-}
-
 /// Elastic energy 1/2 k (L - L0)^2 [J] of every spring at q (N, 3), each added to its body's
 /// entry of body_energy (B,) (Model::spring_body: a body's edge and bending springs; a
 /// user's spring, body -1, counts in the total only); returns the total [J].
