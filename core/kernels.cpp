@@ -72,8 +72,8 @@ void apply_jacobians(const Model& m, const Control& c, const double* q, const do
                      double alpha_m, double alpha_c, double alpha_k, const double* u,
                      const double* a, const double* b, const double* gradient, const double* dpdv,
                      const double* pnet, bool with_attachments, double* out) {
-    for (index i = 0; i < m.particle_count; ++i) {
-        const double w = alpha_m * m.particle_mass[i];
+    for (index i = 0; i < m.particles.count; ++i) {
+        const double w = alpha_m * m.particles.mass[i];
         for (int k = 0; k < 3; ++k) out[3 * i + k] = w * p[3 * i + k];
     }
     springs::jacobian_product(m, u, a, b, alpha_c, alpha_k, p, out);
@@ -83,15 +83,15 @@ void apply_jacobians(const Model& m, const Control& c, const double* q, const do
 }
 
 index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers& w) {
-    if (m.soft_contact_mode == 1) soft::contacts_bounding(m, q, qd, w);
-    if (m.soft_contact_mode == 2) return soft::contacts_surface(m, q, qd, w);
+    if (m.soft_contacts.mode == 1) soft::contacts_bounding(m, q, qd, w);
+    if (m.soft_contacts.mode == 2) return soft::contacts_surface(m, q, qd, w);
     return 0;
 }
 
 void eval_energies(const Model& m, const Control& c, double t, const double* q,
                    const BodyGas& gas, TermEnergies& out) {
     for (double* body : {out.body_gravity, out.body_springs, out.body_attachments})
-        std::fill(body, body + m.body_count, 0.0);
+        std::fill(body, body + m.bodies.count, 0.0);
     out.gravity = gravity::energies(m, q, out.body_gravity);
     out.springs = springs::energies(m, q, out.body_springs);
     out.attachments = attachments::energies(m, c, q, out.body_attachments);
@@ -107,18 +107,18 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
     StiffnessBounds out;
     springs::bound_weights(m, q, w.spring_weight);
     attachments::bound_weights(m, c, q, w.attachment_weight);
-    std::fill(w.root_sum, w.root_sum + springs::kBoundParts * m.particle_count, 0.0);
+    std::fill(w.root_sum, w.root_sum + springs::kBoundParts * m.particles.count, 0.0);
     springs::add_root_sums(m, w.spring_weight, w.root_sum);
     attachments::add_root_sums(m, w.attachment_weight, w.root_sum);
     springs::row_bounds(m, w.spring_weight, w.root_sum, out.springs);
     attachments::row_bounds(m, w.attachment_weight, w.root_sum, out.attachments);
     springs::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
     attachments::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
-    std::fill(w.volume_gradient, w.volume_gradient + 3 * m.particle_count, 0.0);
+    std::fill(w.volume_gradient, w.volume_gradient + 3 * m.particles.count, 0.0);
     gas::bound_slopes(m, q, w.body_pnet, w.body_dpdv, w.volume_gradient);
-    std::fill(w.pressure_row, w.pressure_row + m.particle_count, 0.0);
+    std::fill(w.pressure_row, w.pressure_row + m.particles.count, 0.0);
     gas::add_pressure_rows(m, q, w.body_pnet, w.pressure_row);
-    for (index i = 0; i < m.particle_count; ++i)
+    for (index i = 0; i < m.particles.count; ++i)
         out.pressure_rows = std::max(out.pressure_rows, w.pressure_row[i]);
     out.gas_rank_one = gas::rank_one_bound(m, w.body_dpdv, w.volume_gradient);
     return out;

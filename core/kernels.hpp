@@ -17,7 +17,7 @@ namespace softbody {
 struct TermEnergies {
     double gravity = 0.0, springs = 0.0, attachments = 0.0, gas = 0.0, grab = 0.0;
     double* body_gravity = nullptr;      // (B,) -m g . x
-    double* body_springs = nullptr;      // (B,) 1/2 k (L - L0)^2 by Model::spring_body
+    double* body_springs = nullptr;      // (B,) 1/2 k (L - L0)^2 by Springs::body
     double* body_attachments = nullptr;  // (B,) 1/2 k (L - L0)^2 by the tied particle's body
     double* body_gas = nullptr;          // (B,) E(V) + P_a V at each body's own volume
 };

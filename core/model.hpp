@@ -9,98 +9,155 @@
 
 namespace softbody {
 
-/// Everything fixed after ModelBuilder.finalize (softbody.sim.model.Model), SI units.
-struct Model {
-    index particle_count = 0, spring_count = 0, attachment_count = 0, tri_count = 0;
-    index body_count = 0, collider_count = 0, pin_count = 0, schedule_count = 0;
-    index mc_count = 0;
+/// The particles (N): masses and owning bodies.
+struct Particles {
+    index count = 0;                   // N
+    const double* mass = nullptr;      // (N,) [kg]
+    const double* inv_mass = nullptr;  // (N,) [1/kg], 0 for pinned particles
+    const index* body = nullptr;       // (N,) body or -1
+};
 
-    const double* particle_mass = nullptr;      // (N,) [kg]
-    const double* particle_inv_mass = nullptr;  // (N,) [1/kg], 0 for pinned particles
-    const index* particle_body = nullptr;       // (N,) body or -1
-    double gravity[3] = {0.0, 0.0, 0.0};        // [m/s^2]
+/// Damped Hooke springs (S): mesh edges, bending and user springs (terms/springs.hpp).
+struct Springs {
+    index count = 0;                      // S
+    const index* indices = nullptr;       // (S, 2)
+    const double* rest_length = nullptr;  // (S,) [m]
+    const double* stiffness = nullptr;    // (S,) [N/m]
+    const double* damping = nullptr;      // (S,) [N s/m]
+    const index* body = nullptr;          // (S,) its body, -1 for a user's spring
+};
 
-    const index* spring_indices = nullptr;        // (S, 2)
-    const double* spring_rest_length = nullptr;   // (S,) [m]
-    const double* spring_stiffness = nullptr;     // (S,) [N/m]
-    const double* spring_damping = nullptr;       // (S,) [N s/m]
-    const index* spring_body = nullptr;           // (S,) its body, -1 for a user's spring
+/// Springs from particles to anchors (A) that Control moves (terms/attachments.hpp).
+struct Attachments {
+    index count = 0;                      // A
+    const index* particle = nullptr;      // (A,)
+    const double* rest_length = nullptr;  // (A,) [m]
+    const double* stiffness = nullptr;    // (A,) [N/m]
+    const double* damping = nullptr;      // (A,) [N s/m]
+};
 
-    const index* attachment_particle = nullptr;       // (A,)
-    const double* attachment_rest_length = nullptr;   // (A,) [m]
-    const double* attachment_stiffness = nullptr;     // (A,) [N/m]
-    const double* attachment_damping = nullptr;       // (A,) [N s/m]
+/// The surface triangles (T): faces of the pressure, volume and drag terms.
+struct Triangles {
+    index count = 0;                 // T
+    const index* indices = nullptr;  // (T, 3), outward-wound
+    const index* body = nullptr;     // (T,)
+};
 
-    const index* tri_indices = nullptr;  // (T, 3), outward-wound
-    const index* tri_body = nullptr;     // (T,)
+/// The bodies (B): which particles and triangles each owns, and what contacts fit to it.
+struct Bodies {
+    index count = 0;                         // B
+    const index* particle_range = nullptr;   // (B, 2) [begin, end)
+    const index* tri_range = nullptr;        // (B, 2)
+    const double* rest_volume = nullptr;     // (B,) [m^3]
+    const index* closed = nullptr;           // (B,) 1 closed, 0 open surface
+    const index* contact_shape = nullptr;    // (B,) 1 box, 2 sphere, 3 ellipsoid
+};
 
-    const index* body_particle_range = nullptr;  // (B, 2) [begin, end)
-    const index* body_tri_range = nullptr;       // (B, 2)
-    const index* body_volume_method = nullptr;   // (B,) VolumeMethod
-    const index* body_mc_range = nullptr;        // (B, 2) rows of mc_samples
-    const double* mc_samples = nullptr;          // (M, 2) in [0, 1)^2
-    const index* body_gas_law = nullptr;         // (B,) GasLaw
-    const double* body_gas_value = nullptr;      // (B,) nRT [J] or P0 [Pa]
-    const double* body_gas_gamma = nullptr;      // (B,)
-    const double* body_gas_reference_volume = nullptr;  // (B,) [m^3]
-    const double* body_ambient_pressure = nullptr;      // (B,) [Pa]
-    const index* body_schedule_range = nullptr;  // (B, 2) rows of the gas schedule
-    const double* schedule_time = nullptr;       // (K,) [s]
-    const double* schedule_value = nullptr;      // (K,)
-    const double* body_rest_volume = nullptr;    // (B,) [m^3]
-    const index* body_closed = nullptr;          // (B,) 1 closed, 0 open surface
-    const index* body_contact_shape = nullptr;   // (B,) 1 box, 2 sphere, 3 ellipsoid
+/// Each body's volume method (terms/volume.hpp) with the Monte Carlo samples (M).
+struct Volumes {
+    index mc_count = 0;                   // M
+    const index* method = nullptr;        // (B,) VolumeMethod
+    const index* mc_range = nullptr;      // (B, 2) rows of mc_samples
+    const double* mc_samples = nullptr;   // (M, 2) in [0, 1)^2
+};
 
-    const index* pin_particle = nullptr;  // (P,)
+/// Each body's gas law and its schedule of K points (terms/gas.hpp).
+struct Gases {
+    index schedule_count = 0;                  // K
+    const index* law = nullptr;                // (B,) GasLaw
+    const double* value = nullptr;             // (B,) nRT [J] or P0 [Pa]
+    const double* gamma = nullptr;             // (B,)
+    const double* reference_volume = nullptr;  // (B,) [m^3]
+    const double* ambient_pressure = nullptr;  // (B,) [Pa]
+    const index* schedule_range = nullptr;     // (B, 2) rows of the schedule
+    const double* schedule_time = nullptr;     // (K,) [s]
+    const double* schedule_value = nullptr;    // (K,)
+};
 
-    const double* body_drag_coefficient = nullptr;  // (B,) C_d [1], 0 = no drag
-    double air_density = 0.0;                       // rho [kg/m^3]
-    double wind[3] = {0.0, 0.0, 0.0};               // [m/s], Control.wind may override it
-    bool drag_active = false;  // rho > 0 and some C_d > 0 (else the drag term is skipped)
+/// Pinned particles (P), moved to Control targets.
+struct Pins {
+    index count = 0;                  // P
+    const index* particle = nullptr;  // (P,)
+};
 
-    // Vertex-major neighbour tables (bindings/core_model.hpp derives them from the springs and triangles):
-    // particles in groups of 8 lanes; group g's slots are [start[g], start[g + 1]), and slot
-    // s holds, for lane l, entry 8 s + l. Each particle lists everything it belongs to, so a
-    // pass over particles computes its own forces and writes nothing else's.
-    //
-    // The ring: a particle's neighbours in fan order j_0, j_1, ..., so that consecutive ones
-    // make its faces (i, j_{s-1}, j_s) and each neighbour's row serves its edge spring and
-    // two faces. A closed fan's slot 0 closes the ring (face (i, j_last, j_0)); a shorter
-    // ring is padded with j_0 (no spring, faces of no area).
-    index group_count = 0;                           // ceil(N / 8)
-    const double* lane_mass = nullptr;               // (8 G,) particle masses, 0 past N [kg]
-    const index* lane_reference = nullptr;           // (8 G,) first particle of its body
-    const index* ring_slot_start = nullptr;          // (G + 1,)
-    const index* ring_slot_other = nullptr;          // (slots, 8) neighbour j_s
-    const double* ring_slot_rest_length = nullptr;   // (slots, 8) spring on (i, j_s) [m], or 0
-    const double* ring_slot_stiffness = nullptr;     // (slots, 8) [N/m], 0 without a spring
-    const double* ring_slot_damping = nullptr;       // (slots, 8) [N s/m]
-    const double* ring_slot_face = nullptr;          // (slots, 8) 1 where (j_{s-1}, j_s) is a face
+/// Air drag on faces (terms/drag.hpp).
+struct Drag {
+    const double* coefficient = nullptr;  // (B,) C_d [1], 0 = no drag
+    double air_density = 0.0;             // rho [kg/m^3]
+    double wind[3] = {0.0, 0.0, 0.0};     // [m/s], Control.wind may override it
+    bool active = false;  // rho > 0 and some C_d > 0 (else the drag term is skipped)
+};
+
+/// Vertex-major neighbour tables (bindings/core_model.hpp derives them from the springs and
+/// triangles): particles in groups of 8 lanes; group g's slots are [start[g], start[g + 1]),
+/// and slot s holds, for lane l, entry 8 s + l. Each particle lists everything it belongs
+/// to, so a pass over particles computes its own forces and writes nothing else's.
+///
+/// The ring: a particle's neighbours in fan order j_0, j_1, ..., so that consecutive ones
+/// make its faces (i, j_{s-1}, j_s) and each neighbour's row serves its edge spring and two
+/// faces. A closed fan's slot 0 closes the ring (face (i, j_last, j_0)); a shorter ring is
+/// padded with j_0 (no spring, faces of no area).
+struct Slots {
+    index group_count = 0;                    // G = ceil(N / 8)
+    const double* mass = nullptr;             // (8 G,) particle masses, 0 past N [kg]
+    const index* reference = nullptr;         // (8 G,) first particle of its body
+    const index* ring_start = nullptr;        // (G + 1,)
+    const index* ring_other = nullptr;        // (slots, 8) neighbour j_s
+    const double* ring_rest_length = nullptr; // (slots, 8) spring on (i, j_s) [m], or 0
+    const double* ring_stiffness = nullptr;   // (slots, 8) [N/m], 0 without a spring
+    const double* ring_damping = nullptr;     // (slots, 8) [N s/m]
+    const double* ring_face = nullptr;        // (slots, 8) 1 where (j_{s-1}, j_s) is a face
     // springs off the rings (bending and user springs), with padding pointing at itself
-    const index* spring_slot_start = nullptr;        // (G + 1,)
-    const index* spring_slot_other = nullptr;        // (slots, 8)
-    const double* spring_slot_rest_length = nullptr; // (slots, 8) [m]
-    const double* spring_slot_stiffness = nullptr;   // (slots, 8) [N/m]
-    const double* spring_slot_damping = nullptr;     // (slots, 8) [N s/m]
+    const index* spring_start = nullptr;        // (G + 1,)
+    const index* spring_other = nullptr;        // (slots, 8)
+    const double* spring_rest_length = nullptr; // (slots, 8) [m]
+    const double* spring_stiffness = nullptr;   // (slots, 8) [N/m]
+    const double* spring_damping = nullptr;     // (slots, 8) [N s/m]
     // faces of particles whose faces make no single fan (not met on a validated mesh)
-    const index* face_slot_start = nullptr;          // (G + 1,)
-    const index* face_slot_next = nullptr;           // (slots, 8) face (i, j, k) seen from i: j
-    const index* face_slot_last = nullptr;           // (slots, 8) and k
+    const index* face_start = nullptr;  // (G + 1,)
+    const index* face_next = nullptr;   // (slots, 8) face (i, j, k) seen from i: j
+    const index* face_last = nullptr;   // (slots, 8) and k
+};
 
-    int soft_contact_mode = 0;  // 0 none, 1 bounding objects, 2 surfaces
-    double soft_contact_restitution = 0.0, soft_contact_friction = 0.0;
-    double contact_margin = 0.0, contact_cell_size = 1.0;  // [m]
+/// Contacts between soft bodies (collision/soft.hpp).
+struct SoftContacts {
+    int mode = 0;  // 0 none, 1 bounding objects, 2 surfaces
+    double restitution = 0.0, friction = 0.0;
+    double margin = 0.0, cell_size = 1.0;  // [m]
+};
 
-    const index* collider_kind = nullptr;               // (C,) ColliderKind
-    const double* collider_center = nullptr;            // (C, 3) [m]
-    const double* collider_rotation = nullptr;          // (C, 3, 3)
-    const double* collider_size = nullptr;              // (C, 3) [m]
-    const double* collider_restitution = nullptr;       // (C,)
-    const double* collider_friction = nullptr;          // (C,)
-    const index* collider_motion = nullptr;             // (C,) MotionKind
-    const double* collider_motion_vector = nullptr;     // (C, 3)
-    const double* collider_motion_pivot = nullptr;      // (C, 3) [m]
-    const double* collider_motion_frequency = nullptr;  // (C,) [Hz]
+/// Rigid colliders (C) and their prescribed motions (collision/colliders.hpp).
+struct Colliders {
+    index count = 0;                            // C
+    const index* kind = nullptr;                // (C,) ColliderKind
+    const double* center = nullptr;             // (C, 3) [m]
+    const double* rotation = nullptr;           // (C, 3, 3)
+    const double* size = nullptr;               // (C, 3) [m]
+    const double* restitution = nullptr;        // (C,)
+    const double* friction = nullptr;           // (C,)
+    const index* motion = nullptr;              // (C,) MotionKind
+    const double* motion_vector = nullptr;      // (C, 3)
+    const double* motion_pivot = nullptr;       // (C, 3) [m]
+    const double* motion_frequency = nullptr;   // (C,) [Hz]
+};
+
+/// Everything fixed after ModelBuilder.finalize (softbody.sim.model.Model), SI units,
+/// grouped by what reads it: each term's parameters in its own part, so a term's code names
+/// the part it uses (m.springs, m.gases, m.drag, ...).
+struct Model {
+    Particles particles;
+    double gravity[3] = {0.0, 0.0, 0.0};  // [m/s^2] (terms/gravity.hpp)
+    Springs springs;
+    Attachments attachments;
+    Triangles triangles;
+    Bodies bodies;
+    Volumes volumes;
+    Gases gases;
+    Pins pins;
+    Drag drag;
+    Slots slots;
+    SoftContacts soft_contacts;
+    Colliders colliders;
 };
 
 /// Inputs held constant over one call (softbody.sim.control.Control).
@@ -167,7 +224,7 @@ struct LaneBuffers {
     // x - x_ref (the particle's body's first particle: body-local, so float32 keeps
     // 2^-24 of the body's size) and v; the ring tables are float copies of the model's.
     float* rows_f = nullptr;                    // (8 G, 8) x - x_ref, v, 0, 0 per particle
-    const float* ring_rest_length_f = nullptr;  // (slots, 8) as Model.ring_slot_* [m]
+    const float* ring_rest_length_f = nullptr;  // (slots, 8) as Model.slots.ring_* [m]
     const float* ring_stiffness_f = nullptr;    // [N/m]
     const float* ring_damping_f = nullptr;      // [N s/m]
     const float* ring_face_f = nullptr;         // 1 where (j_{s-1}, j_s) is a face

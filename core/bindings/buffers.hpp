@@ -19,14 +19,14 @@ inline Index hash_table_size(Index tris) {
 class Buffers {
 public:
     explicit Buffers(const softbody::Model& m, int rows, Index hash_capacity = 0) {
-        const size_t n3 = static_cast<size_t>(3 * m.particle_count);
-        const size_t b = static_cast<size_t>(m.body_count), c = static_cast<size_t>(m.collider_count);
+        const size_t n3 = static_cast<size_t>(3 * m.particles.count);
+        const size_t b = static_cast<size_t>(m.bodies.count), c = static_cast<size_t>(m.colliders.count);
         rows_.assign(static_cast<size_t>(rows), std::vector<double>(n3, 0.0));
         per_body_.assign(11, std::vector<double>(3 * b, 0.0));
         per_collider_.assign(3, std::vector<double>(3 * c, 0.0));
         gradient_.assign(n3, 0.0);
         if (rows > 0) {  // the force pass's packed rows (a volume-only call needs none)
-            const size_t lanes = static_cast<size_t>(8 * m.group_count);
+            const size_t lanes = static_cast<size_t>(8 * m.slots.group_count);
             rows_buffer_.assign(8 * lanes, 0.0);  // padding rows stay zero
             lane_pnet_.assign(lanes, 0.0);
             lanes_view.rows = rows_buffer_.data();
@@ -47,8 +47,8 @@ public:
         contact.collider_q_start = per_collider_[0].data();
         contact.collider_v = per_collider_[1].data();
         contact.collider_w = per_collider_[2].data();
-        if (m.soft_contact_mode == 2) {
-            const Index table = hash_table_size(m.tri_count);
+        if (m.soft_contacts.mode == 2) {
+            const Index table = hash_table_size(m.triangles.count);
             hash_start_.assign(static_cast<size_t>(table + 1), 0);
             hash_count_.assign(static_cast<size_t>(table), 0);
             hash_entries_.assign(static_cast<size_t>(hash_capacity), 0);
@@ -74,8 +74,8 @@ private:
 /// triangles up to a cell across); 0 without surface contacts.
 inline Index checked_capacity(const softbody::Model& m, std::optional<Index> asked) {
     if (asked && *asked < 0) fail("hash_capacity must be >= 0, got " + std::to_string(*asked));
-    if (m.soft_contact_mode != 2) return 0;
-    return asked ? *asked : 8 * m.tri_count;
+    if (m.soft_contacts.mode != 2) return 0;
+    return asked ? *asked : 8 * m.triangles.count;
 }
 
 /// A run's state arrays and limits, checked against the model (views held for one call).
@@ -92,11 +92,11 @@ inline CheckedRun checked_run(const softbody::Model& m, Index steps, double t0, 
     if (steps < 0) fail("steps must be >= 0");
     if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
     CheckedRun run;
-    run.q = writable(q, "q", {m.particle_count, 3});
-    run.qd = writable(qd, "qd", {m.particle_count, 3});
-    run.collider_q = writable(collider_q, "collider_q", {m.collider_count, 3});
-    run.collider_rot = writable(collider_rot, "collider_rot", {m.collider_count, 3, 3});
-    run.collider_impulse = writable(collider_impulse, "collider_impulse", {m.collider_count, 3});
+    run.q = writable(q, "q", {m.particles.count, 3});
+    run.qd = writable(qd, "qd", {m.particles.count, 3});
+    run.collider_q = writable(collider_q, "collider_q", {m.colliders.count, 3});
+    run.collider_rot = writable(collider_rot, "collider_rot", {m.colliders.count, 3, 3});
+    run.collider_impulse = writable(collider_impulse, "collider_impulse", {m.colliders.count, 3});
     run.state = {run.q.data(), run.qd.data(), run.collider_q.data(), run.collider_rot.data(),
                  run.collider_impulse.data()};
     run.params.steps = steps;

@@ -7,14 +7,14 @@ namespace softbody::bindings {
 void bind_model(nb::module_& mod) {
     nb::class_<CoreModel>(mod, "Model", "Checked views of a Model's arrays (ModelData).")
         .def(nb::init<nb::handle>(), nb::arg("data"))
-        .def_prop_ro("particle_count", [](const CoreModel& c) { return c.model().particle_count; })
+        .def_prop_ro("particle_count", [](const CoreModel& c) { return c.model().particles.count; })
         .def_prop_ro(
             "lane_slots",
             [](const CoreModel& c) {
                 const softbody::Model& m = c.model();
-                const Index g = m.group_count;
-                return std::make_tuple(m.ring_slot_start[g], m.spring_slot_start[g],
-                                       m.face_slot_start[g]);
+                const Index g = m.slots.group_count;
+                return std::make_tuple(m.slots.ring_start[g], m.slots.spring_start[g],
+                                       m.slots.face_start[g]);
             },
             "Slots of the vertex-major tables, over all groups of 8 particles: (ring, springs "
             "off the rings, faces outside a fan).");

@@ -39,68 +39,68 @@ public:
         keep_f_.insert(keep_f_.end(), {mass, samples, times});
         keep_i_.insert(keep_i_.end(), {springs, tris, ranges, att, kinds, pins});
 
-        m.particle_count = n;
-        m.spring_count = s;
-        m.tri_count = t;
-        m.body_count = b;
-        m.attachment_count = a;
-        m.collider_count = c;
-        m.pin_count = static_cast<Index>(pins.shape(0));
-        m.mc_count = static_cast<Index>(samples.shape(0));
-        m.schedule_count = static_cast<Index>(times.shape(0));
+        m.particles.count = n;
+        m.springs.count = s;
+        m.triangles.count = t;
+        m.bodies.count = b;
+        m.attachments.count = a;
+        m.colliders.count = c;
+        m.pins.count = static_cast<Index>(pins.shape(0));
+        m.volumes.mc_count = static_cast<Index>(samples.shape(0));
+        m.gases.schedule_count = static_cast<Index>(times.shape(0));
 
-        m.particle_mass = mass.data();
-        m.particle_inv_mass = f64("particle_inv_mass", {n});
-        m.particle_body = i64("particle_body", {n});
+        m.particles.mass = mass.data();
+        m.particles.inv_mass = f64("particle_inv_mass", {n});
+        m.particles.body = i64("particle_body", {n});
         const double* g = f64("gravity", {3});
         for (int k = 0; k < 3; ++k) m.gravity[k] = g[k];
-        m.spring_indices = springs.data();
-        m.spring_rest_length = f64("spring_rest_length", {s});
-        m.spring_stiffness = f64("spring_stiffness", {s});
-        m.spring_damping = f64("spring_damping", {s});
-        m.spring_body = i64("spring_body", {s});
-        m.attachment_particle = att.data();
-        m.attachment_rest_length = f64("attachment_rest_length", {a});
-        m.attachment_stiffness = f64("attachment_stiffness", {a});
-        m.attachment_damping = f64("attachment_damping", {a});
-        m.tri_indices = tris.data();
-        m.tri_body = i64("tri_body", {t});
-        m.body_particle_range = ranges.data();
-        m.body_tri_range = i64("body_tri_range", {b, 2});
-        m.body_volume_method = i64("body_volume_method", {b});
-        m.body_mc_range = i64("body_mc_range", {b, 2});
-        m.mc_samples = samples.data();
-        m.body_gas_law = i64("body_gas_law", {b});
-        m.body_gas_value = f64("body_gas_value", {b});
-        m.body_gas_gamma = f64("body_gas_gamma", {b});
-        m.body_gas_reference_volume = f64("body_gas_reference_volume", {b});
-        m.body_ambient_pressure = f64("body_ambient_pressure", {b});
-        m.body_schedule_range = i64("body_schedule_range", {b, 2});
-        m.schedule_time = times.data();
-        m.schedule_value = f64("schedule_value", {m.schedule_count});
-        m.body_rest_volume = f64("body_rest_volume", {b});
-        m.body_closed = i64("body_closed", {b});
-        m.body_contact_shape = i64("body_contact_shape", {b});
-        m.pin_particle = pins.data();
-        m.body_drag_coefficient = f64("body_drag_coefficient", {b});
-        m.air_density = nb::cast<double>(d.attr("air_density"));
+        m.springs.indices = springs.data();
+        m.springs.rest_length = f64("spring_rest_length", {s});
+        m.springs.stiffness = f64("spring_stiffness", {s});
+        m.springs.damping = f64("spring_damping", {s});
+        m.springs.body = i64("spring_body", {s});
+        m.attachments.particle = att.data();
+        m.attachments.rest_length = f64("attachment_rest_length", {a});
+        m.attachments.stiffness = f64("attachment_stiffness", {a});
+        m.attachments.damping = f64("attachment_damping", {a});
+        m.triangles.indices = tris.data();
+        m.triangles.body = i64("tri_body", {t});
+        m.bodies.particle_range = ranges.data();
+        m.bodies.tri_range = i64("body_tri_range", {b, 2});
+        m.volumes.method = i64("body_volume_method", {b});
+        m.volumes.mc_range = i64("body_mc_range", {b, 2});
+        m.volumes.mc_samples = samples.data();
+        m.gases.law = i64("body_gas_law", {b});
+        m.gases.value = f64("body_gas_value", {b});
+        m.gases.gamma = f64("body_gas_gamma", {b});
+        m.gases.reference_volume = f64("body_gas_reference_volume", {b});
+        m.gases.ambient_pressure = f64("body_ambient_pressure", {b});
+        m.gases.schedule_range = i64("body_schedule_range", {b, 2});
+        m.gases.schedule_time = times.data();
+        m.gases.schedule_value = f64("schedule_value", {m.gases.schedule_count});
+        m.bodies.rest_volume = f64("body_rest_volume", {b});
+        m.bodies.closed = i64("body_closed", {b});
+        m.bodies.contact_shape = i64("body_contact_shape", {b});
+        m.pins.particle = pins.data();
+        m.drag.coefficient = f64("body_drag_coefficient", {b});
+        m.drag.air_density = nb::cast<double>(d.attr("air_density"));
         const double* wind = f64("wind", {3});
-        for (int k = 0; k < 3; ++k) m.wind[k] = wind[k];
-        m.soft_contact_mode = nb::cast<int>(d.attr("soft_contact_mode"));
-        m.soft_contact_restitution = nb::cast<double>(d.attr("soft_contact_restitution"));
-        m.soft_contact_friction = nb::cast<double>(d.attr("soft_contact_friction"));
-        m.contact_margin = nb::cast<double>(d.attr("contact_margin"));
-        m.contact_cell_size = nb::cast<double>(d.attr("contact_cell_size"));
-        m.collider_kind = kinds.data();
-        m.collider_center = f64("collider_center", {c, 3});
-        m.collider_rotation = f64("collider_rotation", {c, 3, 3});
-        m.collider_size = f64("collider_size", {c, 3});
-        m.collider_restitution = f64("collider_restitution", {c});
-        m.collider_friction = f64("collider_friction", {c});
-        m.collider_motion = i64("collider_motion", {c});
-        m.collider_motion_vector = f64("collider_motion_vector", {c, 3});
-        m.collider_motion_pivot = f64("collider_motion_pivot", {c, 3});
-        m.collider_motion_frequency = f64("collider_motion_frequency", {c});
+        for (int k = 0; k < 3; ++k) m.drag.wind[k] = wind[k];
+        m.soft_contacts.mode = nb::cast<int>(d.attr("soft_contact_mode"));
+        m.soft_contacts.restitution = nb::cast<double>(d.attr("soft_contact_restitution"));
+        m.soft_contacts.friction = nb::cast<double>(d.attr("soft_contact_friction"));
+        m.soft_contacts.margin = nb::cast<double>(d.attr("contact_margin"));
+        m.soft_contacts.cell_size = nb::cast<double>(d.attr("contact_cell_size"));
+        m.colliders.kind = kinds.data();
+        m.colliders.center = f64("collider_center", {c, 3});
+        m.colliders.rotation = f64("collider_rotation", {c, 3, 3});
+        m.colliders.size = f64("collider_size", {c, 3});
+        m.colliders.restitution = f64("collider_restitution", {c});
+        m.colliders.friction = f64("collider_friction", {c});
+        m.colliders.motion = i64("collider_motion", {c});
+        m.colliders.motion_vector = f64("collider_motion_vector", {c, 3});
+        m.colliders.motion_pivot = f64("collider_motion_pivot", {c, 3});
+        m.colliders.motion_frequency = f64("collider_motion_frequency", {c});
         validate();
         build_lanes();
     }
@@ -111,39 +111,39 @@ private:
     // Indices and enumerations in range, so no kernel reads outside an array.
     void validate() {
         const softbody::Model& m = model_;
-        check_indices(m.spring_indices, 2 * m.spring_count, 0, m.particle_count, "spring_indices");
-        check_indices(m.tri_indices, 3 * m.tri_count, 0, m.particle_count, "tri_indices");
-        check_indices(m.tri_body, m.tri_count, 0, m.body_count, "tri_body");
-        check_indices(m.particle_body, m.particle_count, -1, m.body_count, "particle_body");
-        check_indices(m.spring_body, m.spring_count, -1, m.body_count, "spring_body");
-        check_indices(m.attachment_particle, m.attachment_count, 0, m.particle_count,
+        check_indices(m.springs.indices, 2 * m.springs.count, 0, m.particles.count, "spring_indices");
+        check_indices(m.triangles.indices, 3 * m.triangles.count, 0, m.particles.count, "tri_indices");
+        check_indices(m.triangles.body, m.triangles.count, 0, m.bodies.count, "tri_body");
+        check_indices(m.particles.body, m.particles.count, -1, m.bodies.count, "particle_body");
+        check_indices(m.springs.body, m.springs.count, -1, m.bodies.count, "spring_body");
+        check_indices(m.attachments.particle, m.attachments.count, 0, m.particles.count,
                       "attachment_particle");
-        check_indices(m.pin_particle, m.pin_count, 0, m.particle_count, "pin_particle");
-        check_ranges(m.body_particle_range, m.body_count, m.particle_count, "body_particle_range");
-        check_ranges(m.body_tri_range, m.body_count, m.tri_count, "body_tri_range");
-        check_ranges(m.body_mc_range, m.body_count, m.mc_count, "body_mc_range");
-        check_ranges(m.body_schedule_range, m.body_count, m.schedule_count, "body_schedule_range");
-        for (Index b = 0; b < m.body_count; ++b) {
+        check_indices(m.pins.particle, m.pins.count, 0, m.particles.count, "pin_particle");
+        check_ranges(m.bodies.particle_range, m.bodies.count, m.particles.count, "body_particle_range");
+        check_ranges(m.bodies.tri_range, m.bodies.count, m.triangles.count, "body_tri_range");
+        check_ranges(m.volumes.mc_range, m.bodies.count, m.volumes.mc_count, "body_mc_range");
+        check_ranges(m.gases.schedule_range, m.bodies.count, m.gases.schedule_count, "body_schedule_range");
+        for (Index b = 0; b < m.bodies.count; ++b) {
             // a body's triangles Index its own particles (the volume's reference point)
-            const Index p0 = m.body_particle_range[2 * b], p1 = m.body_particle_range[2 * b + 1];
-            if (m.body_tri_range[2 * b + 1] > m.body_tri_range[2 * b] && p1 == p0)
+            const Index p0 = m.bodies.particle_range[2 * b], p1 = m.bodies.particle_range[2 * b + 1];
+            if (m.bodies.tri_range[2 * b + 1] > m.bodies.tri_range[2 * b] && p1 == p0)
                 fail("body " + std::to_string(b) + " has triangles but no particles");
         }
-        check_indices(m.body_volume_method, m.body_count, 0, 5, "body_volume_method");
-        check_indices(m.body_gas_law, m.body_count, 0, 3, "body_gas_law");
-        check_indices(m.body_contact_shape, m.body_count, 0, 4, "body_contact_shape");
-        check_indices(m.collider_kind, m.collider_count, 0, 4, "collider_kind");
-        check_indices(m.collider_motion, m.collider_count, 0, 4, "collider_motion");
-        if (m.soft_contact_mode < 0 || m.soft_contact_mode > 2)
+        check_indices(m.volumes.method, m.bodies.count, 0, 5, "body_volume_method");
+        check_indices(m.gases.law, m.bodies.count, 0, 3, "body_gas_law");
+        check_indices(m.bodies.contact_shape, m.bodies.count, 0, 4, "body_contact_shape");
+        check_indices(m.colliders.kind, m.colliders.count, 0, 4, "collider_kind");
+        check_indices(m.colliders.motion, m.colliders.count, 0, 4, "collider_motion");
+        if (m.soft_contacts.mode < 0 || m.soft_contacts.mode > 2)
             fail("soft_contact_mode must be 0, 1 or 2");
-        if (m.soft_contact_mode == 2) {
+        if (m.soft_contacts.mode == 2) {
             // the surface contacts' grid: cells of a positive, finite size
-            if (!(std::isfinite(m.contact_cell_size) && m.contact_cell_size > 0.0))
+            if (!(std::isfinite(m.soft_contacts.cell_size) && m.soft_contacts.cell_size > 0.0))
                 fail("contact_cell_size must be finite and > 0, got " +
-                     std::to_string(m.contact_cell_size));
-            if (!(std::isfinite(m.contact_margin) && m.contact_margin >= 0.0))
+                     std::to_string(m.soft_contacts.cell_size));
+            if (!(std::isfinite(m.soft_contacts.margin) && m.soft_contacts.margin >= 0.0))
                 fail("contact_margin must be finite and >= 0, got " +
-                     std::to_string(m.contact_margin));
+                     std::to_string(m.soft_contacts.margin));
         }
         check_drag();
     }
@@ -152,20 +152,20 @@ private:
     // body has drag in air of positive density.
     void check_drag() {
         softbody::Model& m = model_;
-        if (!(std::isfinite(m.air_density) && m.air_density >= 0.0))
+        if (!(std::isfinite(m.drag.air_density) && m.drag.air_density >= 0.0))
             fail("air_density must be finite and >= 0 kg/m^3, got " +
-                 std::to_string(m.air_density));
+                 std::to_string(m.drag.air_density));
         for (int k = 0; k < 3; ++k)
-            if (!std::isfinite(m.wind[k])) fail("wind must be 3 finite numbers [m/s]");
+            if (!std::isfinite(m.drag.wind[k])) fail("wind must be 3 finite numbers [m/s]");
         bool any = false;
-        for (Index b = 0; b < m.body_count; ++b) {
-            const double cd = m.body_drag_coefficient[b];
+        for (Index b = 0; b < m.bodies.count; ++b) {
+            const double cd = m.drag.coefficient[b];
             if (!(std::isfinite(cd) && cd >= 0.0))
                 fail("body_drag_coefficient holds " + std::to_string(cd) + " at " +
                      std::to_string(b) + "; it must be finite and >= 0");
             any = any || cd > 0.0;
         }
-        m.drag_active = any && m.air_density > 0.0;
+        m.drag.active = any && m.drag.air_density > 0.0;
     }
 
     // A particle's faces (i, j, k) as directed pairs j -> k, in fan order: a closed fan is
@@ -223,31 +223,31 @@ private:
     // its busiest particle needs; every particle's own entries in order.
     void build_lanes() {
         softbody::Model& m = model_;
-        const Index n = m.particle_count, groups = (n + kGroup - 1) / kGroup;
+        const Index n = m.particles.count, groups = (n + kGroup - 1) / kGroup;
         const size_t lanes = static_cast<size_t>(kGroup * groups);
-        m.group_count = groups;
+        m.slots.group_count = groups;
         lane_mass_.assign(lanes, 0.0);
-        std::copy(m.particle_mass, m.particle_mass + n, lane_mass_.begin());
+        std::copy(m.particles.mass, m.particles.mass + n, lane_mass_.begin());
         lane_reference_.resize(lanes);
         for (size_t i = 0; i < lanes; ++i) lane_reference_[i] = static_cast<Index>(i);
-        for (Index b = 0; b < m.body_count; ++b)
-            for (Index i = m.body_particle_range[2 * b]; i < m.body_particle_range[2 * b + 1]; ++i)
-                lane_reference_[static_cast<size_t>(i)] = m.body_particle_range[2 * b];
-        m.lane_mass = lane_mass_.data();
-        m.lane_reference = lane_reference_.data();
+        for (Index b = 0; b < m.bodies.count; ++b)
+            for (Index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1]; ++i)
+                lane_reference_[static_cast<size_t>(i)] = m.bodies.particle_range[2 * b];
+        m.slots.mass = lane_mass_.data();
+        m.slots.reference = lane_reference_.data();
 
         // each particle's springs (other end, spring) and faces (j, k), in model order
         std::vector<std::vector<std::pair<Index, Index>>> springs(static_cast<size_t>(n)),
             faces(static_cast<size_t>(n));
-        for (Index s = 0; s < m.spring_count; ++s) {
-            const Index i = m.spring_indices[2 * s], j = m.spring_indices[2 * s + 1];
+        for (Index s = 0; s < m.springs.count; ++s) {
+            const Index i = m.springs.indices[2 * s], j = m.springs.indices[2 * s + 1];
             springs[static_cast<size_t>(i)].push_back({j, s});
             springs[static_cast<size_t>(j)].push_back({i, s});
         }
-        for (Index t = 0; t < m.tri_count; ++t)
+        for (Index t = 0; t < m.triangles.count; ++t)
             for (int c = 0; c < 3; ++c)
-                faces[static_cast<size_t>(m.tri_indices[3 * t + c])].push_back(
-                    {m.tri_indices[3 * t + (c + 1) % 3], m.tri_indices[3 * t + (c + 2) % 3]});
+                faces[static_cast<size_t>(m.triangles.indices[3 * t + c])].push_back(
+                    {m.triangles.indices[3 * t + (c + 1) % 3], m.triangles.indices[3 * t + (c + 2) % 3]});
 
         // per particle: its ring (neighbour, spring or -1, face weight), its other springs
         // and the faces of a broken fan
@@ -339,9 +339,9 @@ private:
                     ring_face_[e] = rings[own].face[k];
                     const Index spring = rings[own].spring[k];
                     if (spring >= 0) {
-                        ring_rest_[e] = m.spring_rest_length[spring];
-                        ring_k_[e] = m.spring_stiffness[spring];
-                        ring_c_[e] = m.spring_damping[spring];
+                        ring_rest_[e] = m.springs.rest_length[spring];
+                        ring_k_[e] = m.springs.stiffness[spring];
+                        ring_c_[e] = m.springs.damping[spring];
                     }
                 }
                 const Index s0 = spring_start_[static_cast<size_t>(g)];
@@ -351,9 +351,9 @@ private:
                     if (real && k < extra_springs[own].size()) {
                         const auto [other, spring] = extra_springs[own][k];
                         spring_other_[e] = other;
-                        spring_rest_[e] = m.spring_rest_length[spring];
-                        spring_k_[e] = m.spring_stiffness[spring];
-                        spring_c_[e] = m.spring_damping[spring];
+                        spring_rest_[e] = m.springs.rest_length[spring];
+                        spring_k_[e] = m.springs.stiffness[spring];
+                        spring_c_[e] = m.springs.damping[spring];
                     }
                 }
                 const Index f0 = face_start_[static_cast<size_t>(g)];
@@ -366,20 +366,20 @@ private:
                     }
                 }
             }
-        m.ring_slot_start = ring_start_.data();
-        m.ring_slot_other = ring_other_.data();
-        m.ring_slot_rest_length = ring_rest_.data();
-        m.ring_slot_stiffness = ring_k_.data();
-        m.ring_slot_damping = ring_c_.data();
-        m.ring_slot_face = ring_face_.data();
-        m.spring_slot_start = spring_start_.data();
-        m.spring_slot_other = spring_other_.data();
-        m.spring_slot_rest_length = spring_rest_.data();
-        m.spring_slot_stiffness = spring_k_.data();
-        m.spring_slot_damping = spring_c_.data();
-        m.face_slot_start = face_start_.data();
-        m.face_slot_next = face_next_.data();
-        m.face_slot_last = face_last_.data();
+        m.slots.ring_start = ring_start_.data();
+        m.slots.ring_other = ring_other_.data();
+        m.slots.ring_rest_length = ring_rest_.data();
+        m.slots.ring_stiffness = ring_k_.data();
+        m.slots.ring_damping = ring_c_.data();
+        m.slots.ring_face = ring_face_.data();
+        m.slots.spring_start = spring_start_.data();
+        m.slots.spring_other = spring_other_.data();
+        m.slots.spring_rest_length = spring_rest_.data();
+        m.slots.spring_stiffness = spring_k_.data();
+        m.slots.spring_damping = spring_c_.data();
+        m.slots.face_start = face_start_.data();
+        m.slots.face_next = face_next_.data();
+        m.slots.face_last = face_last_.data();
     }
 
     static constexpr Index kGroup = 8;  // the kernels' lane group (simd.hpp)
@@ -395,11 +395,11 @@ private:
 /// Views of a ControlData bundle, checked against the model (held for one call).
 struct CoreControl {
     CoreControl(const softbody::Model& m, nb::handle d) {
-        gas = attribute<ConstF64>(d, "gas_override", {m.body_count});
-        particle_f = attribute<ConstF64>(d, "particle_f", {m.particle_count, 3});
-        anchor = attribute<ConstF64>(d, "attachment_anchor", {m.attachment_count, 3});
-        pin = attribute<ConstF64>(d, "pin_target", {m.pin_count, 3});
-        target = attribute<ConstF64>(d, "collider_target", {m.collider_count, 3});
+        gas = attribute<ConstF64>(d, "gas_override", {m.bodies.count});
+        particle_f = attribute<ConstF64>(d, "particle_f", {m.particles.count, 3});
+        anchor = attribute<ConstF64>(d, "attachment_anchor", {m.attachments.count, 3});
+        pin = attribute<ConstF64>(d, "pin_target", {m.pins.count, 3});
+        target = attribute<ConstF64>(d, "collider_target", {m.colliders.count, 3});
         ConstF64 grab = attribute<ConstF64>(d, "grab_target", {3});
         view.gas_override = gas.data();
         view.particle_f = particle_f.data();
@@ -408,7 +408,7 @@ struct CoreControl {
         view.pin_active = nb::cast<bool>(d.attr("pin_active"));
         view.collider_target = target.data();
         view.grab_particle = nb::cast<Index>(d.attr("grab_particle"));
-        if (view.grab_particle < -1 || view.grab_particle >= m.particle_count)
+        if (view.grab_particle < -1 || view.grab_particle >= m.particles.count)
             fail("grab_particle must be -1 or a particle Index");
         for (int k = 0; k < 3; ++k) view.grab_target[k] = grab.data()[k];
         view.grab_stiffness = nb::cast<double>(d.attr("grab_stiffness"));
@@ -421,7 +421,7 @@ struct CoreControl {
         const bool given = std::isfinite(w[0]) && std::isfinite(w[1]) && std::isfinite(w[2]);
         const bool unset = std::isnan(w[0]) && std::isnan(w[1]) && std::isnan(w[2]);
         if (!given && !unset) fail("Control wind must be 3 finite numbers [m/s] or all NaN");
-        for (int k = 0; k < 3; ++k) view.wind[k] = given ? w[k] : m.wind[k];
+        for (int k = 0; k < 3; ++k) view.wind[k] = given ? w[k] : m.drag.wind[k];
     }
     ConstF64 gas, particle_f, anchor, pin, target;
     softbody::Control view;

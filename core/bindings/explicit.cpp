@@ -14,7 +14,7 @@ public:
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
           buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)),
-          threads_(threads, model_.model().body_count) {
+          threads_(threads, model_.model().bodies.count) {
         threads_.attach(buffers_.lanes_view);
         w_.f = buffers_.row(0);
         w_.q0 = buffers_.row(1);
@@ -57,8 +57,8 @@ private:
     /// The float32 force pass: its rows and float copies of the model's ring tables.
     void use_float32() {
         const softbody::Model& m = model_.model();
-        const size_t lanes = static_cast<size_t>(8 * m.group_count);
-        const size_t slots = static_cast<size_t>(8 * m.ring_slot_start[m.group_count]);
+        const size_t lanes = static_cast<size_t>(8 * m.slots.group_count);
+        const size_t slots = static_cast<size_t>(8 * m.slots.ring_start[m.slots.group_count]);
         rows_f_.assign(8 * lanes, 0.0f);  // padding rows stay zero
         auto copy = [slots](const double* from, std::vector<float>& to) {
             to.resize(slots);
@@ -67,11 +67,11 @@ private:
         };
         softbody::LaneBuffers& l = w_.lanes;
         l.rows_f = rows_f_.data();
-        l.ring_rest_length_f = copy(m.ring_slot_rest_length, rest_f_);
-        l.ring_stiffness_f = copy(m.ring_slot_stiffness, stiffness_f_);
-        l.ring_damping_f = copy(m.ring_slot_damping, damping_f_);
-        l.ring_face_f = copy(m.ring_slot_face, face_f_);
-        l.extra_slots = m.spring_slot_start[m.group_count] > 0 || m.face_slot_start[m.group_count] > 0;
+        l.ring_rest_length_f = copy(m.slots.ring_rest_length, rest_f_);
+        l.ring_stiffness_f = copy(m.slots.ring_stiffness, stiffness_f_);
+        l.ring_damping_f = copy(m.slots.ring_damping, damping_f_);
+        l.ring_face_f = copy(m.slots.ring_face, face_f_);
+        l.extra_slots = m.slots.spring_start[m.slots.group_count] > 0 || m.slots.face_start[m.slots.group_count] > 0;
     }
 
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive

@@ -14,7 +14,7 @@ class CheckedMultigrid {
 public:
     CheckedMultigrid(const softbody::Model& m, nb::handle mg) {
         softbody::MultigridView& v = view;
-        const Index n = m.particle_count;
+        const Index n = m.particles.count;
         v.level_count = nb::cast<Index>(mg.attr("level_count"));
         const Index levels = v.level_count;
         if (levels < 0) fail("multigrid level_count must be >= 0");
@@ -59,7 +59,7 @@ public:
                       "multigrid P level " + std::to_string(l));
         const Index coarse = v.level_size[levels];
         v.coarse_cholesky = v.coarse_dense ? f64(mg, "coarse_cholesky", {coarse, coarse}) : nullptr;
-        const Index entries = 2 * m.spring_count;
+        const Index entries = 2 * m.springs.count;
         v.vertex_spring_ptr = i64(mg, "vertex_spring_ptr", {n + 1});
         if (v.vertex_spring_ptr[0] != 0 || v.vertex_spring_ptr[n] != entries)
             fail("multigrid vertex_spring_ptr must run from 0 to twice the spring count");
@@ -68,7 +68,7 @@ public:
                 fail("multigrid vertex_spring_ptr must not decrease");
         v.vertex_spring = i64(mg, "vertex_spring", {entries});
         v.vertex_neighbor = i64(mg, "vertex_neighbor", {entries});
-        check_indices(v.vertex_spring, entries, 0, m.spring_count, "multigrid vertex_spring");
+        check_indices(v.vertex_spring, entries, 0, m.springs.count, "multigrid vertex_spring");
         check_indices(v.vertex_neighbor, entries, 0, n, "multigrid vertex_neighbor");
         const size_t n9 = static_cast<size_t>(9 * n), t3 = static_cast<size_t>(3 * total_);
         scratch_ = {std::vector<double>(n9), std::vector<double>(n9),
@@ -128,7 +128,7 @@ public:
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
           buffers_(model_.model(), 13, checked_capacity(model_.model(), hash_capacity)),
-          threads_(threads, model_.model().body_count) {
+          threads_(threads, model_.model().bodies.count) {
         const softbody::Model& m = model_.model();
         threads_.attach(buffers_.lanes_view);
         if (!multigrid.is_none()) multigrid_.emplace(m, multigrid);
@@ -136,10 +136,10 @@ public:
         double** rows[] = {&w_.f, &w_.q0, &w_.v0, &w_.qs, &w_.vs, &w_.ky, &w_.cg_r,
                            &w_.cg_z, &w_.cg_p, &w_.cg_ap, &w_.cg_x, &w_.q_prev, &w_.v_prev};
         for (int k = 0; k < 13; ++k) *rows[k] = buffers_.row(k);
-        const size_t s = static_cast<size_t>(m.spring_count), b = static_cast<size_t>(m.body_count);
+        const size_t s = static_cast<size_t>(m.springs.count), b = static_cast<size_t>(m.bodies.count);
         per_spring_ = {std::vector<double>(3 * s), std::vector<double>(s), std::vector<double>(s)};
         per_body_ = {std::vector<double>(b), std::vector<double>(b)};
-        diag_.assign(static_cast<size_t>(m.particle_count), 0.0);
+        diag_.assign(static_cast<size_t>(m.particles.count), 0.0);
         w_.spring_u = per_spring_[0].data();
         w_.spring_a = per_spring_[1].data();
         w_.spring_b = per_spring_[2].data();
@@ -185,11 +185,11 @@ public:
     nb::ndarray<nb::numpy, double> apply_preconditioner(nb::handle control, double t, double h,
                                                         ConstF64 q, ConstF64 r) {
         const softbody::Model& m = model_.model();
-        check_shape(q, "q", {m.particle_count, 3});
-        check_shape(r, "r", {m.particle_count, 3});
+        check_shape(q, "q", {m.particles.count, 3});
+        check_shape(r, "r", {m.particles.count, 3});
         if (!(std::isfinite(h) && h > 0.0)) fail("h must be finite and > 0");
         CoreControl c(m, control);
-        const size_t n3 = static_cast<size_t>(3 * m.particle_count);
+        const size_t n3 = static_cast<size_t>(3 * m.particles.count);
         std::copy(q.data(), q.data() + n3, w_.q0);
         double* z = new double[n3 > 0 ? n3 : 1];
         nb::capsule owner(z, [](void* p) noexcept { delete[] static_cast<double*>(p); });
@@ -198,7 +198,7 @@ public:
             softbody::kernels().apply_preconditioner(
                 m, c.view, t, h, w_, multigrid_ ? &multigrid_->view : nullptr, r.data(), z);
         }
-        size_t shape[2] = {static_cast<size_t>(m.particle_count), 3};
+        size_t shape[2] = {static_cast<size_t>(m.particles.count), 3};
         return nb::ndarray<nb::numpy, double>(z, 2, shape, owner);
     }
 
@@ -225,16 +225,16 @@ private:
 /// One V-cycle z = V(r) of a hierarchy for r (N, 3): for tests of the preconditioner.
 nb::ndarray<nb::numpy, double> apply_multigrid(const CoreModel& core, nb::handle mg, ConstF64 r) {
     const softbody::Model& m = core.model();
-    check_shape(r, "r", {m.particle_count, 3});
+    check_shape(r, "r", {m.particles.count, 3});
     CheckedMultigrid checked(m, mg);
-    const size_t n3 = static_cast<size_t>(3 * m.particle_count);
+    const size_t n3 = static_cast<size_t>(3 * m.particles.count);
     double* z = new double[n3 > 0 ? n3 : 1];
     nb::capsule owner(z, [](void* p) noexcept { delete[] static_cast<double*>(p); });
     {
         nb::gil_scoped_release release;
         softbody::kernels().apply_multigrid(checked.view, r.data(), z);
     }
-    size_t shape[2] = {static_cast<size_t>(m.particle_count), 3};
+    size_t shape[2] = {static_cast<size_t>(m.particles.count), 3};
     return nb::ndarray<nb::numpy, double>(z, 2, shape, owner);
 }
 

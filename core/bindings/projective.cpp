@@ -94,7 +94,7 @@ public:
         : handle_(model),
           model_(nb::cast<const CoreModel&>(model)),
           buffers_(model_.model(), 6, checked_capacity(model_.model(), hash_capacity)),
-          threads_(threads, model_.model().body_count) {
+          threads_(threads, model_.model().bodies.count) {
         threads_.attach(buffers_.lanes_view);
         w_.lanes = buffers_.lanes_view;
         w_.f = buffers_.row(0);
@@ -109,7 +109,7 @@ public:
 
     /// Checked first: a refused factor leaves the one set before.
     void set_factor(nb::handle factor) {
-        CoreFactor checked(factor, model_.model().particle_count);
+        CoreFactor checked(factor, model_.model().particles.count);
         factor_.reset();
         factor_.emplace(std::move(checked));
     }
@@ -158,9 +158,9 @@ private:
 nb::ndarray<nb::numpy, double> solve_factor(const CoreModel& core, nb::handle factor,
                                             ConstF64 b) {
     const softbody::Model& m = core.model();
-    check_shape(b, "b", {m.particle_count, 3});
-    CoreFactor checked(factor, m.particle_count);
-    const size_t n3 = static_cast<size_t>(3 * m.particle_count);
+    check_shape(b, "b", {m.particles.count, 3});
+    CoreFactor checked(factor, m.particles.count);
+    const size_t n3 = static_cast<size_t>(3 * m.particles.count);
     std::vector<double> scratch(n3 > 0 ? n3 : 1);
     double* x = new double[n3 > 0 ? n3 : 1];
     nb::capsule owner(x, [](void* p) noexcept { delete[] static_cast<double*>(p); });
@@ -168,7 +168,7 @@ nb::ndarray<nb::numpy, double> solve_factor(const CoreModel& core, nb::handle fa
         nb::gil_scoped_release release;
         softbody::kernels().projective_solve(checked.factor(), b.data(), scratch.data(), x);
     }
-    size_t shape[2] = {static_cast<size_t>(m.particle_count), 3};
+    size_t shape[2] = {static_cast<size_t>(m.particles.count), 3};
     return nb::ndarray<nb::numpy, double>(x, 2, shape, owner);
 }
 

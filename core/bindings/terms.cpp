@@ -11,8 +11,8 @@ namespace {
 nb::tuple eval_forces(const CoreModel& core, nb::handle control, double t, ConstF64 q,
                       ConstF64 qd) {
     const softbody::Model& m = core.model();
-    check_shape(q, "q", {m.particle_count, 3});
-    check_shape(qd, "qd", {m.particle_count, 3});
+    check_shape(q, "q", {m.particles.count, 3});
+    check_shape(qd, "qd", {m.particles.count, 3});
     CoreControl c(m, control);
     Buffers b(m, 1);
     {
@@ -28,7 +28,7 @@ nb::tuple eval_forces(const CoreModel& core, nb::handle control, double t, Const
         nb::capsule owner(copy, [](void* p) noexcept { delete[] static_cast<double*>(p); });
         return nb::ndarray<nb::numpy, double>(copy, shape.size(), shape.data(), owner);
     };
-    const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
+    const size_t n = static_cast<size_t>(m.particles.count), nb_ = static_cast<size_t>(m.bodies.count);
     return nb::make_tuple(out(b.row(0), {n, 3}), out(b.gas.volume, {nb_}),
                           out(b.gas.pressure, {nb_}), out(b.gas.volume_gradient, {n, 3}));
 }
@@ -36,7 +36,7 @@ nb::tuple eval_forces(const CoreModel& core, nb::handle control, double t, Const
 /// Every body's volume by its own method at q, with dV/dx when asked.
 nb::tuple eval_volumes(const CoreModel& core, nb::handle control, double t, ConstF64 q) {
     const softbody::Model& m = core.model();
-    check_shape(q, "q", {m.particle_count, 3});
+    check_shape(q, "q", {m.particles.count, 3});
     CoreControl c(m, control);
     Buffers b(m, 0);
     {
@@ -51,7 +51,7 @@ nb::tuple eval_volumes(const CoreModel& core, nb::handle control, double t, Cons
         nb::capsule owner(copy, [](void* p) noexcept { delete[] static_cast<double*>(p); });
         return nb::ndarray<nb::numpy, double>(copy, shape.size(), shape.data(), owner);
     };
-    const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
+    const size_t n = static_cast<size_t>(m.particles.count), nb_ = static_cast<size_t>(m.bodies.count);
     return nb::make_tuple(out(b.gas.volume, {nb_}), out(b.gas.pressure, {nb_}),
                           out(b.gas.volume_gradient, {n, 3}));
 }
@@ -60,8 +60,8 @@ nb::tuple eval_volumes(const CoreModel& core, nb::handle control, double t, Cons
 /// returns the hash entries the surface contacts needed beyond hash_capacity, or 0.
 Index soft_contacts(const CoreModel& core, F64 q, F64 qd, std::optional<Index> hash_capacity) {
     const softbody::Model& m = core.model();
-    check_shape(q, "q", {m.particle_count, 3});
-    check_shape(qd, "qd", {m.particle_count, 3});
+    check_shape(q, "q", {m.particles.count, 3});
+    check_shape(qd, "qd", {m.particles.count, 3});
     Buffers b(m, 0, checked_capacity(m, hash_capacity));
     nb::gil_scoped_release release;
     return softbody::kernels().soft_contacts(m, q.data(), qd.data(), b.contact);
@@ -73,7 +73,7 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
                      ConstF64 b, ConstF64 gradient, ConstF64 dpdv, ConstF64 pnet, F64 out,
                      bool attachments) {
     const softbody::Model& m = core.model();
-    const Index n = m.particle_count, s = m.spring_count, nb_ = m.body_count;
+    const Index n = m.particles.count, s = m.springs.count, nb_ = m.bodies.count;
     check_shape(q, "q", {n, 3});
     check_shape(p, "p", {n, 3});
     check_shape(u, "spring_u", {s, 3});
@@ -99,30 +99,30 @@ nb::ndarray<nb::numpy, double> body_volumes(ConstF64 q, ConstI64 tri_indices,
     check_shape(q, "q", {-1, 3});
     check_shape(tri_indices, "tri_indices", {-1, 3});
     check_shape(body_particle_range, "body_particle_range", {-1, 2});
-    m.particle_count = static_cast<Index>(q.shape(0));
-    m.tri_count = static_cast<Index>(tri_indices.shape(0));
-    m.body_count = static_cast<Index>(body_particle_range.shape(0));
-    check_shape(body_tri_range, "body_tri_range", {m.body_count, 2});
-    check_shape(body_volume_method, "body_volume_method", {m.body_count});
-    check_shape(body_mc_range, "body_mc_range", {m.body_count, 2});
+    m.particles.count = static_cast<Index>(q.shape(0));
+    m.triangles.count = static_cast<Index>(tri_indices.shape(0));
+    m.bodies.count = static_cast<Index>(body_particle_range.shape(0));
+    check_shape(body_tri_range, "body_tri_range", {m.bodies.count, 2});
+    check_shape(body_volume_method, "body_volume_method", {m.bodies.count});
+    check_shape(body_mc_range, "body_mc_range", {m.bodies.count, 2});
     check_shape(mc_samples, "mc_samples", {-1, 2});
-    m.mc_count = static_cast<Index>(mc_samples.shape(0));
-    m.tri_indices = tri_indices.data();
-    m.body_particle_range = body_particle_range.data();
-    m.body_tri_range = body_tri_range.data();
-    m.body_volume_method = body_volume_method.data();
-    m.body_mc_range = body_mc_range.data();
-    m.mc_samples = mc_samples.data();
-    check_indices(m.tri_indices, 3 * m.tri_count, 0, m.particle_count, "tri_indices");
-    check_ranges(m.body_particle_range, m.body_count, m.particle_count, "body_particle_range");
-    check_ranges(m.body_tri_range, m.body_count, m.tri_count, "body_tri_range");
-    check_ranges(m.body_mc_range, m.body_count, m.mc_count, "body_mc_range");
-    check_indices(m.body_volume_method, m.body_count, 0, 5, "body_volume_method");
-    for (Index b = 0; b < m.body_count; ++b)
-        if (m.body_tri_range[2 * b + 1] > m.body_tri_range[2 * b] &&
-            m.body_particle_range[2 * b + 1] == m.body_particle_range[2 * b])
+    m.volumes.mc_count = static_cast<Index>(mc_samples.shape(0));
+    m.triangles.indices = tri_indices.data();
+    m.bodies.particle_range = body_particle_range.data();
+    m.bodies.tri_range = body_tri_range.data();
+    m.volumes.method = body_volume_method.data();
+    m.volumes.mc_range = body_mc_range.data();
+    m.volumes.mc_samples = mc_samples.data();
+    check_indices(m.triangles.indices, 3 * m.triangles.count, 0, m.particles.count, "tri_indices");
+    check_ranges(m.bodies.particle_range, m.bodies.count, m.particles.count, "body_particle_range");
+    check_ranges(m.bodies.tri_range, m.bodies.count, m.triangles.count, "body_tri_range");
+    check_ranges(m.volumes.mc_range, m.bodies.count, m.volumes.mc_count, "body_mc_range");
+    check_indices(m.volumes.method, m.bodies.count, 0, 5, "body_volume_method");
+    for (Index b = 0; b < m.bodies.count; ++b)
+        if (m.bodies.tri_range[2 * b + 1] > m.bodies.tri_range[2 * b] &&
+            m.bodies.particle_range[2 * b + 1] == m.bodies.particle_range[2 * b])
             fail("body " + std::to_string(b) + " has triangles but no particles");
-    const size_t count = static_cast<size_t>(m.body_count);
+    const size_t count = static_cast<size_t>(m.bodies.count);
     double* volume = new double[count > 0 ? count : 1];
     nb::capsule owner(volume, [](void* p) noexcept { delete[] static_cast<double*>(p); });
     std::vector<double> lo(3 * count), hi(3 * count);
@@ -147,9 +147,9 @@ nb::ndarray<nb::numpy, double> copy_array(const double* data, size_t count) {
 /// Each conservative term's energy at (q, t), per term its total and each body's share.
 nb::dict eval_energies(const CoreModel& core, nb::handle control, double t, ConstF64 q) {
     const softbody::Model& m = core.model();
-    check_shape(q, "q", {m.particle_count, 3});
+    check_shape(q, "q", {m.particles.count, 3});
     CoreControl c(m, control);
-    const size_t nb_ = static_cast<size_t>(m.body_count);
+    const size_t nb_ = static_cast<size_t>(m.bodies.count);
     std::vector<double> per_body(4 * nb_, 0.0), volume(nb_), lo(3 * nb_), hi(3 * nb_);
     softbody::TermEnergies e;
     e.body_gravity = per_body.data();
@@ -177,11 +177,11 @@ nb::dict eval_energies(const CoreModel& core, nb::handle control, double t, Cons
 /// The stability estimate's Gershgorin pieces at q, each term's, and the gas's state there.
 nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q) {
     const softbody::Model& m = core.model();
-    check_shape(q, "q", {m.particle_count, 3});
+    check_shape(q, "q", {m.particles.count, 3});
     CoreControl c(m, control);
-    const size_t n = static_cast<size_t>(m.particle_count), nb_ = static_cast<size_t>(m.body_count);
-    std::vector<double> spring_weight(4 * static_cast<size_t>(m.spring_count)),
-        attachment_weight(4 * static_cast<size_t>(m.attachment_count)), root_sum(4 * n),
+    const size_t n = static_cast<size_t>(m.particles.count), nb_ = static_cast<size_t>(m.bodies.count);
+    std::vector<double> spring_weight(4 * static_cast<size_t>(m.springs.count)),
+        attachment_weight(4 * static_cast<size_t>(m.attachments.count)), root_sum(4 * n),
         pressure_row(n), pnet(nb_), dpdv(nb_), gradient(3 * n);
     softbody::BoundBuffers w;
     w.spring_weight = spring_weight.data();

@@ -31,10 +31,10 @@ inline void rotate_about(V3 a, double angle, double* out) {
 /// in a straight line from q_start to it over `duration` [s], `fraction` of which has passed.
 inline void poses(const Model& m, const Control& c, double fraction, double duration, double t,
                   const double* q_start, double* cq, double* crot, double* cv, double* cw) {
-    for (index k = 0; k < m.collider_count; ++k) {
+    for (index k = 0; k < m.colliders.count; ++k) {
         store(cw, k, {0.0, 0.0, 0.0});
         store(cv, k, {0.0, 0.0, 0.0});
-        const double* rest_rot = m.collider_rotation + 9 * k;
+        const double* rest_rot = m.colliders.rotation + 9 * k;
         double* rot = crot + 9 * k;
         if (std::isfinite(c.collider_target[3 * k])) {
             const V3 d = load(c.collider_target, k) - load(q_start, k);
@@ -42,9 +42,9 @@ inline void poses(const Model& m, const Control& c, double fraction, double dura
             store(cv, k, (1.0 / duration) * d);
             continue;
         }
-        const index motion = m.collider_motion[k];
-        const V3 center = load(m.collider_center, k);
-        const V3 vec = load(m.collider_motion_vector, k);
+        const index motion = m.colliders.motion[k];
+        const V3 center = load(m.colliders.center, k);
+        const V3 vec = load(m.colliders.motion_vector, k);
         if (motion == 1) {  // rotation about a pivot
             const double rate = std::sqrt(dot(vec, vec));
             double r[9];
@@ -52,7 +52,7 @@ inline void poses(const Model& m, const Control& c, double fraction, double dura
                 rotate_about((1.0 / rate) * vec, rate * t, r);
             else
                 rotate_about({1.0, 0.0, 0.0}, 0.0, r);
-            const V3 p = load(m.collider_motion_pivot, k);
+            const V3 p = load(m.colliders.motion_pivot, k);
             const V3 d = center - p;
             for (int i = 0; i < 3; ++i) {
                 cq[3 * k + i] =
@@ -72,7 +72,7 @@ inline void poses(const Model& m, const Control& c, double fraction, double dura
             store(cq, k, center + t * vec);
             store(cv, k, vec);
         } else {  // oscillation a sin(omega t)
-            const double omega = kTwoPi * m.collider_motion_frequency[k];
+            const double omega = kTwoPi * m.colliders.motion_frequency[k];
             store(cq, k, center + std::sin(omega * t) * vec);
             store(cv, k, (omega * std::cos(omega * t)) * vec);
         }
@@ -221,7 +221,7 @@ inline void respond(const Model& m, index i, const Hit& hit, V3 u, double e, dou
     if (vn >= 0.0) return;  // separating already: only the position is corrected
     const V3 tangent = v - vn * hit.n;
     const V3 v_new = u - (e * vn) * hit.n + keep * tangent;
-    j = j - m.particle_mass[i] * (v_new - v_old);
+    j = j - m.particles.mass[i] * (v_new - v_old);
     store(qd, i, v_new);
 }
 
@@ -245,41 +245,41 @@ struct Seen {
 inline void contacts(const Model& m, const double* cq, const double* crot, const double* cv,
                      const double* cw, const double* q_start, double* q, double* qd,
                      double* impulse, Seen* seen = nullptr) {
-    for (index k = 0; k < m.collider_count; ++k) {
-        const index kind = m.collider_kind[k];
+    for (index k = 0; k < m.colliders.count; ++k) {
+        const index kind = m.colliders.kind[k];
         const V3 center = load(cq, k);
         const double* rot = crot + 9 * k;
-        const V3 size = load(m.collider_size, k);
+        const V3 size = load(m.colliders.size, k);
         const V3 vc = load(cv, k), wc = load(cw, k);
-        const double e = m.collider_restitution[k];
-        const double keep = 1.0 - m.collider_friction[k];
+        const double e = m.colliders.restitution[k];
+        const double keep = 1.0 - m.colliders.friction[k];
         V3 j{0.0, 0.0, 0.0};
         if (kind == 0) {  // plane: local +y is the normal (contact() below, unrolled)
             const V3 n{rot[1], rot[4], rot[7]};
-            for (index i = 0; i < m.particle_count; ++i) {
+            for (index i = 0; i < m.particles.count; ++i) {
                 const V3 p = load(q, i);
                 const double dist = dot(p - center, n);
-                if (dist >= 0.0 || m.particle_inv_mass[i] == 0.0) continue;
+                if (dist >= 0.0 || m.particles.inv_mass[i] == 0.0) continue;
                 const Hit hit{true, p - dist * n, n};
                 respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
                 if (seen != nullptr) seen->add(load(q, i), load(qd, i));
             }
         } else if (kind == 1) {  // container: inside the box is free (contact(), unrolled)
             const V3 ax{rot[0], rot[3], rot[6]}, ay{rot[1], rot[4], rot[7]}, az{rot[2], rot[5], rot[8]};
-            for (index i = 0; i < m.particle_count; ++i) {
+            for (index i = 0; i < m.particles.count; ++i) {
                 const V3 d = load(q, i) - center;
                 if (std::fabs(dot(ax, d)) <= size.x && std::fabs(dot(ay, d)) <= size.y &&
                     std::fabs(dot(az, d)) <= size.z)
                     continue;
-                if (m.particle_inv_mass[i] == 0.0) continue;
+                if (m.particles.inv_mass[i] == 0.0) continue;
                 const Hit hit = contact(kind, center, rot, size, load(q, i), load(q_start, i));
                 if (!hit.hit) continue;
                 respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
                 if (seen != nullptr) seen->add(load(q, i), load(qd, i));
             }
         } else {
-            for (index i = 0; i < m.particle_count; ++i) {
-                if (m.particle_inv_mass[i] == 0.0) continue;
+            for (index i = 0; i < m.particles.count; ++i) {
+                if (m.particles.inv_mass[i] == 0.0) continue;
                 const Hit hit = contact(kind, center, rot, size, load(q, i), load(q_start, i));
                 if (!hit.hit) continue;
                 // the surface's velocity at the contact

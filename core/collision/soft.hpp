@@ -21,15 +21,15 @@ namespace softbody::SOFTBODY_KERNELS::soft {
 inline void body_motion(const Model& m, const double* q, const double* qd,
                         const ContactBuffers& w) {
     const double inf = std::numeric_limits<double>::infinity();
-    for (index b = 0; b < m.body_count; ++b) {
+    for (index b = 0; b < m.bodies.count; ++b) {
         double lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
         double px = 0.0, py = 0.0, pz = 0.0, mass = 0.0;
-        for (index i = m.body_particle_range[2 * b]; i < m.body_particle_range[2 * b + 1]; ++i) {
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1]; ++i) {
             for (int k = 0; k < 3; ++k) {
                 lo[k] = std::min(lo[k], q[3 * i + k]);
                 hi[k] = std::max(hi[k], q[3 * i + k]);
             }
-            const double mi = m.particle_mass[i];
+            const double mi = m.particles.mass[i];
             mass += mi;
             px += mi * qd[3 * i];
             py += mi * qd[3 * i + 1];
@@ -87,15 +87,15 @@ inline V3 respond(V3 v, V3 u, V3 n, double e, double keep) {
 
 /// The bounding-object contacts of the whole model; q, qd (N, 3) change in place.
 inline void contacts_bounding(const Model& m, double* q, double* qd, const ContactBuffers& w) {
-    const index bodies = m.body_count;
+    const index bodies = m.bodies.count;
     body_motion(m, q, qd, w);
     for (index b = 0; b < bodies; ++b) {
-        fit(q, m.body_particle_range[2 * b], m.body_particle_range[2 * b + 1],
-            m.body_contact_shape[b], b, w);
+        fit(q, m.bodies.particle_range[2 * b], m.bodies.particle_range[2 * b + 1],
+            m.bodies.contact_shape[b], b, w);
         store(w.body_dv, b, {0.0, 0.0, 0.0});
     }
-    const double e = m.soft_contact_restitution;
-    const double keep = 1.0 - m.soft_contact_friction;
+    const double e = m.soft_contacts.restitution;
+    const double keep = 1.0 - m.soft_contacts.friction;
     for (index a = 0; a < bodies; ++a)
         for (index b = 0; b < bodies; ++b) {
             if (a == b || w.body_mass[b] == 0.0) continue;
@@ -111,10 +111,10 @@ inline void contacts_bounding(const Model& m, double* q, double* qd, const Conta
             const double iax = 1.0 / (ax * ax), iay = 1.0 / (ay * ay), iaz = 1.0 / (az * az);
             const V3 u = load(w.body_velocity, b);
             const double share = 1.0 / w.body_mass[b];
-            const index shape = m.body_contact_shape[b];
-            for (index i = m.body_particle_range[2 * a]; i < m.body_particle_range[2 * a + 1];
+            const index shape = m.bodies.contact_shape[b];
+            for (index i = m.bodies.particle_range[2 * a]; i < m.bodies.particle_range[2 * a + 1];
                  ++i) {
-                if (m.particle_inv_mass[i] == 0.0) continue;
+                if (m.particles.inv_mass[i] == 0.0) continue;
                 double dx = q[3 * i] - c.x, dy = q[3 * i + 1] - c.y, dz = q[3 * i + 2] - c.z;
                 V3 n{0.0, 0.0, 0.0};
                 if (shape == 1) {
@@ -148,7 +148,7 @@ inline void contacts_bounding(const Model& m, double* q, double* qd, const Conta
                 }
                 const V3 v = load(qd, i);
                 const V3 nv = respond(v, u, n, e, keep);
-                const double mi = m.particle_mass[i] * share;
+                const double mi = m.particles.mass[i] * share;
                 add_to(w.body_dv, b, -(mi * (nv - v)));
                 store(qd, i, nv);
             }
@@ -156,8 +156,8 @@ inline void contacts_bounding(const Model& m, double* q, double* qd, const Conta
     for (index b = 0; b < bodies; ++b) {
         const V3 dv = load(w.body_dv, b);
         if (dv.x == 0.0 && dv.y == 0.0 && dv.z == 0.0) continue;  // nothing hit this body
-        for (index i = m.body_particle_range[2 * b]; i < m.body_particle_range[2 * b + 1]; ++i)
-            if (m.particle_inv_mass[i] > 0.0) add_to(qd, i, dv);
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1]; ++i)
+            if (m.particles.inv_mass[i] > 0.0) add_to(qd, i, dv);
     }
 }
 
@@ -235,7 +235,7 @@ inline void cell_range(double a, double b, double c, double margin, double inv, 
 inline index build_triangle_hash(const Model& m, const double* q, const ContactBuffers& w) {
     const index table = w.hash_table;
     for (index h = 0; h < table; ++h) w.hash_count[h] = 0;
-    const double inv = 1.0 / m.contact_cell_size, margin = m.contact_margin;
+    const double inv = 1.0 / m.soft_contacts.cell_size, margin = m.soft_contacts.margin;
     index total = 0;
     for (int pass = 0; pass < 2; ++pass) {
         if (pass == 1) {
@@ -246,8 +246,8 @@ inline index build_triangle_hash(const Model& m, const double* q, const ContactB
                 w.hash_count[h] = 0;
             }
         }
-        for (index t = 0; t < m.tri_count; ++t) {
-            const index* tri = m.tri_indices + 3 * t;
+        for (index t = 0; t < m.triangles.count; ++t) {
+            const index* tri = m.triangles.indices + 3 * t;
             const V3 a = load(q, tri[0]), b = load(q, tri[1]), c = load(q, tri[2]);
             index x0, x1, y0, y1, z0, z1;
             cell_range(a.x, b.x, c.x, margin, inv, x0, x1);
@@ -273,12 +273,12 @@ inline index build_triangle_hash(const Model& m, const double* q, const ContactB
 /// Whether any two bodies' bounds, grown by the margin, overlap (w.body_lo, body_hi).
 inline bool any_bodies_near(const Model& m, const ContactBuffers& w) {
     bool any = false;
-    for (index a = 0; a < m.body_count; ++a)
-        for (index b = a + 1; b < m.body_count; ++b) {
+    for (index a = 0; a < m.bodies.count; ++a)
+        for (index b = a + 1; b < m.bodies.count; ++b) {
             bool near = true;
             for (int k = 0; k < 3; ++k)
-                if (w.body_hi[3 * a + k] + m.contact_margin < w.body_lo[3 * b + k] ||
-                    w.body_hi[3 * b + k] + m.contact_margin < w.body_lo[3 * a + k])
+                if (w.body_hi[3 * a + k] + m.soft_contacts.margin < w.body_lo[3 * b + k] ||
+                    w.body_hi[3 * b + k] + m.soft_contacts.margin < w.body_lo[3 * a + k])
                     near = false;
             any = any || near;
         }
@@ -289,14 +289,14 @@ inline bool any_bodies_near(const Model& m, const ContactBuffers& w) {
 /// p's hash bucket; -1 if none. Fills `point` with the closest point on it.
 inline index nearest_triangle(const Model& m, const double* q, const ContactBuffers& w, V3 p,
                               index body, double inv, TrianglePoint& point) {
-    const double margin = m.contact_margin;
+    const double margin = m.soft_contacts.margin;
     const index h = cell_hash(cell_of(p.x * inv), cell_of(p.y * inv), cell_of(p.z * inv),
                               w.hash_table);
     double best = margin * margin;
     index best_t = -1;
     for (index e = w.hash_start[h]; e < w.hash_start[h + 1]; ++e) {
         const index t = w.hash_entries[e];
-        const index b = m.tri_body[t];
+        const index b = m.triangles.body[t];
         if (b == body) continue;
         const double* lo = w.body_lo + 3 * b;
         const double* hi = w.body_hi + 3 * b;
@@ -304,7 +304,7 @@ inline index nearest_triangle(const Model& m, const double* q, const ContactBuff
                                 lo[1] - margin <= p.y && p.y <= hi[1] + margin &&
                                 lo[2] - margin <= p.z && p.z <= hi[2] + margin;
         if (!inside_box) continue;
-        const index* tri = m.tri_indices + 3 * t;
+        const index* tri = m.triangles.indices + 3 * t;
         const TrianglePoint c =
             closest_point_on_triangle(p, load(q, tri[0]), load(q, tri[1]), load(q, tri[2]));
         const V3 d = p - c.x;
@@ -325,24 +325,24 @@ inline index contacts_surface(const Model& m, double* q, double* qd, const Conta
     if (!any_bodies_near(m, w)) return 0;
     const index needed = build_triangle_hash(m, q, w);
     if (needed > w.hash_capacity) return needed;
-    const double inv = 1.0 / m.contact_cell_size;
-    const double keep = 1.0 - m.soft_contact_friction;
-    for (index a = 0; a < m.body_count; ++a)
-        for (index i = m.body_particle_range[2 * a]; i < m.body_particle_range[2 * a + 1]; ++i) {
+    const double inv = 1.0 / m.soft_contacts.cell_size;
+    const double keep = 1.0 - m.soft_contacts.friction;
+    for (index a = 0; a < m.bodies.count; ++a)
+        for (index i = m.bodies.particle_range[2 * a]; i < m.bodies.particle_range[2 * a + 1]; ++i) {
             const V3 p = load(q, i);
             TrianglePoint c{{0.0, 0.0, 0.0}, 0.0, 0.0, 0.0};
             const index t = nearest_triangle(m, q, w, p, a, inv, c);
             if (t < 0) continue;
-            const index i0 = m.tri_indices[3 * t], i1 = m.tri_indices[3 * t + 1],
-                        i2 = m.tri_indices[3 * t + 2];
+            const index i0 = m.triangles.indices[3 * t], i1 = m.triangles.indices[3 * t + 1],
+                        i2 = m.triangles.indices[3 * t + 2];
             V3 n = cross(load(q, i1) - load(q, i0), load(q, i2) - load(q, i0));
             const double nn = std::sqrt(dot(n, n));
             if (nn == 0.0) continue;  // a degenerate triangle has no normal
             n = {n.x / nn, n.y / nn, n.z / nn};
             const double depth = dot(p - c.x, n);
             if (depth >= 0.0) continue;  // outside the other body
-            const double w0 = m.particle_inv_mass[i0], w1 = m.particle_inv_mass[i1],
-                         w2 = m.particle_inv_mass[i2], wp = m.particle_inv_mass[i];
+            const double w0 = m.particles.inv_mass[i0], w1 = m.particles.inv_mass[i1],
+                         w2 = m.particles.inv_mass[i2], wp = m.particles.inv_mass[i];
             const double weight = wp + c.wa * c.wa * w0 + c.wb * c.wb * w1 + c.wc * c.wc * w2;
             if (weight == 0.0) continue;  // all pinned
             const index corner[3] = {i0, i1, i2};
@@ -357,7 +357,7 @@ inline index contacts_surface(const Model& m, double* q, double* qd, const Conta
             const double vn = dot(rv, n);
             if (vn >= 0.0) continue;  // separating already
             const V3 tangent = rv - vn * n;
-            const double jn = -(1.0 + m.soft_contact_restitution) * vn / weight;
+            const double jn = -(1.0 + m.soft_contacts.restitution) * vn / weight;
             const double jt = -(1.0 - keep) / weight;
             const V3 j = jn * n + jt * tangent;
             add_to(qd, i, wp * j);

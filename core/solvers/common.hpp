@@ -16,11 +16,11 @@ namespace softbody::SOFTBODY_KERNELS::loop {
 /// times its rest volume.
 inline RunResult check_volumes(const Model& m, const double* volume, double ratio_min,
                                double ratio_max) {
-    for (index b = 0; b < m.body_count; ++b) {
-        if (m.body_closed[b] == 0) continue;  // an open surface encloses no volume
+    for (index b = 0; b < m.bodies.count; ++b) {
+        if (m.bodies.closed[b] == 0) continue;  // an open surface encloses no volume
         const double v = volume[b];
         if (!(std::isfinite(v) && v > 0.0)) return {BAD_VOLUME, 0, b, v};
-        const double r = v / m.body_rest_volume[b];
+        const double r = v / m.bodies.rest_volume[b];
         if (r < ratio_min) return {SHRUNK, 0, b, r};
         if (r > ratio_max) return {EXPLODED, 0, b, r};
     }
@@ -32,7 +32,7 @@ inline RunResult check_volumes(const Model& m, const double* volume, double rati
 inline RunResult first_bad_particle(const Model& m, const double* q, const double* qd,
                                     double max_speed) {
     const double limit = max_speed * max_speed;
-    for (index i = 0; i < m.particle_count; ++i) {
+    for (index i = 0; i < m.particles.count; ++i) {
         double s = 0.0;
         bool bad = false;
         for (int k = 0; k < 3; ++k) {
@@ -61,7 +61,7 @@ inline RunResult check_seen(const Model& m, const double* q, const double* qd, d
 /// could pass the limit does the exact pass run (speed^2 <= 3 max component^2).
 inline RunResult check_particles(const Model& m, const double* q, const double* qd,
                                  double max_speed) {
-    const index count = 3 * m.particle_count;
+    const index count = 3 * m.particles.count;
     vi bad{};
     vd largest{};
     index k = 0;
@@ -92,11 +92,11 @@ inline void copy(const double* from, double* to, index count) {
 /// reach their Control targets at the end of the run.
 inline void begin_run(const Model& m, const Control& c, const RunParams& p, const StateView& s,
                       const ContactBuffers& w) {
-    copy(s.collider_q, w.collider_q_start, 3 * m.collider_count);
+    copy(s.collider_q, w.collider_q_start, 3 * m.colliders.count);
     if (!c.pin_active) return;
     const double inv = 1.0 / (static_cast<double>(p.steps) * p.dt);
-    for (index k = 0; k < m.pin_count; ++k) {
-        const index i = m.pin_particle[k];
+    for (index k = 0; k < m.pins.count; ++k) {
+        const index i = m.pins.particle[k];
         for (int d = 0; d < 3; ++d) s.qd[3 * i + d] = (c.pin_target[3 * k + d] - s.q[3 * i + d]) * inv;
     }
 }
@@ -108,19 +108,19 @@ inline void begin_run(const Model& m, const Control& c, const RunParams& p, cons
 inline index contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
                       const StateView& s, const double* q_start, const ContactBuffers& w,
                       colliders::Seen* seen = nullptr) {
-    if (m.collider_count > 0) {
+    if (m.colliders.count > 0) {
         const double fraction = (static_cast<double>(step) + 1.0) / static_cast<double>(p.steps);
         colliders::poses(m, c, fraction, static_cast<double>(p.steps) * p.dt, t,
                          w.collider_q_start, s.collider_q, s.collider_rot, w.collider_v,
                          w.collider_w);
     }
-    if (m.soft_contact_mode == 1) {
+    if (m.soft_contacts.mode == 1) {
         soft::contacts_bounding(m, s.q, s.qd, w);
-    } else if (m.soft_contact_mode == 2) {
+    } else if (m.soft_contacts.mode == 2) {
         const index needed = soft::contacts_surface(m, s.q, s.qd, w);
         if (needed > 0) return needed;
     }
-    if (m.collider_count > 0)
+    if (m.colliders.count > 0)
         colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
                             s.q, s.qd, s.collider_impulse, seen);
     return 0;
@@ -133,7 +133,7 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
 inline RunResult end_step(const Model& m, const Control& c, const RunParams& p, index step,
                           double t, const StateView& s, const double* q0, const double* v0,
                           const ContactBuffers& w) {
-    const index n3 = 3 * m.particle_count;
+    const index n3 = 3 * m.particles.count;
     const index needed = contacts(m, c, p, step, t + p.dt, s, q0, w);
     RunResult r = needed > 0 ? RunResult{NEED_HASH, step, -1, static_cast<double>(needed)}
                              : check_particles(m, s.q, s.qd, p.max_speed);

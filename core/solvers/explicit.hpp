@@ -46,7 +46,7 @@ struct VolumeSums {
 template <bool kSprings>
 inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas& gas, double* f,
                                index g0, index g1, double* body_six_v) {
-    const index n = m.particle_count;
+    const index n = m.particles.count;
     VolumeSums sums{body_six_v};
     for (index g = g0; g < g1; ++g)
         for (int lane0 = 0; lane0 < kGroup; lane0 += kLanes) {
@@ -55,32 +55,32 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
             index own[kLanes];
             for (int l = 0; l < kLanes; ++l) own[l] = first + l;
             const Rows self = load_rows(rows, own);
-            const Rows ref = load_rows(rows, m.lane_reference + first);
+            const Rows ref = load_rows(rows, m.slots.reference + first);
             const vd rx = self.x - ref.x, ry = self.y - ref.y, rz = self.z - ref.z;
             vd fx, fy, fz, gx{}, gy{}, gz{}, six_v{};
             gravity::lane_force(m, first, fx, fy, fz);  // weight m g
             // the ring: damped edge springs, and the faces between consecutive neighbours
             vd ux0{}, uy0{}, uz0{}, ux{}, uy{}, uz{};
-            for (index s = m.ring_slot_start[g]; s < m.ring_slot_start[g + 1]; ++s) {
+            for (index s = m.slots.ring_start[g]; s < m.slots.ring_start[g + 1]; ++s) {
                 const index e = kGroup * s + lane0;
-                const Rows o = load_rows(rows, m.ring_slot_other + e);
+                const Rows o = load_rows(rows, m.slots.ring_other + e);
                 const vd dx = o.x - self.x, dy = o.y - self.y, dz = o.z - self.z;
                 if constexpr (kSprings)
                     springs::lane_pair(self, o, dx, dy, dz,
-                                       load_lanes(m.ring_slot_rest_length + e),
-                                       load_lanes(m.ring_slot_stiffness + e),
-                                       load_lanes(m.ring_slot_damping + e), fx, fy, fz);
-                if (s == m.ring_slot_start[g]) {
+                                       load_lanes(m.slots.ring_rest_length + e),
+                                       load_lanes(m.slots.ring_stiffness + e),
+                                       load_lanes(m.slots.ring_damping + e), fx, fy, fz);
+                if (s == m.slots.ring_start[g]) {
                     ux0 = dx, uy0 = dy, uz0 = dz;  // the face closing the ring comes last
                 } else {
-                    gas::lane_face(ux, uy, uz, dx, dy, dz, load_lanes(m.ring_slot_face + e), rx,
+                    gas::lane_face(ux, uy, uz, dx, dy, dz, load_lanes(m.slots.ring_face + e), rx,
                                    ry, rz, gx, gy, gz, six_v);
                 }
                 ux = dx, uy = dy, uz = dz;
             }
-            if (m.ring_slot_start[g + 1] > m.ring_slot_start[g])
+            if (m.slots.ring_start[g + 1] > m.slots.ring_start[g])
                 gas::lane_face(ux, uy, uz, ux0, uy0, uz0,
-                               load_lanes(m.ring_slot_face + kGroup * m.ring_slot_start[g] + lane0),
+                               load_lanes(m.slots.ring_face + kGroup * m.slots.ring_start[g] + lane0),
                                rx, ry, rz, gx, gy, gz, six_v);
             if constexpr (kSprings)
                 springs::lane_force(m, rows, g, lane0, self, fx, fy, fz);  // springs off the rings
@@ -89,7 +89,7 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
                 const index i = first + l;
                 store(f, i, {fx[l], fy[l], fz[l]});
                 store(gas.volume_gradient, i, {gx[l], gy[l], gz[l]});
-                sums.add(m.particle_body[i], six_v[l]);
+                sums.add(m.particles.body[i], six_v[l]);
             }
         }
     sums.flush();
@@ -103,7 +103,7 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
 /// the forces by the rounding of x - x_ref and v to float32 (2^-24 of their size).
 inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, const BodyGas& gas,
                                    double* f, index g0, index g1, double* body_six_v) {
-    const index n = m.particle_count;
+    const index n = m.particles.count;
     VolumeSums sums{body_six_v};
     for (index g = g0; g < g1; ++g)
         for (int lane0 = 0; lane0 < kGroup; lane0 += kLanesF) {
@@ -114,14 +114,14 @@ inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, con
             const RowsF self = load_rows_f(lanes.rows_f, own);
             vf fx{}, fy{}, fz{}, gx{}, gy{}, gz{}, six_v{};
             vf ux0{}, uy0{}, uz0{}, ux{}, uy{}, uz{};
-            for (index s = m.ring_slot_start[g]; s < m.ring_slot_start[g + 1]; ++s) {
+            for (index s = m.slots.ring_start[g]; s < m.slots.ring_start[g + 1]; ++s) {
                 const index e = kGroup * s + lane0;
-                const RowsF o = load_rows_f(lanes.rows_f, m.ring_slot_other + e);
+                const RowsF o = load_rows_f(lanes.rows_f, m.slots.ring_other + e);
                 const vf dx = o.x - self.x, dy = o.y - self.y, dz = o.z - self.z;
                 springs::lane_pair(self, o, dx, dy, dz, load_lanes_f(lanes.ring_rest_length_f + e),
                                    load_lanes_f(lanes.ring_stiffness_f + e),
                                    load_lanes_f(lanes.ring_damping_f + e), fx, fy, fz);
-                if (s == m.ring_slot_start[g]) {
+                if (s == m.slots.ring_start[g]) {
                     ux0 = dx, uy0 = dy, uz0 = dz;  // the face closing the ring comes last
                 } else {
                     gas::lane_face(ux, uy, uz, dx, dy, dz, load_lanes_f(lanes.ring_face_f + e),
@@ -129,28 +129,28 @@ inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, con
                 }
                 ux = dx, uy = dy, uz = dz;
             }
-            if (m.ring_slot_start[g + 1] > m.ring_slot_start[g])
+            if (m.slots.ring_start[g + 1] > m.slots.ring_start[g])
                 gas::lane_face(ux, uy, uz, ux0, uy0, uz0,
-                               load_lanes_f(lanes.ring_face_f + kGroup * m.ring_slot_start[g] + lane0),
+                               load_lanes_f(lanes.ring_face_f + kGroup * m.slots.ring_start[g] + lane0),
                                self.x, self.y, self.z, gx, gy, gz, six_v);
             for (int l = 0; l < kLanesF && first + l < n; ++l) {
                 const index i = first + l;
-                const double mass = m.lane_mass[i];
+                const double mass = m.slots.mass[i];
                 f[3 * i] = mass * m.gravity[0] + static_cast<double>(fx[l]);
                 f[3 * i + 1] = mass * m.gravity[1] + static_cast<double>(fy[l]);
                 f[3 * i + 2] = mass * m.gravity[2] + static_cast<double>(fz[l]);
                 store(gas.volume_gradient, i,
                       {static_cast<double>(gx[l]), static_cast<double>(gy[l]),
                        static_cast<double>(gz[l])});
-                sums.add(m.particle_body[i], static_cast<double>(six_v[l]));
+                sums.add(m.particles.body[i], static_cast<double>(six_v[l]));
             }
         }
     sums.flush();
     if (!lanes.extra_slots) return;
     // springs off the rings and faces of broken fans: in float64, added to what is there
     for (index g = g0; g < g1; ++g) {
-        if (m.spring_slot_start[g + 1] == m.spring_slot_start[g] &&
-            m.face_slot_start[g + 1] == m.face_slot_start[g])
+        if (m.slots.spring_start[g + 1] == m.slots.spring_start[g] &&
+            m.slots.face_start[g + 1] == m.slots.face_start[g])
             continue;
         for (int lane0 = 0; lane0 < kGroup; lane0 += kLanes) {
             const index first = kGroup * g + lane0;
@@ -158,7 +158,7 @@ inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, con
             index own[kLanes];
             for (int l = 0; l < kLanes; ++l) own[l] = first + l;
             const Rows self = load_rows(lanes.rows, own);
-            const Rows ref = load_rows(lanes.rows, m.lane_reference + first);
+            const Rows ref = load_rows(lanes.rows, m.slots.reference + first);
             const vd rx = self.x - ref.x, ry = self.y - ref.y, rz = self.z - ref.z;
             vd fx{}, fy{}, fz{}, gx{}, gy{}, gz{}, six_v{};
             springs::lane_force(m, lanes.rows, g, lane0, self, fx, fy, fz);
@@ -167,7 +167,7 @@ inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, con
                 const index i = first + l;
                 add_to(f, i, {fx[l], fy[l], fz[l]});
                 add_to(gas.volume_gradient, i, {gx[l], gy[l], gz[l]});
-                sums.add(m.particle_body[i], six_v[l]);
+                sums.add(m.particles.body[i], six_v[l]);
             }
         }
     }
@@ -175,11 +175,11 @@ inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, con
 }
 
 /// The float rows of particles [i0, i1): x - x_ref (x_ref the position of the particle's
-/// lane_reference, its body's first particle) and v, rounded to float32.
+/// slots.reference, its body's first particle) and v, rounded to float32.
 inline void pack_rows_f32(const Model& m, const double* q, const double* qd, float* rows,
                           index i0, index i1) {
     for (index i = i0; i < i1; ++i) {
-        const index r = m.lane_reference[i];
+        const index r = m.slots.reference[i];
         for (int k = 0; k < 3; ++k) {
             rows[kRow * i + k] = static_cast<float>(q[3 * i + k] - q[3 * r + k]);
             rows[kRow * i + 3 + k] = static_cast<float>(qd[3 * i + k]);
@@ -215,10 +215,10 @@ template <bool kSprings = true>
 inline void vertex_pass(const Model& m, const double* q, const double* qd, const BodyGas& gas,
                         const LaneBuffers& lanes, double* f) {
     const int chunks = lanes.parallel != nullptr ? lanes.parallel->chunks : 1;
-    const index bodies = m.body_count, groups = m.group_count;
+    const index bodies = m.bodies.count, groups = m.slots.group_count;
     const bool f32 = kSprings && lanes.rows_f != nullptr;  // the float32 force pass
     if (chunks <= 1) {
-        pack(m, q, qd, lanes, 0, m.particle_count);
+        pack(m, q, qd, lanes, 0, m.particles.count);
         for (index b = 0; b < bodies; ++b) gas.volume[b] = 0.0;
         if (f32)
             vertex_pass_groups_f32(m, lanes, gas, f, 0, groups, gas.volume);
@@ -236,17 +236,17 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
         lanes.parallel->run(*lanes.parallel, [](void* context, int c) {
             const Work& w = *static_cast<const Work*>(context);
             // chunk c's groups: a fixed share of them, whatever the timing
-            const index g0 = w.m->group_count * c / w.chunks;
-            const index g1 = w.m->group_count * (c + 1) / w.chunks;
-            pack(*w.m, w.q, w.qd, *w.lanes, std::min(kGroup * g0, w.m->particle_count),
-                 std::min(kGroup * g1, w.m->particle_count));
+            const index g0 = w.m->slots.group_count * c / w.chunks;
+            const index g1 = w.m->slots.group_count * (c + 1) / w.chunks;
+            pack(*w.m, w.q, w.qd, *w.lanes, std::min(kGroup * g0, w.m->particles.count),
+                 std::min(kGroup * g1, w.m->particles.count));
         }, &work);
         lanes.parallel->run(*lanes.parallel, [](void* context, int c) {
             const Work& w = *static_cast<const Work*>(context);
-            double* six_v = w.lanes->chunk_volume + c * w.m->body_count;
-            for (index b = 0; b < w.m->body_count; ++b) six_v[b] = 0.0;
-            const index g0 = w.m->group_count * c / w.chunks;
-            const index g1 = w.m->group_count * (c + 1) / w.chunks;
+            double* six_v = w.lanes->chunk_volume + c * w.m->bodies.count;
+            for (index b = 0; b < w.m->bodies.count; ++b) six_v[b] = 0.0;
+            const index g0 = w.m->slots.group_count * c / w.chunks;
+            const index g1 = w.m->slots.group_count * (c + 1) / w.chunks;
             if (kSprings && w.lanes->rows_f != nullptr)
                 vertex_pass_groups_f32(*w.m, *w.lanes, *w.gas, w.f, g0, g1, six_v);
             else
@@ -303,8 +303,8 @@ inline void eval_forces(const Model& m, const Control& c, double t, const double
 /// q_out = q0 + h slope_q; v_out = v0 + h f / m (safe when slope_q is v_out).
 inline void stage(const Model& m, const double* q0, const double* v0, double h,
                   const double* slope_q, const double* f, double* q_out, double* v_out) {
-    for (index i = 0; i < m.particle_count; ++i) {
-        const double w = h * m.particle_inv_mass[i];
+    for (index i = 0; i < m.particles.count; ++i) {
+        const double w = h * m.particles.inv_mass[i];
         for (int k = 0; k < 3; ++k) {
             const index r = 3 * i + k;
             const double sq = slope_q[r];
@@ -316,8 +316,8 @@ inline void stage(const Model& m, const double* q0, const double* v0, double h,
 
 inline void accumulate(const Model& m, double weight, const double* vs, const double* f,
                        double* acc_q, double* acc_v) {
-    for (index i = 0; i < m.particle_count; ++i) {
-        const double wm = weight * m.particle_inv_mass[i];
+    for (index i = 0; i < m.particles.count; ++i) {
+        const double wm = weight * m.particles.inv_mass[i];
         for (int k = 0; k < 3; ++k) {
             acc_q[3 * i + k] += weight * vs[3 * i + k];
             acc_v[3 * i + k] += wm * f[3 * i + k];
@@ -328,7 +328,7 @@ inline void accumulate(const Model& m, double weight, const double* vs, const do
 /// One step of `scheme` from (w.q0, w.v0) with the start forces in w.f, into q, qd.
 inline void step(const Model& m, const Control& c, int scheme, double t, double dt, double* q,
                  double* qd, const ExplicitBuffers& w) {
-    const index n = m.particle_count;
+    const index n = m.particles.count;
     if (scheme == 0) {  // explicit Euler (first order)
         stage(m, w.q0, w.v0, dt, w.v0, w.f, q, qd);
     } else if (scheme == 1) {  // midpoint: slopes at the half step (second order)
@@ -354,7 +354,7 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
         }
     } else if (scheme == 3) {  // symplectic Euler: v += dt a(q, v), then q += dt v_new
         for (index i = 0; i < n; ++i) {
-            const double h = dt * m.particle_inv_mass[i];
+            const double h = dt * m.particles.inv_mass[i];
             for (int k = 0; k < 3; ++k) {
                 const index r = 3 * i + k;
                 const double v = w.v0[r] + h * w.f[r];
@@ -364,7 +364,7 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
         }
     } else {  // velocity Verlet: half kick, drift, forces at the new positions, half kick
         for (index i = 0; i < n; ++i) {
-            const double h = 0.5 * dt * m.particle_inv_mass[i];
+            const double h = 0.5 * dt * m.particles.inv_mass[i];
             for (int k = 0; k < 3; ++k) {
                 const index r = 3 * i + k;
                 const double v = w.v0[r] + h * w.f[r];
@@ -374,7 +374,7 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
         }
         eval_forces(m, c, t + dt, q, w.vs, w.gas, w.lanes, w.f);
         for (index i = 0; i < n; ++i) {
-            const double h = 0.5 * dt * m.particle_inv_mass[i];
+            const double h = 0.5 * dt * m.particles.inv_mass[i];
             for (int k = 0; k < 3; ++k) qd[3 * i + k] = w.vs[3 * i + k] + h * w.f[3 * i + k];
         }
     }
@@ -385,12 +385,12 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
 /// the grab spring and drag would change the order of the sums), and bodies whose particle
 /// ranges follow one another.
 inline bool fused_symplectic(const Model& m, const Control& c, int scheme) {
-    if (scheme != 3 || m.attachment_count > 0 || m.drag_active || c.grab_particle >= 0)
+    if (scheme != 3 || m.attachments.count > 0 || m.drag.active || c.grab_particle >= 0)
         return false;
     index end = 0;
-    for (index b = 0; b < m.body_count; ++b) {
-        if (m.body_particle_range[2 * b] < end) return false;
-        end = m.body_particle_range[2 * b + 1];
+    for (index b = 0; b < m.bodies.count; ++b) {
+        if (m.bodies.particle_range[2 * b] < end) return false;
+        end = m.bodies.particle_range[2 * b + 1];
     }
     return true;
 }
@@ -441,13 +441,13 @@ inline void symplectic_pass(const Model& m, const Control& c, double dt, const d
         }
     };
     index at = 0;  // particles between bodies feel no pressure
-    for (index b = 0; b < m.body_count; ++b) {
-        const index p0 = m.body_particle_range[2 * b], p1 = m.body_particle_range[2 * b + 1];
+    for (index b = 0; b < m.bodies.count; ++b) {
+        const index p0 = m.bodies.particle_range[2 * b], p1 = m.bodies.particle_range[2 * b + 1];
         run(3 * at, 3 * p0, false, 0.0);
-        run(3 * p0, 3 * p1, true, gas.pressure[b] - m.body_ambient_pressure[b]);
+        run(3 * p0, 3 * p1, true, gas.pressure[b] - m.gases.ambient_pressure[b]);
         at = p1;
     }
-    run(3 * at, 3 * m.particle_count, false, 0.0);
+    run(3 * at, 3 * m.particles.count, false, 0.0);
     seen.bad |= bad_tail;
     seen.most = std::max(seen.most, most_tail);
     for (int l = 0; l < kLanes; ++l) {
@@ -463,10 +463,10 @@ inline void symplectic_pass(const Model& m, const Control& c, double dt, const d
 /// them. The same arithmetic as step() and end_step(): the same results.
 inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, const RunParams& p,
                                            const StateView& s, const ExplicitBuffers& w) {
-    const index n = m.particle_count;
+    const index n = m.particles.count;
     double* h3 = w.acc_q;  // dt / m per component (RK4's sums are free)
     for (index i = 0; i < n; ++i) {
-        const double h = p.dt * m.particle_inv_mass[i];
+        const double h = p.dt * m.particles.inv_mass[i];
         for (int k = 0; k < 3; ++k) h3[3 * i + k] = h;
     }
     for (index step_index = 0; step_index < p.steps; ++step_index) {
@@ -482,7 +482,7 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
         const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact, &seen);
         if (needed > 0)
             r = {NEED_HASH, step_index, -1, static_cast<double>(needed)};
-        else if (m.soft_contact_mode != 0)  // soft contacts moved particles unseen
+        else if (m.soft_contacts.mode != 0)  // soft contacts moved particles unseen
             r = loop::check_particles(m, s.q, s.qd, p.max_speed);
         else
             r = loop::check_seen(m, s.q, s.qd, p.max_speed, seen.bad, seen.most);
@@ -501,7 +501,7 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
 /// NEED_HASH (value: the entries needed) also leaves the state at the failing step's start.
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const ExplicitBuffers& w) {
-    const index n3 = 3 * m.particle_count;
+    const index n3 = 3 * m.particles.count;
     loop::begin_run(m, c, p, s, w.contact);
     if (fused_symplectic(m, c, p.scheme)) return simulate_symplectic_fused(m, c, p, s, w);
     for (index step_index = 0; step_index < p.steps; ++step_index) {

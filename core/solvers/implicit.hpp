@@ -28,8 +28,8 @@ namespace softbody::SOFTBODY_KERNELS::implicit_solver {
 inline void apply_at_start(const Model& m, const Control& c, const ImplicitBuffers& w,
                            double alpha_m, double alpha_c, double alpha_k, const double* p,
                            double* out) {
-    for (index i = 0; i < m.particle_count; ++i) {
-        const double wm = alpha_m * m.particle_mass[i];
+    for (index i = 0; i < m.particles.count; ++i) {
+        const double wm = alpha_m * m.particles.mass[i];
         for (int k = 0; k < 3; ++k) out[3 * i + k] = wm * p[3 * i + k];
     }
     springs::jacobian_product(m, w.spring_u, w.spring_a, w.spring_b, alpha_c, alpha_k, p, out);
@@ -42,8 +42,8 @@ inline void apply_at_start(const Model& m, const Control& c, const ImplicitBuffe
 /// sum over free particles of a_i . b_i (pinned rows are not unknowns).
 inline double dot_free(const Model& m, const double* a, const double* b) {
     double s = 0.0;
-    for (index i = 0; i < m.particle_count; ++i)
-        if (m.particle_inv_mass[i] > 0.0) s += dot(load(a, i), load(b, i));
+    for (index i = 0; i < m.particles.count; ++i)
+        if (m.particles.inv_mass[i] > 0.0) s += dot(load(a, i), load(b, i));
     return s;
 }
 
@@ -71,7 +71,7 @@ inline void prepare_blocks(const Model& m, const Control& c, double h, const Imp
                              mg.vertex_spring, mg.entry_coef, mg.block);
     attachments::add_smoother_blocks(m, c, h, w.q0, mg.block);
     external::add_grab_block(c, h, mg.block);
-    for (index i = 0; i < m.particle_count; ++i) invert_3x3(mg.block + 9 * i, mg.block_inv + 9 * i);
+    for (index i = 0; i < m.particles.count; ++i) invert_3x3(mg.block + 9 * i, mg.block_inv + 9 * i);
 }
 
 /// Sum over entries first..last-1 of their spring block (alpha u u^T + beta I) times x_j.
@@ -112,8 +112,8 @@ inline void solve_row(const MultigridView& mg, index i, V3 s, const double* b) {
 /// backward up) around the Laplacian hierarchy's correction; otherwise Jacobi with diag.
 inline void precondition(const Model& m, const MultigridView* hierarchy, const double* diag,
                          const double* r, double* z) {
-    const index n = m.particle_count;
-    const double* inv_mass = m.particle_inv_mass;
+    const index n = m.particles.count;
+    const double* inv_mass = m.particles.inv_mass;
     if (hierarchy == nullptr) {
         for (index i = 0; i < n; ++i)
             for (int k = 0; k < 3; ++k) z[3 * i + k] = r[3 * i + k] / diag[i];
@@ -170,11 +170,11 @@ inline void prepare(const Model& m, const Control& c, double h, const ImplicitBu
 
 /// Jacobi's diagonal: mass + h (damping) + h^2 (axial stiffness) of each particle's springs.
 inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) {
-    for (index i = 0; i < m.particle_count; ++i) w.cg_diag[i] = m.particle_mass[i];
-    for (index s = 0; s < m.spring_count; ++s) {
-        const double d = h * m.spring_damping[s] + h * h * w.spring_a[s];
-        w.cg_diag[m.spring_indices[2 * s]] += d;
-        w.cg_diag[m.spring_indices[2 * s + 1]] += d;
+    for (index i = 0; i < m.particles.count; ++i) w.cg_diag[i] = m.particles.mass[i];
+    for (index s = 0; s < m.springs.count; ++s) {
+        const double d = h * m.springs.damping[s] + h * h * w.spring_a[s];
+        w.cg_diag[m.springs.indices[2 * s]] += d;
+        w.cg_diag[m.springs.indices[2 * s + 1]] += d;
     }
 }
 
@@ -185,8 +185,8 @@ inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) 
 inline index step(const Model& m, const Control& c, double dt, double* q, double* qd,
                   const ImplicitBuffers& w, const MultigridView* mg, double tolerance,
                   index max_iterations, bool bdf2) {
-    const index n = m.particle_count;
-    const double* inv_mass = m.particle_inv_mass;
+    const index n = m.particles.count;
+    const double* inv_mass = m.particles.inv_mass;
     const double h = bdf2 ? dt * (2.0 / 3.0) : dt;
     for (index k = 0; k < 3 * n; ++k)  // y, the position change before dv
         w.qs[k] = bdf2 ? (w.q0[k] - w.q_prev[k]) / 3.0 + h * w.v0[k] : h * w.v0[k];
@@ -200,7 +200,7 @@ inline index step(const Model& m, const Control& c, double dt, double* q, double
             double b = 0.0;
             if (inv_mass[i] > 0.0) {
                 b = h * (w.f[r] + w.ky[r]);
-                if (bdf2) b += m.particle_mass[i] * (w.v0[r] - w.v_prev[r]) / 3.0;
+                if (bdf2) b += m.particles.mass[i] * (w.v0[r] - w.v_prev[r]) / 3.0;
             }
             w.cg_r[r] = b;
             rhs_norm += b * b;
@@ -287,7 +287,7 @@ inline bool contacts_acted(index n3, const double* q, const double* qd, const do
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const ImplicitParams& ip, const StateView& s, const ImplicitBuffers& w,
                           const MultigridView* mg) {
-    const index n3 = 3 * m.particle_count;
+    const index n3 = 3 * m.particles.count;
     loop::begin_run(m, c, p, s, w.contact);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;

@@ -137,9 +137,9 @@ inline void right_hand_side(const Model& m, const Control& c, double h, const do
                             const double* x0, const double* y, const double* f, double* rhs) {
     const double inv_h = 1.0 / h;
     const double inv_h2 = inv_h * inv_h;
-    for (index i = 0; i < m.particle_count; ++i) {
-        if (m.particle_inv_mass[i] > 0.0)
-            store(rhs, i, m.particle_mass[i] * inv_h2 * load(y, i) + load(f, i));
+    for (index i = 0; i < m.particles.count; ++i) {
+        if (m.particles.inv_mass[i] > 0.0)
+            store(rhs, i, m.particles.mass[i] * inv_h2 * load(y, i) + load(f, i));
         else
             store(rhs, i, load(y, i));
     }
@@ -153,7 +153,7 @@ inline void right_hand_side(const Model& m, const Control& c, double h, const do
 /// taken at t + dt, the end of the step.
 inline void step(const Model& m, const Control& c, double t, double dt, index iterations,
                  const Factor& a, double* q, double* qd, const ProjectiveBuffers& w) {
-    const index n = m.particle_count;
+    const index n = m.particles.count;
     for (index i = 0; i < n; ++i) {
         const V3 y = load(w.q0, i) + dt * load(w.v0, i);
         store(w.y, i, y);
@@ -167,7 +167,7 @@ inline void step(const Model& m, const Control& c, double t, double dt, index it
         solve(a, w.rhs, w.x, q);
     }
     for (index i = 0; i < n; ++i) {
-        if (m.particle_inv_mass[i] > 0.0) {
+        if (m.particles.inv_mass[i] > 0.0) {
             store(qd, i, inv_dt * (load(q, i) - load(w.q0, i)));
         } else {
             store(q, i, load(w.y, i));
@@ -180,7 +180,7 @@ inline void step(const Model& m, const Control& c, double t, double dt, index it
 /// checks, contacts and restores are the explicit loop's (solvers/explicit.hpp).
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
-    const index n3 = 3 * m.particle_count;
+    const index n3 = 3 * m.particles.count;
     BodyGas volumes_only = w.gas;  // the checks need the volumes, not dV/dx (half the time)
     volumes_only.volume_gradient = nullptr;
     loop::begin_run(m, c, p, s, w.contact);

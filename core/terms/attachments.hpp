@@ -18,15 +18,15 @@ namespace softbody::SOFTBODY_KERNELS::attachments {
 /// Accumulate the attachment forces into f (N, 3) [N].
 inline void force(const Model& m, const Control& c, const double* q, const double* qd,
                   double* f) {
-    for (index a = 0; a < m.attachment_count; ++a) {
-        const index i = m.attachment_particle[a];
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const index i = m.attachments.particle[a];
         const V3 d = load(c.attachment_anchor, a) - load(q, i);
         const double length = std::sqrt(dot(d, d));
         if (length == 0.0) continue;
         const V3 u = (1.0 / length) * d;
         const double rel = -dot(load(qd, i), u);
-        const double mag = m.attachment_stiffness[a] * (length - m.attachment_rest_length[a]) +
-                           m.attachment_damping[a] * rel;
+        const double mag = m.attachments.stiffness[a] * (length - m.attachments.rest_length[a]) +
+                           m.attachments.damping[a] * rel;
         add_to(f, i, mag * u);
     }
 }
@@ -39,13 +39,13 @@ inline void force(const Model& m, const Control& c, const double* q, const doubl
 inline void project(const Model& m, const Control& c, double h, const double* x,
                     const double* x0, double* rhs) {
     const double inv_h = 1.0 / h;
-    for (index a = 0; a < m.attachment_count; ++a) {
-        const index i = m.attachment_particle[a];
-        if (m.particle_inv_mass[i] == 0.0) continue;
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const index i = m.attachments.particle[a];
+        if (m.particles.inv_mass[i] == 0.0) continue;
         const V3 anchor = load(c.attachment_anchor, a);
-        const double k = m.attachment_stiffness[a], c_h = m.attachment_damping[a] * inv_h;
+        const double k = m.attachments.stiffness[a], c_h = m.attachments.damping[a] * inv_h;
         const V3 t = springs::projection(load(x, i) - anchor, load(x0, i) - anchor,
-                                         m.attachment_rest_length[a], k, c_h);
+                                         m.attachments.rest_length[a], k, c_h);
         add_to(rhs, i, (k + c_h) * anchor + t);
     }
 }
@@ -54,19 +54,19 @@ inline void project(const Model& m, const Control& c, double h, const double* x,
 /// k_iso = k max(0, 1 - L0/L), and -c (u.p) u for the damping.
 inline void jacobian_product(const Model& m, const Control& c, const double* q, double alpha_c,
                              double alpha_k, const double* p, double* out) {
-    for (index a = 0; a < m.attachment_count; ++a) {
-        const index i = m.attachment_particle[a];
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const index i = m.attachments.particle[a];
         const V3 d = load(c.attachment_anchor, a) - load(q, i);
         const double length = std::sqrt(dot(d, d));
-        const double k = m.attachment_stiffness[a];
+        const double k = m.attachments.stiffness[a];
         double iso = k, ud = 0.0;
         V3 u{0.0, 0.0, 0.0};
         if (length != 0.0) {
             u = (1.0 / length) * d;
-            iso = k * std::max(0.0, 1.0 - m.attachment_rest_length[a] / length);
+            iso = k * std::max(0.0, 1.0 - m.attachments.rest_length[a] / length);
             ud = dot(u, load(p, i));
         }
-        const double axial = alpha_k * (k - iso) * ud + alpha_c * m.attachment_damping[a] * ud;
+        const double axial = alpha_k * (k - iso) * ud + alpha_c * m.attachments.damping[a] * ud;
         const V3 pi = load(p, i);
         out[3 * i] -= alpha_k * iso * pi.x + axial * u.x;
         out[3 * i + 1] -= alpha_k * iso * pi.y + axial * u.y;
@@ -78,15 +78,15 @@ inline void jacobian_product(const Model& m, const Control& c, const double* q, 
 /// h [s]: per attachment h^2 (k_iso I + (k - k_iso) u u^T) + h c u u^T, added to its particle's.
 inline void add_smoother_blocks(const Model& m, const Control& c, double h, const double* q,
                                 double* block) {
-    for (index a = 0; a < m.attachment_count; ++a) {
-        const index i = m.attachment_particle[a];
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const index i = m.attachments.particle[a];
         const V3 dv = load(c.attachment_anchor, a) - load(q, i);
         const double d[3] = {dv.x, dv.y, dv.z};
         const double length = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-        const double k = m.attachment_stiffness[a];
+        const double k = m.attachments.stiffness[a];
         const double iso =
-            length == 0.0 ? k : k * std::max(0.0, 1.0 - m.attachment_rest_length[a] / length);
-        const double alpha = h * m.attachment_damping[a] + h * h * (k - iso);
+            length == 0.0 ? k : k * std::max(0.0, 1.0 - m.attachments.rest_length[a] / length);
+        const double alpha = h * m.attachments.damping[a] + h * h * (k - iso);
         double* b = block + 9 * i;
         for (int r = 0; r < 3; ++r) {
             for (int col = 0; col < 3; ++col)
@@ -101,13 +101,13 @@ inline void add_smoother_blocks(const Model& m, const Control& c, double h, cons
 /// counts in the total only); returns the total [J].
 inline double energies(const Model& m, const Control& c, const double* q, double* body_energy) {
     double total = 0.0;
-    for (index a = 0; a < m.attachment_count; ++a) {
-        const index i = m.attachment_particle[a];
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const index i = m.attachments.particle[a];
         const V3 d = load(c.attachment_anchor, a) - load(q, i);
-        const double stretch = std::sqrt(dot(d, d)) - m.attachment_rest_length[a];
-        const double e = 0.5 * m.attachment_stiffness[a] * stretch * stretch;
+        const double stretch = std::sqrt(dot(d, d)) - m.attachments.rest_length[a];
+        const double e = 0.5 * m.attachments.stiffness[a] * stretch * stretch;
         total += e;
-        if (m.particle_body[i] >= 0) body_energy[m.particle_body[i]] += e;
+        if (m.particles.body[i] >= 0) body_energy[m.particles.body[i]] += e;
     }
     return total;
 }
@@ -117,15 +117,15 @@ inline double energies(const Model& m, const Control& c, const double* q, double
 /// An attachment is a spring whose other end does not move.
 inline void bound_weights(const Model& m, const Control& c, const double* q, double* w) {
     using namespace springs;
-    for (index a = 0; a < m.attachment_count; ++a) {
-        const V3 d = load(c.attachment_anchor, a) - load(q, m.attachment_particle[a]);
-        const double k = m.attachment_stiffness[a];
-        const double stretch = stretch_factor(std::sqrt(dot(d, d)), m.attachment_rest_length[a]);
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const V3 d = load(c.attachment_anchor, a) - load(q, m.attachments.particle[a]);
+        const double k = m.attachments.stiffness[a];
+        const double stretch = stretch_factor(std::sqrt(dot(d, d)), m.attachments.rest_length[a]);
         double* wa = w + kBoundParts * a;
         wa[kDamped] = k;
         wa[kTransverse] = k * stretch;
         wa[kWhole] = k * std::max(1.0, stretch);
-        wa[kDamping] = m.attachment_damping[a];
+        wa[kDamping] = m.attachments.damping[a];
     }
 }
 
@@ -133,8 +133,8 @@ inline void bound_weights(const Model& m, const Control& c, const double* q, dou
 /// added into root_sum (N, kBoundParts) at the tied particle.
 inline void add_root_sums(const Model& m, const double* w, double* root_sum) {
     using springs::kBoundParts;
-    for (index a = 0; a < m.attachment_count; ++a) {
-        double* ri = root_sum + kBoundParts * m.attachment_particle[a];
+    for (index a = 0; a < m.attachments.count; ++a) {
+        double* ri = root_sum + kBoundParts * m.attachments.particle[a];
         for (int part = 0; part < kBoundParts; ++part)
             ri[part] += std::sqrt(w[kBoundParts * a + part]);
     }
@@ -144,11 +144,11 @@ inline void add_root_sums(const Model& m, const double* w, double* root_sum) {
 /// (damping part: [1/s]), into bound (kBoundParts,) where larger.
 inline void row_bounds(const Model& m, const double* w, const double* root_sum, double* bound) {
     using springs::kBoundParts;
-    for (index a = 0; a < m.attachment_count; ++a) {
-        const index i = m.attachment_particle[a];
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const index i = m.attachments.particle[a];
         for (int part = 0; part < kBoundParts; ++part) {
             const double row = std::sqrt(w[kBoundParts * a + part]) *
-                               root_sum[kBoundParts * i + part] * m.particle_inv_mass[i];
+                               root_sum[kBoundParts * i + part] * m.particles.inv_mass[i];
             bound[part] = std::max(bound[part], row);
         }
     }
@@ -157,8 +157,8 @@ inline void row_bounds(const Model& m, const double* w, const double* root_sum, 
 /// c / k [s] of the attachments with k > 0 folded into [lo, hi]; pure_damper set by one
 /// with c > 0 and k = 0.
 inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_damper) {
-    for (index a = 0; a < m.attachment_count; ++a) {
-        const double k = m.attachment_stiffness[a], c = m.attachment_damping[a];
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const double k = m.attachments.stiffness[a], c = m.attachments.damping[a];
         if (k > 0.0) {
             lo = std::min(lo, c / k);
             hi = std::max(hi, c / k);

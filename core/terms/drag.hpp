@@ -41,8 +41,8 @@ namespace softbody::SOFTBODY_KERNELS::drag {
 /// A degenerate face (zero area) has no normal and feels nothing.
 inline V3 face_force(const Model& m, index t, const double* q, const double* qd, V3 wind,
                      double half_rho_cd) {
-    const index i = m.tri_indices[3 * t], j = m.tri_indices[3 * t + 1],
-                k = m.tri_indices[3 * t + 2];
+    const index i = m.triangles.indices[3 * t], j = m.triangles.indices[3 * t + 1],
+                k = m.triangles.indices[3 * t + 2];
     const V3 xi = load(q, i);
     const V3 a = 0.5 * cross(load(q, j) - xi, load(q, k) - xi);  // A_t n_t [m^2]
     const double a2 = dot(a, a);
@@ -53,19 +53,19 @@ inline V3 face_force(const Model& m, index t, const double* q, const double* qd,
 }
 
 /// f (N, 3) [N] += each face's drag, a third on each corner, for bodies with C_d > 0.
-/// Nothing at all when the model has no drag (Model::drag_active false).
+/// Nothing at all when the model has no drag (Drag::active false).
 inline void force(const Model& m, const Control& c, const double* q, const double* qd,
                   double* f) {
-    if (!m.drag_active) return;
+    if (!m.drag.active) return;
     const V3 wind{c.wind[0], c.wind[1], c.wind[2]};
-    for (index b = 0; b < m.body_count; ++b) {
-        const double cd = m.body_drag_coefficient[b];
+    for (index b = 0; b < m.bodies.count; ++b) {
+        const double cd = m.drag.coefficient[b];
         if (cd == 0.0) continue;
-        const double half_rho_cd = 0.5 * m.air_density * cd;
-        for (index t = m.body_tri_range[2 * b]; t < m.body_tri_range[2 * b + 1]; ++t) {
+        const double half_rho_cd = 0.5 * m.drag.air_density * cd;
+        for (index t = m.bodies.tri_range[2 * b]; t < m.bodies.tri_range[2 * b + 1]; ++t) {
             const V3 share = (1.0 / 3.0) * face_force(m, t, q, qd, wind, half_rho_cd);
             for (int corner = 0; corner < 3; ++corner)
-                add_to(f, m.tri_indices[3 * t + corner], share);
+                add_to(f, m.triangles.indices[3 * t + corner], share);
         }
     }
 }
@@ -73,16 +73,16 @@ inline void force(const Model& m, const Control& c, const double* q, const doubl
 /// The power [W] drag delivers to the particles, sum_t F_t . v_t (<= 0 in still air): for
 /// diagnostics, since drag has no energy to track.
 inline double power(const Model& m, const Control& c, const double* q, const double* qd) {
-    if (!m.drag_active) return 0.0;
+    if (!m.drag.active) return 0.0;
     const V3 wind{c.wind[0], c.wind[1], c.wind[2]};
     double total = 0.0;
-    for (index b = 0; b < m.body_count; ++b) {
-        const double cd = m.body_drag_coefficient[b];
+    for (index b = 0; b < m.bodies.count; ++b) {
+        const double cd = m.drag.coefficient[b];
         if (cd == 0.0) continue;
-        const double half_rho_cd = 0.5 * m.air_density * cd;
-        for (index t = m.body_tri_range[2 * b]; t < m.body_tri_range[2 * b + 1]; ++t) {
-            const index i = m.tri_indices[3 * t], j = m.tri_indices[3 * t + 1],
-                        k = m.tri_indices[3 * t + 2];
+        const double half_rho_cd = 0.5 * m.drag.air_density * cd;
+        for (index t = m.bodies.tri_range[2 * b]; t < m.bodies.tri_range[2 * b + 1]; ++t) {
+            const index i = m.triangles.indices[3 * t], j = m.triangles.indices[3 * t + 1],
+                        k = m.triangles.indices[3 * t + 2];
             const V3 v = (1.0 / 3.0) * (load(qd, i) + load(qd, j) + load(qd, k));
             total += dot(face_force(m, t, q, qd, wind, half_rho_cd), v);
         }

@@ -14,7 +14,7 @@ namespace softbody::SOFTBODY_KERNELS::external {
 
 /// f += Control.particle_f (N, 3) [N].
 inline void force(const Model& m, const Control& c, double* f) {
-    const index n = 3 * m.particle_count;
+    const index n = 3 * m.particles.count;
     for (index k = 0; k < n; ++k) f[k] += c.particle_f[k];
 }
 

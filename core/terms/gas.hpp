@@ -28,10 +28,10 @@ namespace softbody::SOFTBODY_KERNELS::gas {
 /// else the body's piecewise-linear schedule, else its value.
 inline double value_at(const Model& m, const Control& c, index b, double t) {
     if (std::isfinite(c.gas_override[b])) return c.gas_override[b];
-    const index begin = m.body_schedule_range[2 * b], end = m.body_schedule_range[2 * b + 1];
-    if (end == begin) return m.body_gas_value[b];
-    const double* time = m.schedule_time;
-    const double* value = m.schedule_value;
+    const index begin = m.gases.schedule_range[2 * b], end = m.gases.schedule_range[2 * b + 1];
+    if (end == begin) return m.gases.value[b];
+    const double* time = m.gases.schedule_time;
+    const double* value = m.gases.schedule_value;
     if (t <= time[begin]) return value[begin];
     for (index s = begin + 1; s < end; ++s)
         if (t < time[s]) {
@@ -51,9 +51,9 @@ inline double pressure(index law, double value, double gamma, double reference_v
 
 /// The pressure of every body at time t from the volumes in gas.
 inline void pressures(const Model& m, const Control& c, double t, const BodyGas& gas) {
-    for (index b = 0; b < m.body_count; ++b)
-        gas.pressure[b] = pressure(m.body_gas_law[b], value_at(m, c, b, t), m.body_gas_gamma[b],
-                                   m.body_gas_reference_volume[b], gas.volume[b]);
+    for (index b = 0; b < m.bodies.count; ++b)
+        gas.pressure[b] = pressure(m.gases.law[b], value_at(m, c, b, t), m.gases.gamma[b],
+                                   m.gases.reference_volume[b], gas.volume[b]);
 }
 
 /// Volumes (with gas.volume_gradient set, their gradients too) and the pressures of every
@@ -66,9 +66,9 @@ inline void evaluate(const Model& m, const Control& c, double t, const double* q
 
 /// f_i += (P_b - P_ambient,b) dV/dx_i for the particles of every body.
 inline void force(const Model& m, const BodyGas& gas, double* f) {
-    for (index b = 0; b < m.body_count; ++b) {
-        const double p = gas.pressure[b] - m.body_ambient_pressure[b];
-        for (index k = 3 * m.body_particle_range[2 * b]; k < 3 * m.body_particle_range[2 * b + 1];
+    for (index b = 0; b < m.bodies.count; ++b) {
+        const double p = gas.pressure[b] - m.gases.ambient_pressure[b];
+        for (index k = 3 * m.bodies.particle_range[2 * b]; k < 3 * m.bodies.particle_range[2 * b + 1];
              ++k)
             f[k] += p * gas.volume_gradient[k];
     }
@@ -96,10 +96,10 @@ inline void lane_face(V ux, V uy, V uz, V wx, V wy, V wz, V weight, V rx, V ry, 
 /// group g from lane0; r = x_i - reference per lane.
 inline void lane_faces(const Model& m, const double* rows, index g, int lane0, const Rows& self,
                        vd rx, vd ry, vd rz, vd& gx, vd& gy, vd& gz, vd& six_v) {
-    for (index s = m.face_slot_start[g]; s < m.face_slot_start[g + 1]; ++s) {
+    for (index s = m.slots.face_start[g]; s < m.slots.face_start[g + 1]; ++s) {
         const index e = kGroup * s + lane0;
-        const Rows b = load_rows(rows, m.face_slot_next + e);
-        const Rows c = load_rows(rows, m.face_slot_last + e);
+        const Rows b = load_rows(rows, m.slots.face_next + e);
+        const Rows c = load_rows(rows, m.slots.face_last + e);
         lane_face(b.x - self.x, b.y - self.y, b.z - self.z, c.x - self.x, c.y - self.y,
                   c.z - self.z, splat(1.0), rx, ry, rz, gx, gy, gz, six_v);
     }
@@ -107,16 +107,16 @@ inline void lane_faces(const Model& m, const double* rows, index g, int lane0, c
 
 /// dP/dV (B,) [Pa/m^3] of each body's gas law at its volume, and P - P_ambient (B,) [Pa].
 inline void pressure_slopes(const Model& m, const BodyGas& gas, double* dpdv, double* pnet) {
-    for (index b = 0; b < m.body_count; ++b) {
+    for (index b = 0; b < m.bodies.count; ++b) {
         const double v = gas.volume[b], p = gas.pressure[b];
-        pnet[b] = p - m.body_ambient_pressure[b];
-        const index law = m.body_gas_law[b];
-        if (law == 1 || m.body_closed[b] == 0 || !(v > 0.0))
+        pnet[b] = p - m.gases.ambient_pressure[b];
+        const index law = m.gases.law[b];
+        if (law == 1 || m.bodies.closed[b] == 0 || !(v > 0.0))
             dpdv[b] = 0.0;  // fixed pressure (or an open surface)
         else if (law == 0)
             dpdv[b] = -p / v;  // isothermal: P = nRT / V
         else
-            dpdv[b] = -m.body_gas_gamma[b] * p / v;  // adiabatic: P V^gamma constant
+            dpdv[b] = -m.gases.gamma[b] * p / v;  // adiabatic: P V^gamma constant
     }
 }
 
@@ -128,8 +128,8 @@ inline void jacobian_product(const Model& m, const double* q, const double* grad
                              const double* dpdv, const double* pnet, double alpha_k,
                              const double* p, double* out) {
     if (alpha_k == 0.0) return;
-    for (index body = 0; body < m.body_count; ++body) {
-        const index p0 = m.body_particle_range[2 * body], p1 = m.body_particle_range[2 * body + 1];
+    for (index body = 0; body < m.bodies.count; ++body) {
+        const index p0 = m.bodies.particle_range[2 * body], p1 = m.bodies.particle_range[2 * body + 1];
         double gp = 0.0;
         for (index i = p0; i < p1; ++i) gp += dot(load(gradient, i), load(p, i));
         const double c1 = alpha_k * dpdv[body] * gp;
@@ -137,9 +137,9 @@ inline void jacobian_product(const Model& m, const double* q, const double* grad
             for (index i = p0; i < p1; ++i) add_to(out, i, c1 * load(gradient, i));
         const double coef = alpha_k * pnet[body] / 6.0;
         if (coef == 0.0) continue;
-        for (index t = m.body_tri_range[2 * body]; t < m.body_tri_range[2 * body + 1]; ++t) {
-            const index ia = m.tri_indices[3 * t], ib = m.tri_indices[3 * t + 1],
-                        ic = m.tri_indices[3 * t + 2];
+        for (index t = m.bodies.tri_range[2 * body]; t < m.bodies.tri_range[2 * body + 1]; ++t) {
+            const index ia = m.triangles.indices[3 * t], ib = m.triangles.indices[3 * t + 1],
+                        ic = m.triangles.indices[3 * t + 2];
             const V3 a = load(q, ia);
             const V3 e1 = load(q, ib) - a, e2 = load(q, ic) - a;
             const V3 pa = load(p, ia);
@@ -174,11 +174,11 @@ inline double law_energy(index law, double value, double gamma, double reference
 inline double energies(const Model& m, const Control& c, double t, const BodyGas& gas,
                        double* body_energy) {
     double total = 0.0;
-    for (index b = 0; b < m.body_count; ++b) {
+    for (index b = 0; b < m.bodies.count; ++b) {
         const double e =
-            m.body_closed[b] == 1
-                ? law_energy(m.body_gas_law[b], value_at(m, c, b, t), m.body_gas_gamma[b],
-                             m.body_gas_reference_volume[b], m.body_ambient_pressure[b],
+            m.bodies.closed[b] == 1
+                ? law_energy(m.gases.law[b], value_at(m, c, b, t), m.gases.gamma[b],
+                             m.gases.reference_volume[b], m.gases.ambient_pressure[b],
                              gas.volume[b])
                 : 0.0;
         body_energy[b] = e;
@@ -193,22 +193,22 @@ inline double energies(const Model& m, const Control& c, double t, const BodyGas
 /// the bound holds for the whole run; open surfaces alike (a gust on a cloth).
 inline void bound_slopes(const Model& m, const double* q, double* pnet, double* dpdv,
                          double* gradient) {
-    for (index b = 0; b < m.body_count; ++b) {
+    for (index b = 0; b < m.bodies.count; ++b) {
         const double v = volume::exact(m, b, q, gradient);
-        double value = std::max(m.body_gas_value[b], 0.0);
-        for (index s = m.body_schedule_range[2 * b]; s < m.body_schedule_range[2 * b + 1]; ++s)
-            value = std::max(value, m.schedule_value[s]);
+        double value = std::max(m.gases.value[b], 0.0);
+        for (index s = m.gases.schedule_range[2 * b]; s < m.gases.schedule_range[2 * b + 1]; ++s)
+            value = std::max(value, m.gases.schedule_value[s]);
         double p, slope;
-        if (m.body_gas_law[b] == 1) {
+        if (m.gases.law[b] == 1) {
             p = value, slope = 0.0;  // fixed pressure
-        } else if (m.body_gas_law[b] == 0) {
+        } else if (m.gases.law[b] == 0) {
             p = value / v, slope = -value / (v * v);  // isothermal
         } else {
-            const double gamma = m.body_gas_gamma[b];
-            p = value * std::pow(m.body_gas_reference_volume[b], gamma - 1.0) / std::pow(v, gamma);
+            const double gamma = m.gases.gamma[b];
+            p = value * std::pow(m.gases.reference_volume[b], gamma - 1.0) / std::pow(v, gamma);
             slope = -gamma * p / v;  // adiabatic
         }
-        pnet[b] = p - m.body_ambient_pressure[b];
+        pnet[b] = p - m.gases.ambient_pressure[b];
         dpdv[b] = slope;
     }
 }
@@ -219,11 +219,11 @@ inline void bound_slopes(const Model& m, const double* q, double* pnet, double* 
 /// sqrt(m_i m_l)) to row i, per corner of every face, into rows (N,) [1/s^2]. pnet from
 /// bound_slopes.
 inline void add_pressure_rows(const Model& m, const double* q, const double* pnet, double* rows) {
-    const double* inv = m.particle_inv_mass;
-    for (index b = 0; b < m.body_count; ++b) {
+    const double* inv = m.particles.inv_mass;
+    for (index b = 0; b < m.bodies.count; ++b) {
         const double coef = std::abs(pnet[b]) / 6.0;
-        for (index t = m.body_tri_range[2 * b]; t < m.body_tri_range[2 * b + 1]; ++t) {
-            const index* tri = m.tri_indices + 3 * t;
+        for (index t = m.bodies.tri_range[2 * b]; t < m.bodies.tri_range[2 * b + 1]; ++t) {
+            const index* tri = m.triangles.indices + 3 * t;
             for (int corner = 0; corner < 3; ++corner) {
                 const index i = tri[corner], j = tri[(corner + 1) % 3], l = tri[(corner + 2) % 3];
                 const V3 xi = load(q, i);
@@ -241,11 +241,11 @@ inline void add_pressure_rows(const Model& m, const double* q, const double* pne
 /// from bound_slopes.
 inline double rank_one_bound(const Model& m, const double* dpdv, const double* gradient) {
     double bound = 0.0;
-    for (index b = 0; b < m.body_count; ++b) {
+    for (index b = 0; b < m.bodies.count; ++b) {
         double sum = 0.0;
-        for (index i = m.body_particle_range[2 * b]; i < m.body_particle_range[2 * b + 1]; ++i) {
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1]; ++i) {
             const V3 g = load(gradient, i);
-            sum += m.particle_inv_mass[i] * dot(g, g);
+            sum += m.particles.inv_mass[i] * dot(g, g);
         }
         bound = std::max(bound, std::abs(dpdv[b]) * sum);
     }

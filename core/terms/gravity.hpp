@@ -14,8 +14,8 @@ namespace softbody::SOFTBODY_KERNELS::gravity {
 /// Set f (N, 3) [N] to m_i g: the first term of the accumulator (it overwrites f).
 inline void force(const Model& m, double* f) {
     const double gx = m.gravity[0], gy = m.gravity[1], gz = m.gravity[2];
-    for (index i = 0; i < m.particle_count; ++i) {
-        const double mass = m.particle_mass[i];
+    for (index i = 0; i < m.particles.count; ++i) {
+        const double mass = m.particles.mass[i];
         f[3 * i] = mass * gx;
         f[3 * i + 1] = mass * gy;
         f[3 * i + 2] = mass * gz;
@@ -24,7 +24,7 @@ inline void force(const Model& m, double* f) {
 
 /// Vertex-major: m g for kLanes particles from `first` [N] (initialises the lanes).
 inline void lane_force(const Model& m, index first, vd& fx, vd& fy, vd& fz) {
-    const vd mass = load_lanes(m.lane_mass + first);
+    const vd mass = load_lanes(m.slots.mass + first);
     fx = mass * m.gravity[0];
     fy = mass * m.gravity[1];
     fz = mass * m.gravity[2];
@@ -36,11 +36,11 @@ inline void lane_force(const Model& m, index first, vd& fx, vd& fy, vd& fz) {
 inline double energies(const Model& m, const double* q, double* body_energy) {
     const double gx = m.gravity[0], gy = m.gravity[1], gz = m.gravity[2];
     double total = 0.0;
-    for (index i = 0; i < m.particle_count; ++i) {
+    for (index i = 0; i < m.particles.count; ++i) {
         const double e =
-            -m.particle_mass[i] * (q[3 * i] * gx + q[3 * i + 1] * gy + q[3 * i + 2] * gz);
+            -m.particles.mass[i] * (q[3 * i] * gx + q[3 * i + 1] * gy + q[3 * i + 2] * gz);
         total += e;
-        if (m.particle_body[i] >= 0) body_energy[m.particle_body[i]] += e;
+        if (m.particles.body[i] >= 0) body_energy[m.particles.body[i]] += e;
     }
     return total;
 }

@@ -7,7 +7,7 @@
 // geometric stiffness dropped, so -K stays positive semi-definite), its damping C = c u u^T.
 //
 // Forms: force (edge-major) and lane_pair / lane_force (the vertex-major pass); energy and
-// energies (per body, by Model::spring_body); prepare + jacobian_product (the implicit
+// energies (per body, by Springs::body); prepare + jacobian_product (the implicit
 // solvers' K p and C p); smoother_blocks (their multigrid smoother); projection + project
 // (projective dynamics' local step and right-hand side); bound_weights, add_root_sums,
 // row_bounds and damping_ratios (the stability estimate's Gershgorin bound: per part the
@@ -22,8 +22,8 @@ namespace softbody::SOFTBODY_KERNELS::springs {
 
 /// Accumulate every spring's damped force into f (N, 3) [N] at q, qd (N, 3).
 inline void force(const Model& m, const double* q, const double* qd, double* f) {
-    const index* ends = m.spring_indices;
-    for (index s = 0; s < m.spring_count; ++s) {
+    const index* ends = m.springs.indices;
+    for (index s = 0; s < m.springs.count; ++s) {
         const index i = ends[2 * s], j = ends[2 * s + 1];
         const V3 d = load(q, j) - load(q, i);
         const double length = std::sqrt(dot(d, d));
@@ -31,7 +31,7 @@ inline void force(const Model& m, const double* q, const double* qd, double* f) 
         const V3 u = (1.0 / length) * d;
         const double rel = dot(load(qd, j) - load(qd, i), u);
         const double mag =
-            m.spring_stiffness[s] * (length - m.spring_rest_length[s]) + m.spring_damping[s] * rel;
+            m.springs.stiffness[s] * (length - m.springs.rest_length[s]) + m.springs.damping[s] * rel;
         const V3 fi = mag * u;
         add_to(f, i, fi);
         add_to(f, j, -fi);
@@ -63,22 +63,22 @@ inline void lane_pair(const R& self, const R& o, V dx, V dy, V dz, V rest, V sti
 /// group g from lane0, added to fx, fy, fz [N].
 inline void lane_force(const Model& m, const double* rows, index g, int lane0, const Rows& self,
                        vd& fx, vd& fy, vd& fz) {
-    for (index s = m.spring_slot_start[g]; s < m.spring_slot_start[g + 1]; ++s) {
+    for (index s = m.slots.spring_start[g]; s < m.slots.spring_start[g + 1]; ++s) {
         const index e = kGroup * s + lane0;
-        const Rows o = load_rows(rows, m.spring_slot_other + e);
+        const Rows o = load_rows(rows, m.slots.spring_other + e);
         lane_pair(self, o, o.x - self.x, o.y - self.y, o.z - self.z,
-                  load_lanes(m.spring_slot_rest_length + e), load_lanes(m.spring_slot_stiffness + e),
-                  load_lanes(m.spring_slot_damping + e), fx, fy, fz);
+                  load_lanes(m.slots.spring_rest_length + e), load_lanes(m.slots.spring_stiffness + e),
+                  load_lanes(m.slots.spring_damping + e), fx, fy, fz);
     }
 }
 
 /// Per spring the unit direction u (S, 3), axial stiffness a = k and transverse stiffness
 /// b = k max(0, 1 - L0/L) (S,) at q: what jacobian_product reads.
 inline void prepare(const Model& m, const double* q, double* u, double* a, double* b) {
-    for (index s = 0; s < m.spring_count; ++s) {
-        const V3 d = load(q, m.spring_indices[2 * s + 1]) - load(q, m.spring_indices[2 * s]);
+    for (index s = 0; s < m.springs.count; ++s) {
+        const V3 d = load(q, m.springs.indices[2 * s + 1]) - load(q, m.springs.indices[2 * s]);
         const double length = std::sqrt(dot(d, d));
-        const double k = m.spring_stiffness[s];
+        const double k = m.springs.stiffness[s];
         if (length == 0.0) {
             store(u, s, {0.0, 0.0, 0.0});
             a[s] = 0.0;
@@ -87,7 +87,7 @@ inline void prepare(const Model& m, const double* q, double* u, double* a, doubl
         }
         store(u, s, (1.0 / length) * d);
         a[s] = k;
-        b[s] = k * std::max(0.0, 1.0 - m.spring_rest_length[s] / length);
+        b[s] = k * std::max(0.0, 1.0 - m.springs.rest_length[s] / length);
     }
 }
 
@@ -96,13 +96,13 @@ inline void prepare(const Model& m, const double* q, double* u, double* a, doubl
 /// prepare (or any blocks of that form: the stability estimate splits them).
 inline void jacobian_product(const Model& m, const double* u, const double* a, const double* b,
                              double alpha_c, double alpha_k, const double* p, double* out) {
-    for (index s = 0; s < m.spring_count; ++s) {
-        const index i = m.spring_indices[2 * s], j = m.spring_indices[2 * s + 1];
+    for (index s = 0; s < m.springs.count; ++s) {
+        const index i = m.springs.indices[2 * s], j = m.springs.indices[2 * s + 1];
         const V3 d = load(p, j) - load(p, i);
         const V3 us = load(u, s);
         const double ud = dot(us, d);
         const double iso = alpha_k * b[s];
-        const double axial = alpha_k * (a[s] - b[s]) * ud + alpha_c * m.spring_damping[s] * ud;
+        const double axial = alpha_k * (a[s] - b[s]) * ud + alpha_c * m.springs.damping[s] * ud;
         const V3 w = iso * d + axial * us;
         add_to(out, i, w);
         add_to(out, j, -w);
@@ -117,12 +117,12 @@ inline void jacobian_product(const Model& m, const double* u, const double* a, c
 inline void smoother_blocks(const Model& m, double h, const double* u, const double* a,
                             const double* b, const index* entry_ptr, const index* entry_spring,
                             double* coef, double* block) {
-    for (index i = 0; i < m.particle_count; ++i) {
-        double b00 = m.particle_mass[i], b11 = b00, b22 = b00, b01 = 0.0, b02 = 0.0, b12 = 0.0;
+    for (index i = 0; i < m.particles.count; ++i) {
+        double b00 = m.particles.mass[i], b11 = b00, b22 = b00, b01 = 0.0, b02 = 0.0, b12 = 0.0;
         for (index e = entry_ptr[i]; e < entry_ptr[i + 1]; ++e) {
             const index s = entry_spring[e];
             const V3 us = load(u, s);
-            const double alpha = h * m.spring_damping[s] + h * h * (a[s] - b[s]);
+            const double alpha = h * m.springs.damping[s] + h * h * (a[s] - b[s]);
             const double beta = h * h * b[s];
             double* c = coef + 5 * e;
             c[0] = us.x, c[1] = us.y, c[2] = us.z, c[3] = alpha, c[4] = beta;
@@ -163,12 +163,12 @@ inline V3 projection(V3 d, V3 e, double rest, double k, double c_h) {
 /// moves to the free end's side.
 inline void project(const Model& m, double h, const double* x, const double* x0, double* rhs) {
     const double inv_h = 1.0 / h;
-    const double* inv_mass = m.particle_inv_mass;
-    for (index s = 0; s < m.spring_count; ++s) {
-        const index i = m.spring_indices[2 * s], j = m.spring_indices[2 * s + 1];
-        const double k = m.spring_stiffness[s], c_h = m.spring_damping[s] * inv_h;
+    const double* inv_mass = m.particles.inv_mass;
+    for (index s = 0; s < m.springs.count; ++s) {
+        const index i = m.springs.indices[2 * s], j = m.springs.indices[2 * s + 1];
+        const double k = m.springs.stiffness[s], c_h = m.springs.damping[s] * inv_h;
         const V3 t = projection(load(x, j) - load(x, i), load(x0, j) - load(x0, i),
-                                m.spring_rest_length[s], k, c_h);
+                                m.springs.rest_length[s], k, c_h);
         const bool free_i = inv_mass[i] > 0.0, free_j = inv_mass[j] > 0.0;
         if (free_i) {
             add_to(rhs, i, -t);
@@ -182,16 +182,16 @@ inline void project(const Model& m, double h, const double* x, const double* x0,
 }
 
 /// Elastic energy 1/2 k (L - L0)^2 [J] of every spring at q (N, 3), each added to its body's
-/// entry of body_energy (B,) (Model::spring_body: a body's edge and bending springs; a
+/// entry of body_energy (B,) (Springs::body: a body's edge and bending springs; a
 /// user's spring, body -1, counts in the total only); returns the total [J].
 inline double energies(const Model& m, const double* q, double* body_energy) {
     double total = 0.0;
-    for (index s = 0; s < m.spring_count; ++s) {
-        const V3 d = load(q, m.spring_indices[2 * s + 1]) - load(q, m.spring_indices[2 * s]);
-        const double stretch = std::sqrt(dot(d, d)) - m.spring_rest_length[s];
-        const double e = 0.5 * m.spring_stiffness[s] * stretch * stretch;
+    for (index s = 0; s < m.springs.count; ++s) {
+        const V3 d = load(q, m.springs.indices[2 * s + 1]) - load(q, m.springs.indices[2 * s]);
+        const double stretch = std::sqrt(dot(d, d)) - m.springs.rest_length[s];
+        const double e = 0.5 * m.springs.stiffness[s] * stretch * stretch;
         total += e;
-        if (m.spring_body[s] >= 0) body_energy[m.spring_body[s]] += e;
+        if (m.springs.body[s] >= 0) body_energy[m.springs.body[s]] += e;
     }
     return total;
 }
@@ -210,15 +210,15 @@ inline double stretch_factor(double length, double rest_length) {
 
 /// The weights w (S, kBoundParts) [N/m] (kDamping: [N s/m]) of every spring at q (N, 3).
 inline void bound_weights(const Model& m, const double* q, double* w) {
-    for (index s = 0; s < m.spring_count; ++s) {
-        const V3 d = load(q, m.spring_indices[2 * s + 1]) - load(q, m.spring_indices[2 * s]);
-        const double k = m.spring_stiffness[s];
-        const double stretch = stretch_factor(std::sqrt(dot(d, d)), m.spring_rest_length[s]);
+    for (index s = 0; s < m.springs.count; ++s) {
+        const V3 d = load(q, m.springs.indices[2 * s + 1]) - load(q, m.springs.indices[2 * s]);
+        const double k = m.springs.stiffness[s];
+        const double stretch = stretch_factor(std::sqrt(dot(d, d)), m.springs.rest_length[s]);
         double* ws = w + kBoundParts * s;
         ws[kDamped] = k;
         ws[kTransverse] = k * stretch;
         ws[kWhole] = k * std::max(1.0, stretch);
-        ws[kDamping] = m.spring_damping[s];
+        ws[kDamping] = m.springs.damping[s];
     }
 }
 
@@ -226,9 +226,9 @@ inline void bound_weights(const Model& m, const double* q, double* w) {
 /// row sums R_i = sum of sqrt(w) over the springs at i, added into root_sum
 /// (N, kBoundParts) at both ends of every spring.
 inline void add_root_sums(const Model& m, const double* w, double* root_sum) {
-    for (index s = 0; s < m.spring_count; ++s) {
-        double* ri = root_sum + kBoundParts * m.spring_indices[2 * s];
-        double* rj = root_sum + kBoundParts * m.spring_indices[2 * s + 1];
+    for (index s = 0; s < m.springs.count; ++s) {
+        double* ri = root_sum + kBoundParts * m.springs.indices[2 * s];
+        double* rj = root_sum + kBoundParts * m.springs.indices[2 * s + 1];
         for (int part = 0; part < kBoundParts; ++part) {
             const double r = std::sqrt(w[kBoundParts * s + part]);
             ri[part] += r;
@@ -242,9 +242,9 @@ inline void add_root_sums(const Model& m, const double* w, double* root_sum) {
 /// where larger: exact for one spring, the Anderson-Morley bound for equal springs.
 /// root_sum from every spring-like term's add_root_sums; pinned ends (1 / m = 0) add none.
 inline void row_bounds(const Model& m, const double* w, const double* root_sum, double* bound) {
-    const double* inv = m.particle_inv_mass;
-    for (index s = 0; s < m.spring_count; ++s) {
-        const index i = m.spring_indices[2 * s], j = m.spring_indices[2 * s + 1];
+    const double* inv = m.particles.inv_mass;
+    for (index s = 0; s < m.springs.count; ++s) {
+        const index i = m.springs.indices[2 * s], j = m.springs.indices[2 * s + 1];
         for (int part = 0; part < kBoundParts; ++part) {
             const double row = std::sqrt(w[kBoundParts * s + part]) *
                                (root_sum[kBoundParts * i + part] * inv[i] +
@@ -257,8 +257,8 @@ inline void row_bounds(const Model& m, const double* w, const double* root_sum, 
 /// The damping per stiffness c / k [s] of the springs with k > 0, folded into [lo, hi];
 /// pure_damper set where a spring has c > 0 and k = 0 (it may damp any mode).
 inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_damper) {
-    for (index s = 0; s < m.spring_count; ++s) {
-        const double k = m.spring_stiffness[s], c = m.spring_damping[s];
+    for (index s = 0; s < m.springs.count; ++s) {
+        const double k = m.springs.stiffness[s], c = m.springs.damping[s];
         if (k > 0.0) {
             lo = std::min(lo, c / k);
             hi = std::max(hi, c / k);

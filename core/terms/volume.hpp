@@ -16,14 +16,14 @@ constexpr double kPi = 3.14159265358979323846;
 /// the body's first vertex so round-off stays of the body's size far from the origin. With
 /// grad (N, 3) non-null its rows of the body get sum over faces of n_t / 6, exactly dV/dx.
 inline double exact(const Model& m, index b, const double* q, double* grad) {
-    const index p0 = m.body_particle_range[2 * b], p1 = m.body_particle_range[2 * b + 1];
+    const index p0 = m.bodies.particle_range[2 * b], p1 = m.bodies.particle_range[2 * b + 1];
     const V3 r = load(q, p0);
     if (grad)
         for (index k = 3 * p0; k < 3 * p1; ++k) grad[k] = 0.0;
     double six_v = 0.0;
-    for (index t = m.body_tri_range[2 * b]; t < m.body_tri_range[2 * b + 1]; ++t) {
-        const index i = m.tri_indices[3 * t], j = m.tri_indices[3 * t + 1],
-                    k = m.tri_indices[3 * t + 2];
+    for (index t = m.bodies.tri_range[2 * b]; t < m.bodies.tri_range[2 * b + 1]; ++t) {
+        const index i = m.triangles.indices[3 * t], j = m.triangles.indices[3 * t + 1],
+                    k = m.triangles.indices[3 * t + 2];
         const V3 a = load(q, i);
         const V3 n = cross(load(q, j) - a, load(q, k) - a);
         if (grad) {
@@ -91,8 +91,8 @@ inline double monte_carlo(const Model& m, const double* q, index t_begin, index 
     const double y0 = 0.5 * (lo[1] + hi[1]);
     double total = 0.0;
     for (index t = t_begin; t < t_end; ++t) {
-        const index i = m.tri_indices[3 * t], j = m.tri_indices[3 * t + 1],
-                    k = m.tri_indices[3 * t + 2];
+        const index i = m.triangles.indices[3 * t], j = m.triangles.indices[3 * t + 1],
+                    k = m.triangles.indices[3 * t + 2];
         const double ax = q[3 * i], az = q[3 * i + 2], bx = q[3 * j], bz = q[3 * j + 2];
         const double cx = q[3 * k], cz = q[3 * k + 2];
         const double ay = q[3 * i + 1] - y0, by = q[3 * j + 1] - y0, cy = q[3 * k + 1] - y0;
@@ -122,20 +122,20 @@ inline double monte_carlo(const Model& m, const double* q, index t_begin, index 
 /// exact_done, bodies of the exact method keep the volume already in gas.volume.
 inline void evaluate(const Model& m, const double* q, const BodyGas& gas,
                      bool exact_done = false) {
-    for (index b = 0; b < m.body_count; ++b) {
-        const index method = m.body_volume_method[b];
+    for (index b = 0; b < m.bodies.count; ++b) {
+        const index method = m.volumes.method[b];
         if (exact_done && method == 0) continue;  // the vertex-major pass measured it
         const bool need_exact = method == 0 || gas.volume_gradient != nullptr;
         double v = need_exact ? exact(m, b, q, gas.volume_gradient) : 0.0;
         if (method != 0) {
-            const index begin = m.body_particle_range[2 * b], end = m.body_particle_range[2 * b + 1];
+            const index begin = m.bodies.particle_range[2 * b], end = m.bodies.particle_range[2 * b + 1];
             double* lo = gas.lo + 3 * b;
             double* hi = gas.hi + 3 * b;
             bounds(q, begin, end, lo, hi);
             if (method == 4) {
-                const index s0 = m.body_mc_range[2 * b], s1 = m.body_mc_range[2 * b + 1];
-                v = monte_carlo(m, q, m.body_tri_range[2 * b], m.body_tri_range[2 * b + 1], lo,
-                                hi, m.mc_samples + 2 * s0, s1 - s0);
+                const index s0 = m.volumes.mc_range[2 * b], s1 = m.volumes.mc_range[2 * b + 1];
+                v = monte_carlo(m, q, m.bodies.tri_range[2 * b], m.bodies.tri_range[2 * b + 1], lo,
+                                hi, m.volumes.mc_samples + 2 * s0, s1 - s0);
             } else {
                 v = bounding(q, begin, end, method, lo, hi);
             }
