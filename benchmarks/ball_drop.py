@@ -11,10 +11,12 @@ most 90 s, it is then simulated and checked (volume within [0.7, 1.5] of its sta
 centre of mass back up at least 5 cm after the first contact, and at the end the kinetic
 energy of motion relative to the centre of mass below 5% of the drop energy m g h, so a
 ball shaking from a too-long step fails), so no broken scene counts as real time. Peak
-memory per vertex is the tracemalloc peak of building the model, a simulator and one
-step, divided by the vertex count, for implicit Euler (with its multigrid hierarchy) and
-for velocity Verlet (with its stability estimate's Lanczos runs), each after a pass on a
-small ball so that loading the compiled kernels is not counted.
+memory per vertex is the growth of the peak resident set of building the model, a
+simulator and one step, in a fresh process after the same on a small ball (so loading
+the modules and the compiled core is not counted), divided by the vertex count, for
+implicit Euler (with its multigrid hierarchy) and for velocity Verlet (with its
+stability estimate's Lanczos runs); ``--memory-only`` measures it again into the last
+result.
 
 With panda3d installed (``pip install -e ".[bench]"``), the same drop runs in Bullet's
 soft body with its pressure coefficient kPR at Bullet's usual fixed 1/60 s step, in the
@@ -34,9 +36,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
+import sys
 import time
-import tracemalloc
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -291,29 +293,51 @@ def bullet_entry(subdivisions: int) -> dict:
     return result
 
 
-def _peak_bytes(subdivisions: int, integrator: str) -> tuple[int, int]:
-    """tracemalloc peak [bytes] of building the model, a simulator (implicit: at 1/60 s;
-    explicit: at the step its estimate picks) and one step, and the vertex count."""
-    tracemalloc.start()
-    model = ball_drop(subdivisions)
-    implicit = sb.Integrator.parse(integrator).implicit
+#: run in a fresh process by _peak_bytes: the growth of the peak resident set [bytes] of
+#: building a ball, a simulator and one step, after the same on a small ball and the
+#: imports the simulator makes lazily (so that loading modules and the compiled core is
+#: not counted)
+_MEMORY_PROBE = """
+import resource, sys, warnings
+import scipy.linalg, scipy.sparse, scipy.sparse.csgraph, scipy.sparse.linalg  # lazy elsewhere
+import softbody as sb
+from ball_drop import ball_drop
+subdivisions, integrator = int(sys.argv[1]), sys.argv[2]
+implicit = sb.Integrator.parse(integrator).implicit
+def step(s):
+    model = ball_drop(s)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sb.StabilityWarning)
         sim = sb.Simulator(model, integrator=integrator, dt=1 / 60 if implicit else "auto")
     sim.run(model.state(), 1)
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    return peak, model.particle_count
+    return model.particle_count
+step(1)
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+count = step(subdivisions)
+after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(1024 * (after - before), count)
+"""
+
+
+def _peak_bytes(subdivisions: int, integrator: str) -> tuple[int, int]:
+    """Growth of the peak resident set [bytes] of building the model, a simulator
+    (implicit: at 1/60 s; explicit: at the step its estimate picks) and one step, in a
+    fresh process after the same on a 42-vertex ball; and the vertex count. The resident
+    set counts the compiled core's buffers, which Python's tracemalloc does not see."""
+    out = subprocess.run(
+        [sys.executable, "-c", _MEMORY_PROBE, str(subdivisions), integrator],
+        cwd=Path(__file__).parent, capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    peak, count = out.stdout.split()
+    return int(peak), int(count)
 
 
 def memory_per_vertex(subdivisions: int) -> dict:
     """Peak memory per vertex [bytes] of the implicit Euler simulator (model, multigrid
     hierarchy, one step) and of an explicit one (velocity Verlet: model, its stability
-    estimate's Lanczos runs, one step). A first pass on a small ball loads the compiled
-    kernels, whose loading would otherwise count toward the first size measured."""
+    estimate's Lanczos runs, one step), each in a fresh process (_peak_bytes)."""
     out = {}
     for integrator in ("implicit_euler", "velocity_verlet"):
-        _peak_bytes(1, integrator)
         peak, count = _peak_bytes(subdivisions, integrator)
         out[integrator] = peak / count
     return out
@@ -375,9 +399,22 @@ def main() -> None:
     parser.add_argument(
         "--plot-only", action="store_true", help="redraw the plot from results/ball_drop.json"
     )
+    parser.add_argument(
+        "--memory-only", action="store_true",
+        help="measure the memory per vertex again into results/ball_drop.json",
+    )  # fmt: skip
     args = parser.parse_args()
     if args.plot_only:
         plot(json.loads((RESULTS / "ball_drop.json").read_text()), RESULTS / "ball_drop.png")
+        return
+    if args.memory_only:
+        result = json.loads((RESULTS / "ball_drop.json").read_text())
+        for row in result["sizes"]:
+            subdivisions = round(float(np.log2((row["vertex_count"] - 2) / 10)) / 2)
+            row["peak_bytes_per_vertex"] = memory_per_vertex(subdivisions)
+            print(row["vertex_count"], row["peak_bytes_per_vertex"], flush=True)
+        result["memory_measured"] = time.strftime("%Y-%m-%d")
+        write_json(RESULTS / "ball_drop.json", result)
         return
     rows = []
     for s in range(args.min_subdivisions, args.max_subdivisions + 1):
