@@ -104,7 +104,7 @@ class Simulator:
         the force pass's mesh springs, dV/dx and volume shares. Positions, velocities,
         the integration, the pressure and every sum stay float64; float32 perturbs the
         forces as if each position moved by 2^-24 of its body's size (60 nm on a 1 m
-        ball); a step runs 1.3-1.9x as fast with AVX2 or AVX-512 (0.5x on the scalar
+        ball); a step runs 1.2-2.2x as fast with AVX2 or AVX-512 (0.4-0.75x on the scalar
         path). ``benchmarks/float32.py`` measures its drift against float64 (user guide:
         "Choosing an integrator"). Another integrator with ``"float32"`` is a
         ``ValueError``.
