@@ -5,14 +5,11 @@
 #include <algorithm>
 
 #include "solvers/explicit.hpp"
+#include "solvers/forms.hpp"
 #include "solvers/implicit.hpp"
 #include "solvers/multigrid.hpp"
 #include "solvers/projective.hpp"
-#include "terms/attachments.hpp"
-#include "terms/external.hpp"
-#include "terms/gas.hpp"
-#include "terms/gravity.hpp"
-#include "terms/springs.hpp"
+#include "terms/registry.hpp"
 #include "terms/volume.hpp"
 
 #define SOFTBODY_STRING2(x) #x
@@ -36,8 +33,8 @@ RunResult simulate_implicit(const Model& m, const Control& c, const RunParams& p
 void apply_preconditioner(const Model& m, const Control& c, double t, double h,
                           const ImplicitBuffers& w, const MultigridView* mg, const double* r,
                           double* z) {
-    gas::evaluate(m, c, t, w.q0, w.gas);
-    implicit_solver::prepare(m, c, h, w, mg);
+    forms::update(Eval{m, c, t, w.q0, w.v0, w.gas});
+    implicit_solver::prepare(m, c, t, h, w, mg);
     if (mg == nullptr) implicit_solver::jacobi_diagonal(m, h, w);
     implicit_solver::precondition(m, mg, w.cg_diag, r, z);
 }
@@ -57,29 +54,20 @@ void projective_solve(const Factor& a, const double* b, double* x, double* out) 
 
 void eval_forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
                  const BodyGas& gas, const LaneBuffers& lanes, double* f) {
-    explicit_solver::eval_forces(m, c, t, q, qd, gas, lanes, f);
+    forms::eval_forces(m, c, t, q, qd, gas, lanes, f);
 }
 
 void eval_gas(const Model& m, const Control& c, double t, const double* q, const BodyGas& gas) {
-    gas::evaluate(m, c, t, q, gas);
+    forms::update(Eval{m, c, t, q, q, gas});  // the terms' state: volumes and pressures
 }
 
 void eval_volumes(const Model& m, const double* q, const BodyGas& gas) {
     volume::evaluate(m, q, gas);
 }
 
-void apply_jacobians(const Model& m, const Control& c, const double* q, const double* p,
-                     double alpha_m, double alpha_c, double alpha_k, const double* u,
-                     const double* a, const double* b, const double* gradient, const double* dpdv,
-                     const double* pnet, bool with_attachments, double* out) {
-    for (index i = 0; i < m.particles.count; ++i) {
-        const double w = alpha_m * m.particles.mass[i];
-        for (int k = 0; k < 3; ++k) out[3 * i + k] = w * p[3 * i + k];
-    }
-    springs::jacobian_product(m, u, a, b, alpha_c, alpha_k, p, out);
-    if (with_attachments) attachments::jacobian_product(m, c, q, alpha_c, alpha_k, p, out);
-    external::grab_jacobian_product(c, alpha_c, alpha_k, p, out);
-    gas::jacobian_product(m, q, gradient, dpdv, pnet, alpha_k, p, out);
+void apply_jacobians(const Model& m, const Control& c, const Linearization& l, const double* p,
+                     double alpha_m, double alpha_c, double alpha_k, unsigned skip, double* out) {
+    forms::apply_jacobians(m, c, l, alpha_m, alpha_c, alpha_k, p, out, skip);
 }
 
 index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers& w) {
@@ -90,14 +78,7 @@ index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers&
 
 void eval_energies(const Model& m, const Control& c, double t, const double* q,
                    const BodyGas& gas, TermEnergies& out) {
-    for (double* body : {out.body_gravity, out.body_springs, out.body_attachments})
-        std::fill(body, body + m.bodies.count, 0.0);
-    out.gravity = gravity::energies(m, q, out.body_gravity);
-    out.springs = springs::energies(m, q, out.body_springs);
-    out.attachments = attachments::energies(m, c, q, out.body_attachments);
-    out.grab = external::grab_energy(c, q);
-    volume::evaluate(m, q, gas);  // gas.volume_gradient null: no dV/dx needed
-    out.gas = gas::energies(m, c, t, gas, out.body_gas);
+    forms::energies(Eval{m, c, t, q, q, gas}, out.total, out.body);
 }
 
 // The estimate's Gershgorin bounds, term by term: the spring-like terms' row sums first
@@ -127,7 +108,9 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
 }  // namespace
 
 const KernelTable& kernel_table() {
-    static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), simulate_explicit,
+    static_assert(Terms::count <= kMaxTerms, "more terms than kMaxTerms");
+    static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), Terms::count, term_traits(),
+                                   simulate_explicit,
                                    simulate_implicit, apply_preconditioner, apply_multigrid, simulate_projective,
                                    projective_solve, eval_forces,
                                    eval_gas, eval_volumes,

@@ -10,16 +10,16 @@
 
 namespace softbody {
 
-/// Each conservative term's energy at a state [J] (softbody.diagnostics.energies): its
-/// total over the model and, where the term belongs to bodies, each body's share (B,)
-/// (a free particle's weight, a user's spring or an attachment of a free particle counts in
-/// the total only). Drag and Control.particle_f have none.
+/// The most terms a registry holds (terms/registry.hpp checks it).
+constexpr int kMaxTerms = 16;
+
+/// Each registered term's energy at a state [J] (softbody.diagnostics.energies), in
+/// registry order: its total over the model and each body's share (a free particle's
+/// weight, a user's spring or an attachment of a free particle counts in the total only).
+/// Terms without an energy (TermTraits::energy) give 0.
 struct TermEnergies {
-    double gravity = 0.0, springs = 0.0, attachments = 0.0, gas = 0.0, grab = 0.0;
-    double* body_gravity = nullptr;      // (B,) -m g . x
-    double* body_springs = nullptr;      // (B,) 1/2 k (L - L0)^2 by Springs::body
-    double* body_attachments = nullptr;  // (B,) 1/2 k (L - L0)^2 by the tied particle's body
-    double* body_gas = nullptr;          // (B,) E(V) + P_a V at each body's own volume
+    double total[kMaxTerms] = {};
+    double* body = nullptr;  // (terms, B): term k's shares at body + k B
 };
 
 /// The stability estimate's Gershgorin pieces (softbody.stability.stiffest_mode), each
@@ -51,6 +51,8 @@ struct BoundBuffers {
 
 struct KernelTable {
     const char* name;  // "scalar", "avx2", "avx512"
+    int term_count;            // the registered terms (terms/registry.hpp)
+    const TermTraits* terms;   // (term_count,) their names and traits, in registry order
     /// Advance a state by an explicit scheme (RunParams.scheme 0-4).
     RunResult (*simulate_explicit)(const Model&, const Control&, const RunParams&,
                                    const StateView&, const ExplicitBuffers&);
@@ -84,18 +86,16 @@ struct KernelTable {
     /// Volumes alone into gas.volume (B,) (bounds into gas.lo/hi); reads only the model's
     /// topology, volume methods and Monte Carlo samples.
     void (*eval_volumes)(const Model&, const double* q, const BodyGas& gas);
-    /// out = alpha_m M p + alpha_c C p + alpha_k K p for p (N, 3) at q (C = df/dv, K = df/dx):
-    /// spring blocks from u (S, 3), a, b (S,); pressure from dV/dx (N, 3), dP/dV and
-    /// P - P_ambient (B,); attachments only when `attachments`.
-    void (*apply_jacobians)(const Model&, const Control&, const double* q, const double* p,
-                            double alpha_m, double alpha_c, double alpha_k, const double* u,
-                            const double* a, const double* b, const double* gradient,
-                            const double* dpdv, const double* pnet, bool attachments,
-                            double* out);
+    /// out = alpha_m M p + alpha_c C p + alpha_k K p for p (N, 3) at the linearisation l
+    /// (C = df/dv, K = df/dx), every registered term's product but those with their bit
+    /// (registry position) set in `skip`.
+    void (*apply_jacobians)(const Model&, const Control&, const Linearization& l,
+                            const double* p, double alpha_m, double alpha_c, double alpha_k,
+                            unsigned skip, double* out);
     /// One pass of the soft-soft contacts (the model's mode) on q, qd (N, 3) in place;
     /// returns the hash entries the surface contacts needed (0 if they fit, or none).
     index (*soft_contacts)(const Model&, double* q, double* qd, const ContactBuffers& w);
-    /// Every conservative term's energy at q and time t (TermEnergies), each body's gas at
+    /// Every registered term's energy at q and time t (TermEnergies), each body's gas at
     /// its volume by its own method (into gas.volume, with gas.lo/hi as scratch).
     void (*eval_energies)(const Model&, const Control&, double t, const double* q,
                           const BodyGas& gas, TermEnergies& out);

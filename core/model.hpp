@@ -341,6 +341,35 @@ struct ProjectiveBuffers {
     ContactBuffers contact;
 };
 
+/// The implicit solvers' linearisation at a point q (N, 3): what `prepare` writes and
+/// `jacobian_product` / `add_smoother_blocks` read. The Python API's apply_jacobians passes
+/// the same arrays in.
+struct Linearization {
+    const double* q = nullptr;    // (N, 3) the point [m]
+    double* spring_u = nullptr;   // (S, 3) spring directions
+    double* spring_a = nullptr;   // (S,) axial stiffness [N/m]
+    double* spring_b = nullptr;   // (S,) transverse stiffness [N/m]
+    const double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2]
+    double* body_dpdv = nullptr;  // (B,) dP/dV [Pa/m^3]
+    double* body_pnet = nullptr;  // (B,) P - P_ambient [Pa]
+};
+
+/// The multigrid smoother's diagonal blocks and the per-entry spring coefficients
+/// (MultigridView's scratch), for step h [s].
+struct SmootherBlocks {
+    double h = 0.0;
+    const index* entry_ptr = nullptr;    // (N + 1,) each particle's spring entries
+    const index* entry_spring = nullptr; // (2 S,)
+    double* entry_coef = nullptr;        // (2 S, 5) u (3,), alpha, beta
+    double* block = nullptr;             // (N, 3, 3) set to M, then each term adds its share
+};
+
+/// A registered term's name and traits (terms/term.hpp), for the bindings and Python.
+struct TermTraits {
+    const char* name = "";
+    bool lane = false, projected = false, fused = false, energy = false, external = false;
+};
+
 /// Outcome of a run of steps (softbody.solvers.Status).
 enum Status : int {
     OK = 0,

@@ -172,6 +172,10 @@ def test_core_energies_match_the_reference(name, simd):
     volume = _core.eval_volumes(core_model(model), data, t, q)[0]
     np.testing.assert_array_equal(energies["volume"], volume)
     expected = _reference_energies(model, data, t, q, volume)
+    # every registered term with an energy is checked here against its reference
+    with_energy = {t["name"] for t in sb.core.terms() if t["energy"]}
+    assert with_energy == set(expected) | {"grab"}
+    assert set(energies) == with_energy | {"volume"}
     for term, (total, bodies, total_size, body_size) in expected.items():
         got_total, got_bodies = energies[term]
         _close(got_total, total, total_size, f"{term} total")
@@ -181,8 +185,14 @@ def test_core_energies_match_the_reference(name, simd):
         assert (abs(total) > 0.0) == (name != "cloth" or term in ("gravity", "springs")), term
     g = int(data.grab_particle)
     grab_size = data.grab_stiffness * (np.linalg.norm(data.grab_target) + np.linalg.norm(q[g])) ** 2
-    _close(energies["grab"], external.grab_energy(data, q), grab_size, "grab")
-    assert (energies["grab"] > 0.0) == (g >= 0)
+    grab_total, grab_bodies = energies["grab"]
+    _close(grab_total, external.grab_energy(data, q), grab_size, "grab")
+    assert (grab_total > 0.0) == (g >= 0)
+    # its share goes to the grabbed particle's body
+    body = int(model.particle_body[g]) if g >= 0 else -1
+    np.testing.assert_array_equal(
+        grab_bodies, np.where(np.arange(model.body_count) == body, grab_total, 0.0)
+    )
 
 
 @pytest.mark.parametrize("name", list(MODELS))
@@ -211,6 +221,9 @@ def test_diagnostics_energies_compose_the_terms(name):
         _close(getattr(e, body_name), sum(expected[k][1] for k in terms),
                sum(expected[k][3] for k in terms), body_name)  # fmt: skip
     assert e.total == pytest.approx(e.kinetic + e.gravitational + e.spring + e.gas, rel=1e-15)
+    # every registered term's energy is reported, the grab's too (outside the total)
+    assert set(e.terms) == {t["name"] for t in sb.core.terms() if t["energy"]}
+    assert e.terms["grab"] == pytest.approx(float(external.grab_energy(data, q)), rel=1e-12, abs=0)
 
 
 # -- forces are minus the gradients of the energies --------------------------------------
@@ -246,7 +259,7 @@ def test_each_force_is_minus_the_gradient_of_the_core_energy(name):
     def energy(term, body=None):
         def function(x):
             out = _core.eval_energies(cm, data, t, np.ascontiguousarray(x))[term]
-            return out if term == "grab" else (out[0] if body is None else out[1][body])
+            return out[0] if body is None else out[1][body]
 
         return function
 
@@ -279,7 +292,7 @@ def test_each_force_is_minus_the_gradient_of_the_core_energy(name):
 
     def total(x):
         out = _core.eval_energies(cm, data, t, np.ascontiguousarray(x))
-        return sum(out[k][0] for k in ("gravity", "springs", "attachments", "gas")) + out["grab"]
+        return sum(out[k][0] for k in ("gravity", "springs", "attachments", "gas", "grab"))
 
     size = np.sum(np.abs(force * direction))
     _check_derivative(total, q, direction, -np.sum(force * direction), 1e-4,

@@ -67,6 +67,15 @@ Index soft_contacts(const CoreModel& core, F64 q, F64 qd, std::optional<Index> h
     return softbody::kernels().soft_contacts(m, q.data(), qd.data(), b.contact);
 }
 
+/// The registry position of the term called `name`.
+int term_position(const std::string& name) {
+    const softbody::KernelTable& k = softbody::kernels();
+    for (int t = 0; t < k.term_count; ++t)
+        if (name == k.terms[t].name) return t;
+    fail("no registered term is called " + name);
+    return -1;
+}
+
 /// The implicit schemes' matrix-free product, also behind the stability estimate.
 void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, ConstF64 p,
                      double alpha_m, double alpha_c, double alpha_k, ConstF64 u, ConstF64 a,
@@ -84,10 +93,19 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
     check_shape(pnet, "body_pnet", {nb_});
     check_shape(out, "out", {n, 3});
     CoreControl c(m, control);
+    // the product reads these arrays only (they stay the caller's)
+    softbody::Linearization l;
+    l.q = q.data();
+    l.spring_u = const_cast<double*>(u.data());
+    l.spring_a = const_cast<double*>(a.data());
+    l.spring_b = const_cast<double*>(b.data());
+    l.volume_gradient = gradient.data();
+    l.body_dpdv = const_cast<double*>(dpdv.data());
+    l.body_pnet = const_cast<double*>(pnet.data());
+    const unsigned skip = attachments ? 0u : 1u << term_position("attachments");
     nb::gil_scoped_release release;
-    softbody::kernels().apply_jacobians(m, c.view, q.data(), p.data(), alpha_m, alpha_c, alpha_k,
-                                        u.data(), a.data(), b.data(), gradient.data(),
-                                        dpdv.data(), pnet.data(), attachments, out.data());
+    softbody::kernels().apply_jacobians(m, c.view, l, p.data(), alpha_m, alpha_c, alpha_k, skip,
+                                        out.data());
 }
 
 /// Volumes of bodies given by plain arrays (before a Model exists, or by another method).
@@ -144,33 +162,51 @@ nb::ndarray<nb::numpy, double> copy_array(const double* data, size_t count) {
     return to_numpy(std::vector<double>(data, data + count));
 }
 
-/// Each conservative term's energy at (q, t), per term its total and each body's share.
+/// Each registered term's energy at (q, t): per term with an energy its total and each
+/// body's share.
 nb::dict eval_energies(const CoreModel& core, nb::handle control, double t, ConstF64 q) {
     const softbody::Model& m = core.model();
     check_shape(q, "q", {m.particles.count, 3});
     CoreControl c(m, control);
+    const softbody::KernelTable& k = softbody::kernels();
     const size_t nb_ = static_cast<size_t>(m.bodies.count);
-    std::vector<double> per_body(4 * nb_, 0.0), volume(nb_), lo(3 * nb_), hi(3 * nb_);
+    std::vector<double> per_body(static_cast<size_t>(k.term_count) * nb_, 0.0), volume(nb_),
+        lo(3 * nb_), hi(3 * nb_);
     softbody::TermEnergies e;
-    e.body_gravity = per_body.data();
-    e.body_springs = e.body_gravity + nb_;
-    e.body_attachments = e.body_springs + nb_;
-    e.body_gas = e.body_attachments + nb_;
+    e.body = per_body.data();
     softbody::BodyGas gas;
     gas.volume = volume.data();
     gas.lo = lo.data();
     gas.hi = hi.data();
     {
         nb::gil_scoped_release release;
-        softbody::kernels().eval_energies(m, c.view, t, q.data(), gas, e);
+        k.eval_energies(m, c.view, t, q.data(), gas, e);
     }
     nb::dict out;
-    out["gravity"] = nb::make_tuple(e.gravity, copy_array(e.body_gravity, nb_));
-    out["springs"] = nb::make_tuple(e.springs, copy_array(e.body_springs, nb_));
-    out["attachments"] = nb::make_tuple(e.attachments, copy_array(e.body_attachments, nb_));
-    out["gas"] = nb::make_tuple(e.gas, copy_array(e.body_gas, nb_));
-    out["grab"] = e.grab;
+    for (int term = 0; term < k.term_count; ++term)
+        if (k.terms[term].energy)
+            out[k.terms[term].name] =
+                nb::make_tuple(e.total[term], copy_array(e.body + term * nb_, nb_));
     out["volume"] = copy_array(volume.data(), nb_);
+    return out;
+}
+
+/// The registered terms in registry order (the order of their sums): each a dict of its
+/// name and traits.
+nb::list term_table() {
+    const softbody::KernelTable& k = softbody::kernels();
+    nb::list out;
+    for (int t = 0; t < k.term_count; ++t) {
+        const softbody::TermTraits& traits = k.terms[t];
+        nb::dict d;
+        d["name"] = traits.name;
+        d["lane"] = traits.lane;
+        d["projected"] = traits.projected;
+        d["fused"] = traits.fused;
+        d["energy"] = traits.energy;
+        d["external"] = traits.external;
+        out.append(d);
+    }
     return out;
 }
 
@@ -218,9 +254,14 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
 void bind_terms(nb::module_& mod) {
     mod.def("eval_energies", &eval_energies, nb::arg("model"), nb::arg("control"), nb::arg("t"),
             nb::arg("q").noconvert(),
-            "Energies [J] of the conservative terms at q (N, 3), time t [s]: a dict of "
-            "'gravity', 'springs', 'attachments', 'gas' -> (total, per body (B,)), 'grab' -> "
-            "total, and 'volume' (B,) [m^3], each body's by its method (the gas's).");
+            "Energies [J] of the registered terms that have one at q (N, 3), time t [s]: a "
+            "dict of term name -> (total, per body (B,)), and 'volume' (B,) [m^3], each "
+            "body's by its method (the gas's).");
+    mod.def("term_table", &term_table,
+            "The registered physics terms in the order their forces are summed: a list of "
+            "dicts of 'name' and the traits 'lane' (a vertex-major form), 'projected' "
+            "(projective dynamics' local step), 'fused' (the fused symplectic pass), "
+            "'energy' (has one), 'external' (its energy is work from outside the model).");
     mod.def("stiffness_bounds", &stiffness_bounds, nb::arg("model"), nb::arg("control"),
             nb::arg("q").noconvert(),
             "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'springs', "

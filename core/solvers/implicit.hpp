@@ -13,30 +13,32 @@
 
 #include "model.hpp"
 #include "solvers/common.hpp"
-#include "solvers/explicit.hpp"
+#include "solvers/forms.hpp"
 #include "solvers/multigrid.hpp"
-#include "terms/attachments.hpp"
-#include "terms/external.hpp"
-#include "terms/gas.hpp"
-#include "terms/springs.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::implicit_solver {
 
-/// out = alpha_m M p + alpha_c C p + alpha_k K p at the step's start (the prepared spring
-/// and pressure data in w): the system matrix's product, term by term.
+/// The linearisation at the step's start (x0 in w.q0, the gas there in w.gas) that the
+/// terms' Jacobian products and smoother blocks read.
+inline Linearization at_start(const ImplicitBuffers& w) {
+    Linearization l;
+    l.q = w.q0;
+    l.spring_u = w.spring_u;
+    l.spring_a = w.spring_a;
+    l.spring_b = w.spring_b;
+    l.volume_gradient = w.gas.volume_gradient;
+    l.body_dpdv = w.body_dpdv;
+    l.body_pnet = w.body_pnet;
+    return l;
+}
+
+/// out = alpha_m M p + alpha_c C p + alpha_k K p at the step's start: the system matrix's
+/// product, term by term (forms::apply_jacobians).
 inline void apply_at_start(const Model& m, const Control& c, const ImplicitBuffers& w,
                            double alpha_m, double alpha_c, double alpha_k, const double* p,
                            double* out) {
-    for (index i = 0; i < m.particles.count; ++i) {
-        const double wm = alpha_m * m.particles.mass[i];
-        for (int k = 0; k < 3; ++k) out[3 * i + k] = wm * p[3 * i + k];
-    }
-    springs::jacobian_product(m, w.spring_u, w.spring_a, w.spring_b, alpha_c, alpha_k, p, out);
-    attachments::jacobian_product(m, c, w.q0, alpha_c, alpha_k, p, out);
-    external::grab_jacobian_product(c, alpha_c, alpha_k, p, out);
-    gas::jacobian_product(m, w.q0, w.gas.volume_gradient, w.body_dpdv, w.body_pnet, alpha_k, p,
-                          out);
+    forms::apply_jacobians(m, c, at_start(w), alpha_m, alpha_c, alpha_k, p, out);
 }
 
 /// sum over free particles of a_i . b_i (pinned rows are not unknowns).
@@ -67,10 +69,13 @@ inline void invert_3x3(const double* a, double* out) {
 /// The finest-level smoother's blocks for step h: each term's share, then the inverses.
 inline void prepare_blocks(const Model& m, const Control& c, double h, const ImplicitBuffers& w,
                            const MultigridView& mg) {
-    springs::smoother_blocks(m, h, w.spring_u, w.spring_a, w.spring_b, mg.vertex_spring_ptr,
-                             mg.vertex_spring, mg.entry_coef, mg.block);
-    attachments::add_smoother_blocks(m, c, h, w.q0, mg.block);
-    external::add_grab_block(c, h, mg.block);
+    SmootherBlocks blocks;
+    blocks.h = h;
+    blocks.entry_ptr = mg.vertex_spring_ptr;
+    blocks.entry_spring = mg.vertex_spring;
+    blocks.entry_coef = mg.entry_coef;
+    blocks.block = mg.block;
+    forms::smoother_blocks(m, c, at_start(w), blocks);
     for (index i = 0; i < m.particles.count; ++i) invert_3x3(mg.block + 9 * i, mg.block_inv + 9 * i);
 }
 
@@ -161,10 +166,9 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
 
 /// Everything the step's matrix needs at its start (x0 in w.q0, the gas in w.gas): spring
 /// blocks, pressure slopes, the smoother's blocks or the Jacobi diagonal, for step h.
-inline void prepare(const Model& m, const Control& c, double h, const ImplicitBuffers& w,
-                    const MultigridView* mg) {
-    springs::prepare(m, w.q0, w.spring_u, w.spring_a, w.spring_b);
-    gas::pressure_slopes(m, w.gas, w.body_dpdv, w.body_pnet);
+inline void prepare(const Model& m, const Control& c, double t, double h,
+                    const ImplicitBuffers& w, const MultigridView* mg) {
+    forms::prepare(Eval{m, c, t, w.q0, w.v0, w.gas}, at_start(w));
     if (mg != nullptr) prepare_blocks(m, c, h, w, *mg);
 }
 
@@ -182,7 +186,7 @@ inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) 
 /// into q, qd; BDF2 reads the previous step's start in w.q_prev, w.v_prev, and both leave
 /// this step's start there. dv is solved from the last step's dv (w.cg_x) when that is
 /// closer. Returns the CG iterations used.
-inline index step(const Model& m, const Control& c, double dt, double* q, double* qd,
+inline index step(const Model& m, const Control& c, double t, double dt, double* q, double* qd,
                   const ImplicitBuffers& w, const MultigridView* mg, double tolerance,
                   index max_iterations, bool bdf2) {
     const index n = m.particles.count;
@@ -190,7 +194,7 @@ inline index step(const Model& m, const Control& c, double dt, double* q, double
     const double h = bdf2 ? dt * (2.0 / 3.0) : dt;
     for (index k = 0; k < 3 * n; ++k)  // y, the position change before dv
         w.qs[k] = bdf2 ? (w.q0[k] - w.q_prev[k]) / 3.0 + h * w.v0[k] : h * w.v0[k];
-    prepare(m, c, h, w, mg);
+    prepare(m, c, t, h, w, mg);
     apply_at_start(m, c, w, 0.0, 0.0, 1.0, w.qs, w.ky);  // K y for the right-hand side
     if (mg == nullptr) jacobi_diagonal(m, h, w);
     double rhs_norm = 0.0;
@@ -293,14 +297,14 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);
-        explicit_solver::eval_forces(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);
+        forms::eval_forces(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);
         RunResult r = loop::check_volumes(m, w.gas.volume, p.ratio_min, p.ratio_max);
         if (r.status != OK) {
             r.steps_done = step_index;
             return r;
         }
         const bool two_step = ip.bdf2 && (step_index > 0 || ip.history) && w.contacts_acted[0] == 0;
-        const index its = step(m, c, p.dt, s.q, s.qd, w, mg, ip.tolerance, ip.max_iterations,
+        const index its = step(m, c, t, p.dt, s.q, s.qd, w, mg, ip.tolerance, ip.max_iterations,
                                two_step);
         w.cg_stats[0] += 1;
         w.cg_stats[1] += its;

@@ -11,20 +11,14 @@
 //     (M / h^2 + sum_s (k_s + c_s / h) A_s^T A_s) x = M y / h^2 + sum_s A_s^T (k_s p_s + c_s / h q_s) + f
 //
 // (the global step) by two triangular solves on the factor Python built for h. f is every
-// other force at the iterate, explicit within the iteration: gravity, external and grab
-// forces, the gas pressure and air drag. Python's softbody.solvers.projective builds the
+// other force at the iterate, explicit within the iteration: every registered term that is
+// not projected (terms/term.hpp, kProjected). Python's softbody.solvers.projective builds the
 // factor and caches one per step size.
 #pragma once
 
 #include "model.hpp"
 #include "solvers/common.hpp"
-#include "solvers/explicit.hpp"
-#include "terms/attachments.hpp"
-#include "terms/drag.hpp"
-#include "terms/external.hpp"
-#include "terms/gas.hpp"
-#include "terms/gravity.hpp"
-#include "terms/springs.hpp"
+#include "solvers/forms.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::projective {
@@ -113,22 +107,11 @@ inline void solve(const Factor& a, const double* b, double* x, double* out) {
 }
 
 /// The forces projective dynamics keeps explicit, at time t [s] for the iterate q, qd
-/// (N, 3), into f (N, 3) [N] (refreshing the volumes, dV/dx and pressures in gas). With
-/// SIMD lanes or threads the weight, dV/dx and exact volumes come from the vertex-major pass
-/// without its springs; the sums run in another order, so the paths agree to round-off.
+/// (N, 3), into f (N, 3) [N] (refreshing the volumes, dV/dx and pressures in gas): every
+/// term's but the projected ones' (forms::eval_forces<kUnprojected>).
 inline void forces(const Model& m, const Control& c, double t, const double* q, const double* qd,
                    const BodyGas& gas, const LaneBuffers& lanes, double* f) {
-    const bool lanes_pass = explicit_solver::use_vertex_pass(lanes);
-    if (lanes_pass)
-        explicit_solver::vertex_pass<false>(m, q, qd, gas, lanes, f);  // weight, dV/dx, V
-    else
-        gravity::force(m, f);           // weight m g (initialises the accumulator)
-    external::force(m, c, f);           // per-step forces from Control
-    external::grab_force(c, q, qd, f);  // a grabbed particle pulled to a target
-    volume::evaluate(m, q, gas, lanes_pass);  // volumes and dV/dx (the rest, after the pass)
-    gas::pressures(m, c, t, gas);       // the gas law's P(V, t)
-    gas::force(m, gas, f);              // (P - P_ambient) dV/dx
-    drag::force(m, c, q, qd, f);        // air drag on faces (skipped when off)
+    forms::eval_forces<forms::Which::kUnprojected>(m, c, t, q, qd, gas, lanes, f);
 }
 
 /// rhs (N, 3) = M y / h^2 + f + the springs' and attachments' projection terms at the iterate
@@ -143,8 +126,7 @@ inline void right_hand_side(const Model& m, const Control& c, double h, const do
         else
             store(rhs, i, load(y, i));
     }
-    springs::project(m, h, x, x0, rhs);
-    attachments::project(m, c, h, x, x0, rhs);
+    forms::project(m, c, h, x, x0, rhs);
 }
 
 /// One backward Euler step of `iterations` local-global iterations from w.q0, w.v0 at time t,

@@ -11,6 +11,7 @@
 
 #include "model.hpp"
 #include "terms/springs.hpp"
+#include "terms/term.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::attachments {
@@ -167,5 +168,26 @@ inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_da
         }
     }
 }
+
+/// The registered term (terms/registry.hpp).
+struct Term : TermBase {
+    static constexpr const char* kName = "attachments";
+    static constexpr bool kProjected = true, kEnergy = true;
+    static bool active(const Model& m, const Control&) { return m.attachments.count > 0; }
+    static void force(const Eval& e, double* f) { attachments::force(e.m, e.c, e.q, e.qd, f); }
+    static double energy(const Eval& e, double* body) { return energies(e.m, e.c, e.q, body); }
+    static void jacobian_product(const Model& m, const Control& c, const Linearization& l,
+                                 double alpha_c, double alpha_k, const double* p, double* out) {
+        attachments::jacobian_product(m, c, l.q, alpha_c, alpha_k, p, out);
+    }
+    static void add_smoother_blocks(const Model& m, const Control& c, const Linearization& l,
+                                    const SmootherBlocks& s) {
+        attachments::add_smoother_blocks(m, c, s.h, l.q, s.block);
+    }
+    static void project(const Model& m, const Control& c, double h, const double* x,
+                        const double* x0, double* rhs) {
+        attachments::project(m, c, h, x, x0, rhs);
+    }
+};
 
 }  // namespace softbody::SOFTBODY_KERNELS::attachments

@@ -31,6 +31,7 @@
 #pragma once
 
 #include "model.hpp"
+#include "terms/term.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::drag {
@@ -89,5 +90,12 @@ inline double power(const Model& m, const Control& c, const double* q, const dou
     }
     return total;
 }
+
+/// The registered term (terms/registry.hpp): a force every solver takes explicitly.
+struct Term : TermBase {
+    static constexpr const char* kName = "drag";
+    static bool active(const Model& m, const Control&) { return m.drag.active; }
+    static void force(const Eval& e, double* f) { drag::force(e.m, e.c, e.q, e.qd, f); }
+};
 
 }  // namespace softbody::SOFTBODY_KERNELS::drag

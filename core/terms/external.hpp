@@ -8,6 +8,7 @@
 #pragma once
 
 #include "model.hpp"
+#include "terms/term.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::external {
@@ -57,5 +58,35 @@ inline double grab_energy(const Control& c, const double* q) {
     }
     return 0.5 * c.grab_stiffness * e;
 }
+
+/// The registered terms (terms/registry.hpp): Control's per-particle forces, and the grab
+/// spring (its energy is reported, and softbody.diagnostics leaves it out of the total).
+struct Term : TermBase {
+    static constexpr const char* kName = "external";
+    static constexpr bool kFused = true;
+    static void force(const Eval& e, double* f) { external::force(e.m, e.c, f); }
+};
+
+struct GrabTerm : TermBase {
+    static constexpr const char* kName = "grab";
+    static constexpr bool kEnergy = true, kExternal = true;
+    static bool active(const Model&, const Control& c) { return c.grab_particle >= 0; }
+    static void force(const Eval& e, double* f) { grab_force(e.c, e.q, e.qd, f); }
+    /// The grab spring's energy [J], added to the grabbed particle's body.
+    static double energy(const Eval& e, double* body) {
+        const double energy = grab_energy(e.c, e.q);
+        if (e.c.grab_particle >= 0 && e.m.particles.body[e.c.grab_particle] >= 0)
+            body[e.m.particles.body[e.c.grab_particle]] += energy;
+        return energy;
+    }
+    static void jacobian_product(const Model&, const Control& c, const Linearization&,
+                                 double alpha_c, double alpha_k, const double* p, double* out) {
+        grab_jacobian_product(c, alpha_c, alpha_k, p, out);
+    }
+    static void add_smoother_blocks(const Model&, const Control& c, const Linearization&,
+                                    const SmootherBlocks& s) {
+        add_grab_block(c, s.h, s.block);
+    }
+};
 
 }  // namespace softbody::SOFTBODY_KERNELS::external

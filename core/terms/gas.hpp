@@ -19,6 +19,7 @@
 
 #include "model.hpp"
 #include "simd.hpp"
+#include "terms/term.hpp"
 #include "terms/volume.hpp"
 #include "vec.hpp"
 
@@ -251,5 +252,31 @@ inline double rank_one_bound(const Model& m, const double* dpdv, const double* g
     }
     return bound;
 }
+
+/// The registered term (terms/registry.hpp). Its update refreshes the volumes (those the
+/// vertex-major pass did not sum when it ran), dV/dx and the pressures every force reads.
+struct Term : TermBase {
+    static constexpr const char* kName = "gas";
+    static constexpr bool kFused = true, kEnergy = true;
+    static void update(const Eval& e, bool lanes_ran) {
+        volume::evaluate(e.m, e.q, e.gas, lanes_ran);
+        pressures(e.m, e.c, e.t, e.gas);
+    }
+    static void force(const Eval& e, double* f) { gas::force(e.m, e.gas, f); }
+    /// Each body's gas energy at its volume by its own method (into e.gas.volume; no dV/dx
+    /// when e.gas.volume_gradient is null).
+    static double energy(const Eval& e, double* body) {
+        volume::evaluate(e.m, e.q, e.gas);
+        return energies(e.m, e.c, e.t, e.gas, body);
+    }
+    /// P'(V) and P - P_a from the gas state at the point (e.gas, refreshed there).
+    static void prepare(const Eval& e, const Linearization& l) {
+        pressure_slopes(e.m, e.gas, l.body_dpdv, l.body_pnet);
+    }
+    static void jacobian_product(const Model& m, const Control&, const Linearization& l,
+                                 double, double alpha_k, const double* p, double* out) {
+        gas::jacobian_product(m, l.q, l.volume_gradient, l.body_dpdv, l.body_pnet, alpha_k, p, out);
+    }
+};
 
 }  // namespace softbody::SOFTBODY_KERNELS::gas

@@ -7,18 +7,19 @@
 
 #include "model.hpp"
 #include "simd.hpp"
+#include "terms/term.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::gravity {
 
-/// Set f (N, 3) [N] to m_i g: the first term of the accumulator (it overwrites f).
+/// f (N, 3) [N] += m_i g.
 inline void force(const Model& m, double* f) {
     const double gx = m.gravity[0], gy = m.gravity[1], gz = m.gravity[2];
     for (index i = 0; i < m.particles.count; ++i) {
         const double mass = m.particles.mass[i];
-        f[3 * i] = mass * gx;
-        f[3 * i + 1] = mass * gy;
-        f[3 * i + 2] = mass * gz;
+        f[3 * i] += mass * gx;
+        f[3 * i + 1] += mass * gy;
+        f[3 * i + 2] += mass * gz;
     }
 }
 
@@ -44,5 +45,13 @@ inline double energies(const Model& m, const double* q, double* body_energy) {
     }
     return total;
 }
+
+/// The registered term (terms/registry.hpp).
+struct Term : TermBase {
+    static constexpr const char* kName = "gravity";
+    static constexpr bool kLane = true, kFused = true, kEnergy = true;
+    static void force(const Eval& e, double* f) { gravity::force(e.m, f); }
+    static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
+};
 
 }  // namespace softbody::SOFTBODY_KERNELS::gravity

@@ -16,6 +16,7 @@
 
 #include "model.hpp"
 #include "simd.hpp"
+#include "terms/term.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::springs {
@@ -112,13 +113,14 @@ inline void jacobian_product(const Model& m, const double* u, const double* a, c
 /// The springs' share of the implicit system M - h C - h^2 K for its finest-level smoother:
 /// per spring the block alpha u u^T + beta I with alpha = h c + h^2 (a - b), beta = h^2 b,
 /// packed per particle entry (entry_ptr (N + 1,), entry_spring (2 S,)) into coef (2 S, 5)
-/// as u, alpha, beta, and each particle's diagonal block m I + the sum of its springs'
-/// blocks into block (N, 3, 3). u, a, b from prepare; h [s].
+/// as u, alpha, beta, and each particle's springs' blocks added to its diagonal block in
+/// block (N, 3, 3) (which holds m I and the terms before). u, a, b from prepare; h [s].
 inline void smoother_blocks(const Model& m, double h, const double* u, const double* a,
                             const double* b, const index* entry_ptr, const index* entry_spring,
                             double* coef, double* block) {
     for (index i = 0; i < m.particles.count; ++i) {
-        double b00 = m.particles.mass[i], b11 = b00, b22 = b00, b01 = 0.0, b02 = 0.0, b12 = 0.0;
+        double* d = block + 9 * i;
+        double b00 = d[0], b11 = d[4], b22 = d[8], b01 = d[1], b02 = d[2], b12 = d[5];
         for (index e = entry_ptr[i]; e < entry_ptr[i + 1]; ++e) {
             const index s = entry_spring[e];
             const V3 us = load(u, s);
@@ -133,7 +135,6 @@ inline void smoother_blocks(const Model& m, double h, const double* u, const dou
             b02 += alpha * us.x * us.z;
             b12 += alpha * us.y * us.z;
         }
-        double* d = block + 9 * i;
         d[0] = b00, d[4] = b11, d[8] = b22;
         d[1] = d[3] = b01;
         d[2] = d[6] = b02;
@@ -267,5 +268,29 @@ inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_da
         }
     }
 }
+
+/// The registered term (terms/registry.hpp): its forms for the solvers.
+struct Term : TermBase {
+    static constexpr const char* kName = "springs";
+    static constexpr bool kLane = true, kProjected = true, kFused = true, kEnergy = true;
+    static void force(const Eval& e, double* f) { springs::force(e.m, e.q, e.qd, f); }
+    static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
+    static void prepare(const Eval& e, const Linearization& l) {
+        springs::prepare(e.m, l.q, l.spring_u, l.spring_a, l.spring_b);
+    }
+    static void jacobian_product(const Model& m, const Control&, const Linearization& l,
+                                 double alpha_c, double alpha_k, const double* p, double* out) {
+        springs::jacobian_product(m, l.spring_u, l.spring_a, l.spring_b, alpha_c, alpha_k, p, out);
+    }
+    static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
+                                    const SmootherBlocks& s) {
+        smoother_blocks(m, s.h, l.spring_u, l.spring_a, l.spring_b, s.entry_ptr, s.entry_spring,
+                        s.entry_coef, s.block);
+    }
+    static void project(const Model& m, const Control&, double h, const double* x,
+                        const double* x0, double* rhs) {
+        springs::project(m, h, x, x0, rhs);
+    }
+};
 
 }  // namespace softbody::SOFTBODY_KERNELS::springs

@@ -16,7 +16,7 @@ import weakref
 
 from softbody import _core
 
-__all__ = ["available_threads", "simd_path", "simd_paths", "use_simd"]
+__all__ = ["available_threads", "simd_path", "simd_paths", "terms", "use_simd"]
 
 _MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -42,6 +42,16 @@ def use_simd(name: str) -> None:
             f"instruction set {name!r} is not available here; choose one of: "
             + ", ".join([*simd_paths(), "auto"])
         )
+
+
+def terms() -> list[dict]:
+    """The physics terms registered in the core (``core/terms/registry.hpp``), in the order
+    their forces, Jacobian products and energies are summed: one dict each with its
+    ``name`` and traits, ``lane`` (the vertex-major pass gives its force), ``projected``
+    (projective dynamics solves it by its projection), ``fused`` (the fused symplectic
+    Euler pass covers it), ``energy`` (it has one) and ``external`` (its energy is work
+    done from outside the model, such as the grab spring's)."""
+    return [dict(t) for t in _core.term_table()]
 
 
 def available_threads() -> int:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from softbody import _core
-from softbody.core import core_model
+from softbody.core import core_model, terms
 from softbody.reference import gas as ref_gas
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
@@ -118,11 +118,15 @@ class Energies:
     """Energies of a state [J]. Totals cover the whole model (free particles included);
     ``body_*`` arrays (B,) split them by body.
 
-    ``gas`` is the gas law's potential (``softbody.gas``), evaluated at each body's volume
-    by its own method (0 for open surfaces, whose wind pressure does uncounted work).
-    With the exact volume the pressure force is minus its gradient, so kinetic +
-    gravitational + spring + gas is conserved without damping and with constant nRT;
-    with a bounding volume that sum is not conserved (the paper's approximation).
+    ``terms`` holds every registered term's energy (``softbody.core.terms()``, those with
+    one), ``body_terms`` its split by body. ``gravitational`` is the weight's, ``gas`` the
+    gas law's potential (``softbody.gas``), evaluated at each body's volume by its own
+    method (0 for open surfaces, whose wind pressure does uncounted work), and ``spring``
+    every other term's elastic energy (springs, attachments, and any term added since),
+    work done from outside the model (the grab spring) left out. With the exact volume the
+    pressure force is minus its gradient, so kinetic + gravitational + spring + gas is
+    conserved without damping and with constant nRT; with a bounding volume that sum is not
+    conserved (the paper's approximation).
     """
 
     kinetic: float
@@ -133,6 +137,8 @@ class Energies:
     body_gravitational: np.ndarray
     body_spring: np.ndarray
     body_gas: np.ndarray
+    terms: dict[str, float]
+    body_terms: dict[str, np.ndarray]
 
     @property
     def total(self) -> float:
@@ -141,13 +147,13 @@ class Energies:
 
 
 def energies(model: Model, state: State, control: Control | None = None) -> Energies:
-    """Kinetic, gravitational (-m g.x), spring (edges, bending, attachments) and gas energy.
+    """Kinetic energy and every registered term's energy at ``state``.
 
     ``control`` supplies gas overrides and attachment anchors when they differ from the
     model's. Each term's energy comes from its own file of the compiled core
-    (``core/terms/``: ``gravity``, ``springs``, ``attachments``, ``gas``;
-    ``softbody.reference`` holds the same formulas in NumPy). Drag and the control's
-    forces have no energy; the grab spring's is left out (the user's hand does work).
+    (``core/terms/``; ``softbody.reference`` holds the same formulas in NumPy). Dissipative
+    and given forces (air on faces, the control's forces) have none; the grab spring's is
+    reported in ``terms`` but left out of the total (the user's hand does work).
     """
     state.conform(model)
     q, qd = state.particle_q, state.particle_qd
@@ -158,15 +164,18 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
     kin = 0.5 * m * np.einsum("ij,ij->i", qd, qd)
     # each body's gas energy at its volume by its own method; an open surface (cloth)
     # holds no gas: the work of its wind pressure is not counted
-    terms = _core.eval_energies(core_model(model), _control(model, control), float(state.time), q)
-    grav, spr, att, gas = (terms[name] for name in ("gravity", "springs", "attachments", "gas"))
+    values = _core.eval_energies(core_model(model), _control(model, control), float(state.time), q)
+    internal = [t["name"] for t in terms() if t["energy"] and not t["external"]]
+    elastic = [name for name in internal if name not in ("gravity", "gas")]
     return Energies(
         kinetic=float(kin.sum()),
-        gravitational=grav[0],
-        spring=spr[0] + att[0],
-        gas=gas[0],
+        gravitational=values["gravity"][0],
+        spring=float(sum(values[name][0] for name in elastic)),
+        gas=values["gas"][0],
         body_kinetic=np.bincount(pb[pb >= 0], weights=kin[pb >= 0], minlength=bodies),
-        body_gravitational=grav[1],
-        body_spring=spr[1] + att[1],
-        body_gas=gas[1],
+        body_gravitational=values["gravity"][1],
+        body_spring=sum((values[name][1] for name in elastic), np.zeros(bodies)),
+        body_gas=values["gas"][1],
+        terms={name: float(v[0]) for name, v in values.items() if name != "volume"},
+        body_terms={name: v[1] for name, v in values.items() if name != "volume"},
     )

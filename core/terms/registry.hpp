@@ -1,0 +1,48 @@
+// The registered physics terms, one line each, in the order every solver sums them: their
+// forces into the accumulator, their Jacobian products, smoother blocks, projections and
+// energies. The order is part of the results (floating-point sums), so a run repeats bit
+// for bit; a new term goes where its sums should fall (usually last). Solvers, kernels.cpp
+// and the bindings iterate this list and never name a term (terms/term.hpp: the forms).
+#pragma once
+
+#include "terms/attachments.hpp"
+#include "terms/drag.hpp"
+#include "terms/external.hpp"
+#include "terms/gas.hpp"
+#include "terms/gravity.hpp"
+#include "terms/springs.hpp"
+#include "terms/term.hpp"
+
+namespace softbody::SOFTBODY_KERNELS {
+
+template <class... T>
+struct TermList {
+    static constexpr int count = sizeof...(T);
+    /// f(Term{}, position) for every term, in order.
+    template <class F>
+    static void each(F&& f) {
+        int position = 0;
+        (f(T{}, position++), ...);
+    }
+};
+
+using Terms = TermList<
+    gravity::Term,      // weight m g
+    springs::Term,      // damped Hooke springs: edges, bending, user springs
+    gas::Term,          // the gas law's pressure on the faces
+    attachments::Term,  // springs to anchor points Control moves
+    external::Term,     // per-particle forces from Control
+    external::GrabTerm, // a grabbed particle pulled to a target
+    drag::Term>;        // air drag on faces
+
+/// Each term's traits (terms/term.hpp) in registry order (softbody._core.term_table).
+inline const TermTraits* term_traits() {
+    static TermTraits traits[Terms::count];
+    Terms::each([](auto term, int k) {
+        using T = decltype(term);
+        traits[k] = {T::kName, T::kLane, T::kProjected, T::kFused, T::kEnergy, T::kExternal};
+    });
+    return traits;
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS

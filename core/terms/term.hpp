@@ -1,0 +1,74 @@
+// What a physics term is to the solvers: one struct per term (its file's `Term`), derived
+// from TermBase, whose static functions are the term's forms. A solver, the diagnostics and
+// the stability estimate iterate the registered terms (terms/registry.hpp) and call a form
+// on each; TermBase gives every form a default that does nothing, so a term defines only
+// the forms it has, and an empty default costs nothing once inlined.
+//
+// The forms, each at a point `Eval` (model, control, time, positions, velocities and the
+// gas state of this evaluation):
+//
+//   update      per-evaluation state the forces read, before any force (gas: volumes and
+//               pressures); `lanes_ran` says the vertex-major pass already did its part
+//   force       f (N, 3) [N] += the term's force; skipped for a kLane term when the
+//               vertex-major pass ran (its lane form gave that force) and for a kProjected
+//               term in projective dynamics (its projection stands for the force there)
+//   energy      the term's energy [J], each body's share added to body (B,); kEnergy says
+//               the term has one (dissipative and given forces have none)
+//   prepare     the implicit solvers' linearisation at the step's start (Linearization)
+//   jacobian_product   out (N, 3) += alpha_c C p + alpha_k K p (C = df/dv, K = df/dx), the
+//               matrix-free product of backward Euler and BDF2, -K positive semi-definite
+//   add_smoother_blocks  the term's share of each particle's 3 x 3 diagonal block of
+//               M - h C - h^2 K (the multigrid smoother)
+//   project     projective dynamics' local step: the term's part of the global step's
+//               right-hand side at the iterate (a kProjected term's matrix part is in the
+//               factor Python builds)
+//   active      whether the term acts at all in a call (the fused symplectic Euler pass
+//               covers only kFused terms: a call with another active term takes the
+//               general step)
+//
+// Forms the vertex-major pass fuses (lanes) stay in each term's file beside these
+// (gravity::lane_force, springs::lane_pair, gas::lane_face); the stability estimate's
+// Gershgorin pieces too (kernels.cpp composes them).
+#pragma once
+
+#include "model.hpp"
+
+namespace softbody::SOFTBODY_KERNELS {
+
+/// A point at which a form is evaluated: time t [s], positions q and velocities qd (N, 3),
+/// and the gas state (volumes, pressures, dV/dx) the forces of this evaluation share.
+struct Eval {
+    const Model& m;
+    const Control& c;
+    double t;
+    const double* q;
+    const double* qd;
+    const BodyGas& gas;
+};
+
+/// Every form's default: none. A term's struct derives from this and hides what it has.
+struct TermBase {
+    static constexpr bool kLane = false;       // the vertex-major pass gives its force
+    static constexpr bool kProjected = false;  // projective dynamics: a projection, no force
+    // the fused symplectic pass (solvers/explicit.hpp, symplectic_pass) sums its force: only
+    // the lane terms and the terms that pass adds (the pressure, Control's forces) may say so
+    static constexpr bool kFused = false;
+    static constexpr bool kEnergy = false;     // it has an energy
+    // its energy is work done from outside the model (the grab spring: the user's hand),
+    // which softbody.diagnostics leaves out of the model's total
+    static constexpr bool kExternal = false;
+    static bool active(const Model&, const Control&) { return true; }
+    static void update(const Eval&, bool /*lanes_ran*/) {}
+    static void force(const Eval&, double* /*f*/) {}
+    static double energy(const Eval&, double* /*body*/) { return 0.0; }
+    static void prepare(const Eval&, const Linearization&) {}
+    static void jacobian_product(const Model&, const Control&, const Linearization&,
+                                 double /*alpha_c*/, double /*alpha_k*/, const double* /*p*/,
+                                 double* /*out*/) {}
+    static void add_smoother_blocks(const Model&, const Control&, const Linearization&,
+                                    const SmootherBlocks&) {}
+    static void project(const Model&, const Control&, double /*h*/, const double* /*x*/,
+                        const double* /*x0*/, double* /*rhs*/) {}
+};
+
+}  // namespace softbody::SOFTBODY_KERNELS
