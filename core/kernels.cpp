@@ -71,8 +71,8 @@ void apply_jacobians(const Model& m, const Control& c, const Linearization& l, c
 }
 
 index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers& w) {
-    if (m.soft_contacts.mode == 1) soft::contacts_bounding(m, q, qd, w);
-    if (m.soft_contacts.mode == 2) return soft::contacts_surface(m, q, qd, w);
+    if (m.soft_contacts.mode == SoftContactMode::BOUNDING) soft::contacts_bounding(m, q, qd, w);
+    if (m.soft_contacts.mode == SoftContactMode::SURFACE) return soft::contacts_surface(m, q, qd, w);
     return 0;
 }
 

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "config.hpp"
+#include "enums.hpp"
 #include "parallel.hpp"
 
 namespace softbody {
@@ -121,7 +122,7 @@ struct Slots {
 
 /// Contacts between soft bodies (collision/soft.hpp).
 struct SoftContacts {
-    int mode = 0;  // 0 none, 1 bounding objects, 2 surfaces
+    int mode = SoftContactMode::NONE;  // SoftContactMode
     double restitution = 0.0, friction = 0.0;
     double margin = 0.0, cell_size = 1.0;  // [m]
 };
@@ -371,15 +372,11 @@ struct TermTraits {
 };
 
 /// Outcome of a run of steps (softbody.solvers.Status).
-enum Status : int {
-    OK = 0,
-    NONFINITE = 1,   // a position or velocity became NaN or infinite
-    RUNAWAY = 2,     // a particle moved faster than the speed limit
-    BAD_VOLUME = 3,  // a body volume became NaN, zero or negative
-    SHRUNK = 4,      // a body volume fell below the lower limit
-    EXPLODED = 5,    // a body volume grew past the upper limit
-    NEED_HASH = 6,   // the spatial hash needs more room
-};
+/// OK; NONFINITE: a position or velocity became NaN or infinite; RUNAWAY: a particle moved
+/// faster than the speed limit; BAD_VOLUME: a body volume became NaN, zero or negative;
+/// SHRUNK / EXPLODED: a body volume fell below / grew past its limit; NEED_HASH: the
+/// spatial hash needs more room (enums.hpp lists them).
+enum Status : int { SOFTBODY_ENUM_STATUS(SOFTBODY_ENUM_MEMBER) };
 
 struct RunResult {
     int status = OK;
@@ -398,7 +395,7 @@ struct ImplicitParams {
 
 /// The run's limits and its step.
 struct RunParams {
-    int scheme = 3;  // Integrator value 0-4 (explicit schemes)
+    int scheme = Integrator::SYMPLECTIC_EULER;  // an explicit scheme (0-4)
     index iterations = 0;  // projective dynamics: local-global iterations per step
     index steps = 0;
     double t0 = 0.0, dt = 0.0;

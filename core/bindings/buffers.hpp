@@ -47,7 +47,7 @@ public:
         contact.collider_q_start = per_collider_[0].data();
         contact.collider_v = per_collider_[1].data();
         contact.collider_w = per_collider_[2].data();
-        if (m.soft_contacts.mode == 2) {
+        if (m.soft_contacts.mode == SoftContactMode::SURFACE) {
             const Index table = hash_table_size(m.triangles.count);
             hash_start_.assign(static_cast<size_t>(table + 1), 0);
             hash_count_.assign(static_cast<size_t>(table), 0);
@@ -74,7 +74,7 @@ private:
 /// triangles up to a cell across); 0 without surface contacts.
 inline Index checked_capacity(const softbody::Model& m, std::optional<Index> asked) {
     if (asked && *asked < 0) fail("hash_capacity must be >= 0, got " + std::to_string(*asked));
-    if (m.soft_contacts.mode != 2) return 0;
+    if (m.soft_contacts.mode != SoftContactMode::SURFACE) return 0;
     return asked ? *asked : 8 * m.triangles.count;
 }
 

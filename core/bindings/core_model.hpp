@@ -129,14 +129,15 @@ private:
             if (m.bodies.tri_range[2 * b + 1] > m.bodies.tri_range[2 * b] && p1 == p0)
                 fail("body " + std::to_string(b) + " has triangles but no particles");
         }
-        check_indices(m.volumes.method, m.bodies.count, 0, 5, "body_volume_method");
-        check_indices(m.gases.law, m.bodies.count, 0, 3, "body_gas_law");
-        check_indices(m.bodies.contact_shape, m.bodies.count, 0, 4, "body_contact_shape");
-        check_indices(m.colliders.kind, m.colliders.count, 0, 4, "collider_kind");
-        check_indices(m.colliders.motion, m.colliders.count, 0, 4, "collider_motion");
-        if (m.soft_contacts.mode < 0 || m.soft_contacts.mode > 2)
+        check_indices(m.volumes.method, m.bodies.count, 0, VolumeMethod::kCount, "body_volume_method");
+        check_indices(m.gases.law, m.bodies.count, 0, GasLaw::kCount, "body_gas_law");
+        check_indices(m.bodies.contact_shape, m.bodies.count, 0, VolumeMethod::MONTE_CARLO,
+                      "body_contact_shape");  // an exact or bounding method
+        check_indices(m.colliders.kind, m.colliders.count, 0, ColliderKind::kCount, "collider_kind");
+        check_indices(m.colliders.motion, m.colliders.count, 0, MotionKind::kCount, "collider_motion");
+        if (m.soft_contacts.mode < 0 || m.soft_contacts.mode >= SoftContactMode::kCount)
             fail("soft_contact_mode must be 0, 1 or 2");
-        if (m.soft_contacts.mode == 2) {
+        if (m.soft_contacts.mode == SoftContactMode::SURFACE) {
             // the surface contacts' grid: cells of a positive, finite size
             if (!(std::isfinite(m.soft_contacts.cell_size) && m.soft_contacts.cell_size > 0.0))
                 fail("contact_cell_size must be finite and > 0, got " +

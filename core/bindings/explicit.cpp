@@ -36,7 +36,7 @@ public:
                                                    nb::handle collider_impulse, double max_speed,
                                                    double ratio_min, double ratio_max) {
         const softbody::Model& m = model_.model();
-        if (scheme < 0 || scheme > 4) fail("scheme must be an explicit Integrator (0-4)");
+        if (scheme < Integrator::EULER || scheme > Integrator::VELOCITY_VERLET) fail("scheme must be an explicit Integrator (0-4)");
         CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
                                      collider_impulse, max_speed, ratio_min, ratio_max);
         run.params.scheme = scheme;

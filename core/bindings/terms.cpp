@@ -135,7 +135,7 @@ nb::ndarray<nb::numpy, double> body_volumes(ConstF64 q, ConstI64 tri_indices,
     check_ranges(m.bodies.particle_range, m.bodies.count, m.particles.count, "body_particle_range");
     check_ranges(m.bodies.tri_range, m.bodies.count, m.triangles.count, "body_tri_range");
     check_ranges(m.volumes.mc_range, m.bodies.count, m.volumes.mc_count, "body_mc_range");
-    check_indices(m.volumes.method, m.bodies.count, 0, 5, "body_volume_method");
+    check_indices(m.volumes.method, m.bodies.count, 0, VolumeMethod::kCount, "body_volume_method");
     for (Index b = 0; b < m.bodies.count; ++b)
         if (m.bodies.tri_range[2 * b + 1] > m.bodies.tri_range[2 * b] &&
             m.bodies.particle_range[2 * b + 1] == m.bodies.particle_range[2 * b])
@@ -188,6 +188,23 @@ nb::dict eval_energies(const CoreModel& core, nb::handle control, double t, Cons
             out[k.terms[term].name] =
                 nb::make_tuple(e.total[term], copy_array(e.body + term * nb_, nb_));
     out["volume"] = copy_array(volume.data(), nb_);
+    return out;
+}
+
+/// The closed sets (enums.hpp): {Python IntEnum name: {member: value}}.
+nb::dict enums() {
+    nb::dict out;
+#define SOFTBODY_ENUM_ITEM(name, value) members[#name] = static_cast<Index>(value);
+#define SOFTBODY_ENUM_SET(cpp, python, list) \
+    {                                        \
+        nb::dict members;                    \
+        list(SOFTBODY_ENUM_ITEM)             \
+        out[python] = members;               \
+    }
+    SOFTBODY_ENUMS(SOFTBODY_ENUM_SET)
+    SOFTBODY_ENUM_SET(Status, "Status", SOFTBODY_ENUM_STATUS)
+#undef SOFTBODY_ENUM_SET
+#undef SOFTBODY_ENUM_ITEM
     return out;
 }
 
@@ -257,6 +274,8 @@ void bind_terms(nb::module_& mod) {
             "Energies [J] of the registered terms that have one at q (N, 3), time t [s]: a "
             "dict of term name -> (total, per body (B,)), and 'volume' (B,) [m^3], each "
             "body's by its method (the gas's).");
+    mod.def("enums", &enums,
+            "The core's closed sets: {IntEnum name: {member name: value}} (core/enums.hpp).");
     mod.def("term_table", &term_table,
             "The registered physics terms in the order their forces are summed: a list of "
             "dicts of 'name' and the traits 'lane' (a vertex-major form), 'projected' "

@@ -45,7 +45,7 @@ inline void poses(const Model& m, const Control& c, double fraction, double dura
         const index motion = m.colliders.motion[k];
         const V3 center = load(m.colliders.center, k);
         const V3 vec = load(m.colliders.motion_vector, k);
-        if (motion == 1) {  // rotation about a pivot
+        if (motion == MotionKind::ROTATION) {  // rotation about a pivot
             const double rate = std::sqrt(dot(vec, vec));
             double r[9];
             if (rate > 0.0)
@@ -66,9 +66,9 @@ inline void poses(const Model& m, const Control& c, double fraction, double dura
             continue;
         }
         for (int j = 0; j < 9; ++j) rot[j] = rest_rot[j];
-        if (motion == 0) {
+        if (motion == MotionKind::STATIC) {
             store(cq, k, center);
-        } else if (motion == 2) {  // constant velocity
+        } else if (motion == MotionKind::TRANSLATION) {  // constant velocity
             store(cq, k, center + t * vec);
             store(cv, k, vec);
         } else {  // oscillation a sin(omega t)
@@ -126,12 +126,12 @@ inline Hit contact(index kind, V3 c, const double* r, V3 h, V3 p, V3 p0) {
     Hit out;
     const V3 ax{r[0], r[3], r[6]}, ay{r[1], r[4], r[7]}, az{r[2], r[5], r[8]};
     const V3 d = p - c;
-    if (kind == 0) {  // plane: local +y is the normal
+    if (kind == ColliderKind::PLANE) {  // plane: local +y is the normal
         const double dist = dot(d, ay);
         if (dist >= 0.0) return out;
         return {true, p - dist * ay, ay};
     }
-    if (kind == 1) {  // container: clamp into the box
+    if (kind == ColliderKind::BOX_CONTAINER) {  // container: clamp into the box
         double lx = dot(ax, d), ly = dot(ay, d), lz = dot(az, d);
         if (std::fabs(lx) <= h.x && std::fabs(ly) <= h.y && std::fabs(lz) <= h.z) return out;
         const double mx = clamp_inward(lx, h.x), my = clamp_inward(ly, h.y),
@@ -142,7 +142,8 @@ inline Hit contact(index kind, V3 c, const double* r, V3 h, V3 p, V3 p0) {
         const V3 n = (mx * ax + my * ay + mz * az);
         return {true, x, {n.x / norm, n.y / norm, n.z / norm}};
     }
-    if (kind == 2) {  // solid sphere: did the path enter it? |p0 + s (p - p0) - c| = r
+    // solid sphere: did the path enter it? |p0 + s (p - p0) - c| = r
+    if (kind == ColliderKind::SPHERE) {
         const double radius = h.x;
         const double d2 = dot(d, d);
         const V3 e = p0 - c, u = p - p0;
@@ -254,7 +255,8 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
         const double e = m.colliders.restitution[k];
         const double keep = 1.0 - m.colliders.friction[k];
         V3 j{0.0, 0.0, 0.0};
-        if (kind == 0) {  // plane: local +y is the normal (contact() below, unrolled)
+        // plane: local +y is the normal (contact() below, unrolled)
+        if (kind == ColliderKind::PLANE) {
             const V3 n{rot[1], rot[4], rot[7]};
             for (index i = 0; i < m.particles.count; ++i) {
                 const V3 p = load(q, i);
@@ -264,7 +266,8 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
                 respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
                 if (seen != nullptr) seen->add(load(q, i), load(qd, i));
             }
-        } else if (kind == 1) {  // container: inside the box is free (contact(), unrolled)
+        } else if (kind == ColliderKind::BOX_CONTAINER) {
+            // container: inside the box is free (contact(), unrolled)
             const V3 ax{rot[0], rot[3], rot[6]}, ay{rot[1], rot[4], rot[7]}, az{rot[2], rot[5], rot[8]};
             for (index i = 0; i < m.particles.count; ++i) {
                 const V3 d = load(q, i) - center;

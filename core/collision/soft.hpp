@@ -57,10 +57,10 @@ inline void fit(const double* q, index begin, index end, index shape, index b,
         w.body_axes[3 * b + k] =
             std::max(0.5 * (w.body_hi[3 * b + k] - w.body_lo[3 * b + k]), 1e-12);
     }
-    if (shape == 1) return;
+    if (shape == VolumeMethod::BOUNDING_BOX) return;
     const V3 c = load(w.body_center, b);
     double wx = 1.0, wy = 1.0, wz = 1.0;
-    if (shape == 3) {
+    if (shape == VolumeMethod::BOUNDING_ELLIPSOID) {
         wx = 1.0 / w.body_axes[3 * b];
         wy = 1.0 / w.body_axes[3 * b + 1];
         wz = 1.0 / w.body_axes[3 * b + 2];
@@ -73,7 +73,7 @@ inline void fit(const double* q, index begin, index end, index shape, index b,
     }
     const double s = std::sqrt(s2);
     for (int k = 0; k < 3; ++k)
-        w.body_axes[3 * b + k] = shape == 2 ? s : s * w.body_axes[3 * b + k];
+        w.body_axes[3 * b + k] = shape == VolumeMethod::BOUNDING_SPHERE ? s : s * w.body_axes[3 * b + k];
 }
 
 /// New velocity for v against normal n, relative to velocity u.
@@ -117,7 +117,7 @@ inline void contacts_bounding(const Model& m, double* q, double* qd, const Conta
                 if (m.particles.inv_mass[i] == 0.0) continue;
                 double dx = q[3 * i] - c.x, dy = q[3 * i + 1] - c.y, dz = q[3 * i + 2] - c.z;
                 V3 n{0.0, 0.0, 0.0};
-                if (shape == 1) {
+                if (shape == VolumeMethod::BOUNDING_BOX) {
                     const double px = ax - std::fabs(dx), py = ay - std::fabs(dy),
                                  pz = az - std::fabs(dz);
                     if (px <= 0.0 || py <= 0.0 || pz <= 0.0) continue;

@@ -114,9 +114,9 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
                          w.collider_q_start, s.collider_q, s.collider_rot, w.collider_v,
                          w.collider_w);
     }
-    if (m.soft_contacts.mode == 1) {
+    if (m.soft_contacts.mode == SoftContactMode::BOUNDING) {
         soft::contacts_bounding(m, s.q, s.qd, w);
-    } else if (m.soft_contacts.mode == 2) {
+    } else if (m.soft_contacts.mode == SoftContactMode::SURFACE) {
         const index needed = soft::contacts_surface(m, s.q, s.qd, w);
         if (needed > 0) return needed;
     }

@@ -41,13 +41,13 @@ inline void accumulate(const Model& m, double weight, const double* vs, const do
 inline void step(const Model& m, const Control& c, int scheme, double t, double dt, double* q,
                  double* qd, const ExplicitBuffers& w) {
     const index n = m.particles.count;
-    if (scheme == 0) {  // explicit Euler (first order)
+    if (scheme == Integrator::EULER) {  // explicit Euler (first order)
         stage(m, w.q0, w.v0, dt, w.v0, w.f, q, qd);
-    } else if (scheme == 1) {  // midpoint: slopes at the half step (second order)
+    } else if (scheme == Integrator::MIDPOINT) {  // midpoint: slopes at the half step (second order)
         stage(m, w.q0, w.v0, 0.5 * dt, w.v0, w.f, w.qs, w.vs);
         forms::eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.lanes, w.f);
         stage(m, w.q0, w.v0, dt, w.vs, w.f, q, qd);
-    } else if (scheme == 2) {  // classical RK4
+    } else if (scheme == Integrator::RK4) {  // classical RK4
         for (index k = 0; k < 3 * n; ++k) w.acc_q[k] = w.acc_v[k] = 0.0;
         accumulate(m, 1.0, w.v0, w.f, w.acc_q, w.acc_v);
         stage(m, w.q0, w.v0, 0.5 * dt, w.v0, w.f, w.qs, w.vs);
@@ -64,7 +64,7 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
             q[k] = w.q0[k] + h * w.acc_q[k];
             qd[k] = w.v0[k] + h * w.acc_v[k];
         }
-    } else if (scheme == 3) {  // symplectic Euler: v += dt a(q, v), then q += dt v_new
+    } else if (scheme == Integrator::SYMPLECTIC_EULER) {  // symplectic Euler: v += dt a(q, v), then q += dt v_new
         for (index i = 0; i < n; ++i) {
             const double h = dt * m.particles.inv_mass[i];
             for (int k = 0; k < 3; ++k) {
@@ -97,7 +97,7 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
 /// Control's forces; another would change the order of the sums), and bodies whose
 /// particle ranges follow one another.
 inline bool fused_symplectic(const Model& m, const Control& c, int scheme) {
-    if (scheme != 3 || !forms::all_fused(m, c)) return false;
+    if (scheme != Integrator::SYMPLECTIC_EULER || !forms::all_fused(m, c)) return false;
     index end = 0;
     for (index b = 0; b < m.bodies.count; ++b) {
         if (m.bodies.particle_range[2 * b] < end) return false;
@@ -193,7 +193,7 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
         const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact, &seen);
         if (needed > 0)
             r = {NEED_HASH, step_index, -1, static_cast<double>(needed)};
-        else if (m.soft_contacts.mode != 0)  // soft contacts moved particles unseen
+        else if (m.soft_contacts.mode != SoftContactMode::NONE)  // soft contacts moved particles unseen
             r = loop::check_particles(m, s.q, s.qd, p.max_speed);
         else
             r = loop::check_seen(m, s.q, s.qd, p.max_speed, seen.bad, seen.most);

@@ -44,9 +44,9 @@ inline double value_at(const Model& m, const Control& c, index b, double t) {
 
 /// Absolute pressure [Pa] of a gas law at volume v [m^3] (NaN for v <= 0 unless fixed).
 inline double pressure(index law, double value, double gamma, double reference_volume, double v) {
-    if (law == 1) return value;
+    if (law == GasLaw::FIXED_PRESSURE) return value;
     if (!(v > 0.0)) return std::numeric_limits<double>::quiet_NaN();
-    if (law == 0) return value / v;
+    if (law == GasLaw::ISOTHERMAL) return value / v;
     return value * std::pow(reference_volume, gamma - 1.0) / std::pow(v, gamma);
 }
 
@@ -112,9 +112,9 @@ inline void pressure_slopes(const Model& m, const BodyGas& gas, double* dpdv, do
         const double v = gas.volume[b], p = gas.pressure[b];
         pnet[b] = p - m.gases.ambient_pressure[b];
         const index law = m.gases.law[b];
-        if (law == 1 || m.bodies.closed[b] == 0 || !(v > 0.0))
+        if (law == GasLaw::FIXED_PRESSURE || m.bodies.closed[b] == 0 || !(v > 0.0))
             dpdv[b] = 0.0;  // fixed pressure (or an open surface)
-        else if (law == 0)
+        else if (law == GasLaw::ISOTHERMAL)
             dpdv[b] = -p / v;  // isothermal: P = nRT / V
         else
             dpdv[b] = -m.gases.gamma[b] * p / v;  // adiabatic: P V^gamma constant
@@ -159,9 +159,9 @@ inline void jacobian_product(const Model& m, const double* q, const double* grad
 inline double law_energy(index law, double value, double gamma, double reference_volume,
                          double ambient_pressure, double v) {
     double e;
-    if (law == 0)
+    if (law == GasLaw::ISOTHERMAL)
         e = -value * std::log(v);
-    else if (law == 1)
+    else if (law == GasLaw::FIXED_PRESSURE)
         e = -value * v;
     else
         e = value * std::pow(reference_volume, gamma - 1.0) * std::pow(v, 1.0 - gamma) /
@@ -200,9 +200,9 @@ inline void bound_slopes(const Model& m, const double* q, double* pnet, double* 
         for (index s = m.gases.schedule_range[2 * b]; s < m.gases.schedule_range[2 * b + 1]; ++s)
             value = std::max(value, m.gases.schedule_value[s]);
         double p, slope;
-        if (m.gases.law[b] == 1) {
+        if (m.gases.law[b] == GasLaw::FIXED_PRESSURE) {
             p = value, slope = 0.0;  // fixed pressure
-        } else if (m.gases.law[b] == 0) {
+        } else if (m.gases.law[b] == GasLaw::ISOTHERMAL) {
             p = value / v, slope = -value / (v * v);  // isothermal
         } else {
             const double gamma = m.gases.gamma[b];

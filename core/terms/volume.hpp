@@ -56,9 +56,9 @@ inline double bounding(const double* q, index begin, index end, index method, co
                        const double* hi) {
     const double hx = 0.5 * (hi[0] - lo[0]), hy = 0.5 * (hi[1] - lo[1]),
                  hz = 0.5 * (hi[2] - lo[2]);
-    if (method == 1) return 8.0 * hx * hy * hz;
+    if (method == VolumeMethod::BOUNDING_BOX) return 8.0 * hx * hy * hz;
     const double cx = lo[0] + hx, cy = lo[1] + hy, cz = lo[2] + hz;
-    if (method == 2) {
+    if (method == VolumeMethod::BOUNDING_SPHERE) {
         double r2 = 0.0;
         for (index i = begin; i < end; ++i) {
             const double dx = q[3 * i] - cx, dy = q[3 * i + 1] - cy, dz = q[3 * i + 2] - cz;
@@ -124,15 +124,15 @@ inline void evaluate(const Model& m, const double* q, const BodyGas& gas,
                      bool exact_done = false) {
     for (index b = 0; b < m.bodies.count; ++b) {
         const index method = m.volumes.method[b];
-        if (exact_done && method == 0) continue;  // the vertex-major pass measured it
-        const bool need_exact = method == 0 || gas.volume_gradient != nullptr;
+        if (exact_done && method == VolumeMethod::EXACT) continue;  // the vertex-major pass measured it
+        const bool need_exact = method == VolumeMethod::EXACT || gas.volume_gradient != nullptr;
         double v = need_exact ? exact(m, b, q, gas.volume_gradient) : 0.0;
-        if (method != 0) {
+        if (method != VolumeMethod::EXACT) {
             const index begin = m.bodies.particle_range[2 * b], end = m.bodies.particle_range[2 * b + 1];
             double* lo = gas.lo + 3 * b;
             double* hi = gas.hi + 3 * b;
             bounds(q, begin, end, lo, hi);
-            if (method == 4) {
+            if (method == VolumeMethod::MONTE_CARLO) {
                 const index s0 = m.volumes.mc_range[2 * b], s1 = m.volumes.mc_range[2 * b + 1];
                 v = monte_carlo(m, q, m.bodies.tri_range[2 * b], m.bodies.tri_range[2 * b + 1], lo,
                                 hi, m.volumes.mc_samples + 2 * s0, s1 - s0);

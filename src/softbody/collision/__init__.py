@@ -8,6 +8,7 @@ from softbody.collision.colliders import (
     MotionOscillation,
     MotionRotation,
     MotionTranslation,
+    SoftContactMode,
     rotation_about,
 )
 
@@ -19,5 +20,6 @@ __all__ = [
     "MotionOscillation",
     "MotionRotation",
     "MotionTranslation",
+    "SoftContactMode",
     "rotation_about",
 ]

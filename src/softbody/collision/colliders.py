@@ -24,6 +24,14 @@ class ColliderKind(IntEnum):
     BOX = 3  # solid box: particles stay outside
 
 
+class SoftContactMode(IntEnum):
+    """How soft bodies meet each other (``ModelBuilder.set_soft_contact``)."""
+
+    NONE = 0  # they pass through each other
+    BOUNDING = 1  # the paper's bounding objects
+    SURFACE = 2  # vertex against triangle, on the surfaces
+
+
 class MotionKind(IntEnum):
     """Prescribed motion of a collider."""
 

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from softbody import _core, limits
-from softbody.collision.colliders import Collider, collider_arrays
+from softbody.collision.colliders import Collider, SoftContactMode, collider_arrays
 from softbody.errors import MeshError
 from softbody.gas import Gas, GasLaw
 from softbody.mesh.topology import bending_pairs, unique_edges, vertex_areas
@@ -648,7 +648,7 @@ class ModelBuilder:
             tri_body=np.repeat(np.arange(bcount), tri_counts).astype(np.int64),
             body_closed=np.array([int(b.closed) for b in bodies], dtype=np.int64),
             body_contact_shape=np.array([int(b.contact_shape) for b in bodies], dtype=np.int64),
-            soft_contact_mode={"none": 0, "bounding": 1, "surface": 2}[mode],
+            soft_contact_mode=int(SoftContactMode[mode.upper()]),
             soft_contact_restitution=contact_e,
             soft_contact_friction=contact_mu,
             contact_margin=float(margin),

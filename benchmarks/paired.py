@@ -1,0 +1,218 @@
+"""This version against an earlier one, case by case: is a change free?
+
+The engine benchmark's ball (``ball_drop.ball_drop``, 2,562 to 40,962 vertices) stepped by
+symplectic Euler and midpoint at 1e-5 s (as ``engine.py``), implicit Euler at 1/60 s
+(multigrid, CG 1e-3) and projective dynamics with 2 iterations at 1/60 s; and the
+five-ball scene (``five_balls.py``'s runs, 2 s of simulated time each). Both versions run
+in worker processes of their own (``versions.py``), called in alternation, each case
+``ROUNDS`` times; each call is the best of ``REPEATS`` timed runs of at least
+``MIN_SECONDS``. Reported per case: each version's best rate and the median over rounds
+of this version's rate over the baseline's in the same round (ratios are what this
+shared machine measures reliably; >= 0.97 is "no slowdown" within its noise).
+
+Writes results/paired.{json,png}. Usage, for the commit before a change:
+
+    git worktree add /tmp/before COMMIT && (cd /tmp/before && python tools/build_core.py)
+    python benchmarks/paired.py --baseline /tmp/before/src
+
+With ``--instructions`` each case instead runs a fixed number of steps under valgrind's
+callgrind in both versions and reports the instructions the run's compiled calls executed
+(the ``run`` calls alone, toggled on around them), which repeat exactly whatever else the
+machine is doing: the comparison for a machine too busy to time. Valgrind runs the AVX2
+path (it has no AVX-512), so these counts are of AVX2 code. Writes
+results/paired-instructions.{json,png}.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+import softbody as sb
+from ball_drop import ball_drop
+from results_io import RESULTS, run_record, save_figure, write_json
+from versions import versions
+
+ROUNDS = 5
+REPEATS = 3
+MIN_SECONDS = 0.2
+BALL_CASES = [
+    ("symplectic_euler", 1e-5, {}),
+    ("midpoint", 1e-5, {}),
+    ("implicit_euler", 1.0 / 60.0, {"implicit_preconditioner": "multigrid",
+                                    "implicit_tolerance": 1e-3}),
+    ("projective", 1.0 / 60.0, {"projective_iterations": 2}),
+]  # fmt: skip
+FIVE_BALLS_SECONDS = 2.0
+
+_CACHE: dict = {}
+
+
+def build(kind: str, case: int, subdivisions: int = 4) -> tuple[sb.Model, sb.Simulator]:
+    """The model and simulator of a case (cached): ``"ball"``, BALL_CASES[case] on the
+    ball of ``subdivisions``; ``"five"``, five_balls.RUNS[case] (its step and options)."""
+    key = (kind, case, subdivisions)
+    if key in _CACHE:
+        return _CACHE[key]
+    if kind == "ball":
+        integrator, dt, options = BALL_CASES[case]
+        model = ball_drop(subdivisions)
+    else:
+        import five_balls
+        from softbody.scenes.loader import load_scene
+
+        integrator, step, options = five_balls.RUNS[case]
+        scene = load_scene("bouncing-balls")
+        model = scene.model
+        if step == "scene dt":
+            dt = scene.dt
+        elif step == "1/60 s":
+            dt = 1.0 / 60.0
+            options = {"implicit_tolerance": 1e-3, **options}
+        else:
+            dt = 0.9 * sb.Simulator(model, integrator=integrator, dt=1e-6).stable_dt
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sb.StabilityWarning)
+        _CACHE[key] = model, sb.Simulator(model, integrator=integrator, dt=dt, **options)
+    return _CACHE[key]
+
+
+def rate(kind: str, case: int, subdivisions: int = 4) -> float:
+    """The case's speed: vertex-steps per second for a ball, simulated seconds per wall
+    second for the five balls; the best of REPEATS runs of at least MIN_SECONDS each."""
+    model, sim = build(kind, case, subdivisions)
+    per_step = model.particle_count if kind == "ball" else sim.dt
+    sim.run(model.state(), 2)  # buffers and caches warm
+    steps = 4
+    while True:  # steps for one timed run of MIN_SECONDS
+        state = model.state()
+        start = time.perf_counter()
+        sim.run(state, steps)
+        if time.perf_counter() - start >= MIN_SECONDS:
+            break
+        steps *= 2
+    best = 0.0
+    for _ in range(REPEATS):
+        state = model.state()
+        start = time.perf_counter()
+        sim.run(state, steps)
+        best = max(best, per_step * steps / (time.perf_counter() - start))
+    return best
+
+
+def instructions(kind: str, case: int, subdivisions: int, steps: int, source: str) -> int:
+    """Instructions the compiled run of ``steps`` steps of the case executes, counted by
+    callgrind in a process running the version at ``source`` (a src folder)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "callgrind.out"
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([source, str(Path(__file__).parent)])}
+        code = (f"import paired; m, s = paired.build({kind!r}, {case}, {subdivisions}); "
+                f"s.run(m.state(), 2); s.run(m.state(), {steps})")  # fmt: skip
+        subprocess.run(
+            ["valgrind", "--tool=callgrind", "--collect-atstart=no",
+             "--toggle-collect=*simulate*", f"--callgrind-out-file={out}",
+             sys.executable, "-c", code],
+            check=True, env=env, capture_output=True,
+        )  # fmt: skip
+        for line in out.read_text().splitlines():
+            if line.startswith("summary:") or line.startswith("totals:"):
+                return int(line.split()[1])
+    raise RuntimeError("callgrind wrote no total")
+
+
+def case_name(kind: str, case: int, subdivisions: int) -> str:
+    if kind == "ball":
+        integrator, dt, _ = BALL_CASES[case]
+        return f"ball {ball_drop(subdivisions).particle_count}: {integrator} at {dt:.3g} s"
+    import five_balls
+
+    integrator, step, options = five_balls.RUNS[case]
+    extra = ", ".join(f"{k}={v}" for k, v in options.items())
+    return f"five balls: {integrator} at {step}" + (f" ({extra})" if extra else "")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--baseline", type=Path, required=True,
+        help="the src folder of the earlier version, its core built in place",
+    )  # fmt: skip
+    parser.add_argument("--max-subdivisions", type=int, default=6)
+    parser.add_argument("--instructions", action="store_true",
+                        help="count instructions under callgrind instead of timing")  # fmt: skip
+    args = parser.parse_args()
+    import five_balls
+
+    cases = [("ball", k, s) for s in range(4, args.max_subdivisions + 1)
+             for k in range(len(BALL_CASES))]  # fmt: skip
+    cases += [("five", k, 4) for k in range(len(five_balls.RUNS))]
+    rows = []
+    if args.instructions:
+        this = str(Path(sb.__file__).resolve().parent.parent)
+        for kind, case, subdivisions in cases:
+            steps = 20 if kind == "ball" else 200
+            counts = {v: instructions(kind, case, subdivisions, steps, src)
+                      for v, src in (("this", this), ("baseline", str(args.baseline)))}  # fmt: skip
+            row = {"case": case_name(kind, case, subdivisions), "steps": steps, **counts,
+                   "ratio": counts["baseline"] / counts["this"]}  # fmt: skip
+            rows.append(row)
+            print(f"{row['case']:70s} {row['ratio']:.4f}", flush=True)
+        write_json(RESULTS / "paired-instructions.json",
+                   run_record("paired-instructions", baseline=str(args.baseline), simd="avx2",
+                              cases=rows))  # fmt: skip
+        plot(rows, "baseline instructions / this version's (the run's compiled calls)",
+             RESULTS / "paired-instructions.png")
+        return
+    this, baseline = versions(args.baseline)
+    for kind, case, subdivisions in cases:
+        ratios, best = [], {"this": 0.0, "baseline": 0.0}
+        for r in range(ROUNDS):
+            order = [this, baseline] if r % 2 == 0 else [baseline, this]
+            rates = {v.name: v.call("paired:rate", kind=kind, case=case,
+                                    subdivisions=subdivisions) for v in order}  # fmt: skip
+            ratios.append(rates["this"] / rates["baseline"])
+            for v in best:
+                best[v] = max(best[v], rates[v])
+        row = {"case": case_name(kind, case, subdivisions), **best,
+               "ratio": float(np.median(ratios)), "ratios": ratios}  # fmt: skip
+        rows.append(row)
+        print(f"{row['case']:70s} {row['ratio']:.3f}  {np.round(ratios, 3)}", flush=True)
+    for v in (this, baseline):
+        v.close()
+    record = run_record("paired", baseline=str(args.baseline), rounds=ROUNDS, cases=rows)
+    write_json(RESULTS / "paired.json", record)
+    plot(rows, "speed of this version / the baseline's, median of rounds", RESULTS / "paired.png")
+
+
+def plot(rows: list[dict], label: str, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 0.28 * len(rows) + 1.4))
+    y = np.arange(len(rows))
+    for k, row in enumerate(rows):
+        if "ratios" in row:
+            ax.plot(row["ratios"], [k] * len(row["ratios"]), "o", color="0.7", markersize=3)
+    ax.plot([r["ratio"] for r in rows], y, "D", color="C0")
+    ax.axvline(1.0, color="k", linewidth=0.8)
+    ax.axvline(0.97, color="C3", linewidth=0.8, linestyle="--")
+    ax.set_yticks(y, [r["case"] for r in rows], fontsize=7)
+    ax.invert_yaxis()
+    ax.set_xlabel(label + " (dashed: 0.97)")
+    ax.set_title("This version against the baseline, case by case", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+if __name__ == "__main__":
+    main()
