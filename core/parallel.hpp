@@ -1,8 +1,8 @@
 // Opt-in threads for the kernels, kept deterministic: work is cut into a fixed number of
 // chunks (one per thread), each chunk writes only its own rows and its own partial sums,
 // and partial sums are added in chunk order afterwards, so a run gives the same bits
-// whatever the threads' timing. The pool itself lives in bindings/threads.hpp (plain C++, no
-// instruction-set code); kernels see only this interface.
+// whatever the threads' timing. The pool itself lives in threads.hpp (plain C++, no instruction-set
+// code); kernels see only this interface.
 #pragma once
 
 namespace softbody {

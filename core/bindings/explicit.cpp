@@ -1,7 +1,7 @@
 // softbody._core.ExplicitSolver: the explicit schemes (core/solvers/explicit.hpp).
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
-#include "bindings/threads.hpp"
+#include "threads.hpp"
 
 namespace softbody::bindings {
 namespace {

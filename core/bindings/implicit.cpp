@@ -2,7 +2,7 @@
 // preconditions with (core/solvers/implicit.hpp, multigrid.hpp), checked once.
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
-#include "bindings/threads.hpp"
+#include "threads.hpp"
 
 namespace softbody::bindings {
 namespace {

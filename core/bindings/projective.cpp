@@ -2,7 +2,7 @@
 // (core/solvers/projective.hpp), checked once.
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
-#include "bindings/threads.hpp"
+#include "threads.hpp"
 
 namespace softbody::bindings {
 namespace {

@@ -1,19 +1,22 @@
-// Opt-in threads for the solvers' force pass: a fixed pool (core/parallel.hpp's
-// interface) and its attachment to a solver's lanes.
+// Opt-in threads for the solvers' force pass: a fixed pool behind parallel.hpp's interface
+// (plain C++, no instruction-set code), and a solver's share of it attached to its lanes.
 #pragma once
 
 #include <condition_variable>
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <stdexcept>
+#include <string>
 #include <thread>
+#include <vector>
 
-#include "bindings/arrays.hpp"
+#include "model.hpp"
 #include "parallel.hpp"
 
-namespace softbody::bindings {
+namespace softbody {
 
-/// A fixed set of worker threads for softbody::Parallel: run() hands chunk 0 to the caller
+/// A fixed set of worker threads for Parallel: run() hands chunk 0 to the caller
 /// and chunk w to worker w, and returns when every chunk is done. Workers wait on a
 /// condition variable between calls, so an idle pool costs nothing.
 class ThreadPool {
@@ -34,11 +37,11 @@ public:
     ThreadPool(const ThreadPool&) = delete;
     ThreadPool& operator=(const ThreadPool&) = delete;
 
-    softbody::Parallel interface() {
-        softbody::Parallel p;
+    Parallel interface() {
+        Parallel p;
         p.chunks = threads_;
         p.pool = this;
-        p.run = [](const softbody::Parallel& self, void (*task)(void*, int), void* context) {
+        p.run = [](const Parallel& self, void (*task)(void*, int), void* context) {
             static_cast<ThreadPool*>(self.pool)->run(task, context);
         };
         return p;
@@ -97,9 +100,10 @@ private:
 /// Lives inside its solver and never moves, since the lanes point at it.
 class SolverThreads {
 public:
-    SolverThreads(int threads, Index body_count) {
+    SolverThreads(int threads, index body_count) {
         if (threads < 1 || threads > ThreadPool::kMostThreads)
-            fail("threads must be from 1 to " + std::to_string(ThreadPool::kMostThreads));
+            throw std::invalid_argument("threads must be from 1 to " +
+                                        std::to_string(ThreadPool::kMostThreads));
         if (threads > 1) {
             pool_ = std::make_unique<ThreadPool>(threads);
             parallel_ = pool_->interface();
@@ -109,7 +113,7 @@ public:
     SolverThreads(const SolverThreads&) = delete;
     SolverThreads& operator=(const SolverThreads&) = delete;
 
-    void attach(softbody::LaneBuffers& lanes) {
+    void attach(LaneBuffers& lanes) {
         if (!pool_) return;
         lanes.parallel = &parallel_;
         lanes.chunk_volume = chunk_volume_.data();
@@ -118,8 +122,8 @@ public:
 
 private:
     std::unique_ptr<ThreadPool> pool_;
-    softbody::Parallel parallel_;
+    Parallel parallel_;
     std::vector<double> chunk_volume_;
 };
 
-}  // namespace softbody::bindings
+}  // namespace softbody
