@@ -15,21 +15,11 @@ Writes results/paired.{json,png}. Usage, for the commit before a change:
     git worktree add /tmp/before COMMIT && (cd /tmp/before && python tools/build_core.py)
     python benchmarks/paired.py --baseline /tmp/before/src
 
-With ``--instructions`` each case instead runs a fixed number of steps under valgrind's
-callgrind in both versions and reports the instructions the run's compiled calls executed
-(the ``run`` calls alone, toggled on around them), which repeat exactly whatever else the
-machine is doing: the comparison for a machine too busy to time. Valgrind runs the AVX2
-path (it has no AVX-512), so these counts are of AVX2 code. Writes
-results/paired-instructions.{json,png}.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
-import sys
-import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -108,26 +98,6 @@ def rate(kind: str, case: int, subdivisions: int = 4) -> float:
     return best
 
 
-def instructions(kind: str, case: int, subdivisions: int, steps: int, source: str) -> int:
-    """Instructions the compiled run of ``steps`` steps of the case executes, counted by
-    callgrind in a process running the version at ``source`` (a src folder)."""
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "callgrind.out"
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join([source, str(Path(__file__).parent)])}
-        code = (f"import paired; m, s = paired.build({kind!r}, {case}, {subdivisions}); "
-                f"s.run(m.state(), 2); s.run(m.state(), {steps})")  # fmt: skip
-        subprocess.run(
-            ["valgrind", "--tool=callgrind", "--collect-atstart=no",
-             "--toggle-collect=*simulate*", f"--callgrind-out-file={out}",
-             sys.executable, "-c", code],
-            check=True, env=env, capture_output=True,
-        )  # fmt: skip
-        for line in out.read_text().splitlines():
-            if line.startswith("summary:") or line.startswith("totals:"):
-                return int(line.split()[1])
-    raise RuntimeError("callgrind wrote no total")
-
-
 def case_name(kind: str, case: int, subdivisions: int) -> str:
     if kind == "ball":
         integrator, dt, _ = BALL_CASES[case]
@@ -146,8 +116,6 @@ def main() -> None:
         help="the src folder of the earlier version, its core built in place",
     )  # fmt: skip
     parser.add_argument("--max-subdivisions", type=int, default=6)
-    parser.add_argument("--instructions", action="store_true",
-                        help="count instructions under callgrind instead of timing")  # fmt: skip
     args = parser.parse_args()
     import five_balls
 
@@ -155,22 +123,6 @@ def main() -> None:
              for k in range(len(BALL_CASES))]  # fmt: skip
     cases += [("five", k, 4) for k in range(len(five_balls.RUNS))]
     rows = []
-    if args.instructions:
-        this = str(Path(sb.__file__).resolve().parent.parent)
-        for kind, case, subdivisions in cases:
-            steps = 20 if kind == "ball" else 200
-            counts = {v: instructions(kind, case, subdivisions, steps, src)
-                      for v, src in (("this", this), ("baseline", str(args.baseline)))}  # fmt: skip
-            row = {"case": case_name(kind, case, subdivisions), "steps": steps, **counts,
-                   "ratio": counts["baseline"] / counts["this"]}  # fmt: skip
-            rows.append(row)
-            print(f"{row['case']:70s} {row['ratio']:.4f}", flush=True)
-        write_json(RESULTS / "paired-instructions.json",
-                   run_record("paired-instructions", baseline=str(args.baseline), simd="avx2",
-                              cases=rows))  # fmt: skip
-        plot(rows, "baseline instructions / this version's (the run's compiled calls)",
-             RESULTS / "paired-instructions.png")
-        return
     this, baseline = versions(args.baseline)
     for kind, case, subdivisions in cases:
         ratios, best = [], {"this": 0.0, "baseline": 0.0}
