@@ -3,9 +3,9 @@
 The engine benchmark's ball (``ball_drop.ball_drop``, 2,562 to 40,962 vertices) stepped by
 symplectic Euler and midpoint at 1e-5 s (as ``engine.py``), implicit Euler at 1/60 s
 (multigrid, CG 1e-3) and projective dynamics with 2 iterations at 1/60 s; and the
-five-ball scene (``five_balls.py``'s runs, 2 s of simulated time each). Both versions run
-in worker processes of their own (``versions.py``), called in alternation, each case
-``ROUNDS`` times; each call is the best of ``REPEATS`` timed runs of at least
+five-ball scene (each of ``five_balls.py``'s runs, its integrator, step and options).
+Both versions run in worker processes of their own (``versions.py``), called in
+alternation, each case ``ROUNDS`` times; each call is the best of ``REPEATS`` timed runs of at least
 ``MIN_SECONDS``. Reported per case: each version's best rate and the median over rounds
 of this version's rate over the baseline's in the same round (ratios are what this
 shared machine measures reliably; >= 0.97 is "no slowdown" within its noise).
@@ -14,7 +14,6 @@ Writes results/paired.{json,png}. Usage, for the commit before a change:
 
     git worktree add /tmp/before COMMIT && (cd /tmp/before && python tools/build_core.py)
     python benchmarks/paired.py --baseline /tmp/before/src
-
 """
 
 from __future__ import annotations
@@ -41,7 +40,6 @@ BALL_CASES = [
                                     "implicit_tolerance": 1e-3}),
     ("projective", 1.0 / 60.0, {"projective_iterations": 2}),
 ]  # fmt: skip
-FIVE_BALLS_SECONDS = 2.0
 
 _CACHE: dict = {}
 
