@@ -81,6 +81,14 @@ void eval_energies(const Model& m, const Control& c, double t, const double* q,
     forms::energies(Eval{m, c, t, q, q, gas}, out.total, out.body);
 }
 
+unsigned active_terms(const Model& m, const Control& c) {
+    unsigned mask = 0;
+    Terms::each([&](auto term, int k) {
+        if (decltype(term)::active(m, c)) mask |= 1u << k;
+    });
+    return mask;
+}
+
 // The estimate's Gershgorin bounds, term by term: the spring-like terms' row sums first
 // (a particle's row holds its springs and its attachments), then each term's rows.
 StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double* q,
@@ -115,7 +123,7 @@ const KernelTable& kernel_table() {
                                    projective_solve, eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
-                                   eval_energies, stiffness_bounds};
+                                   eval_energies, active_terms, stiffness_bounds};
     return table;
 }
 

@@ -99,6 +99,8 @@ struct KernelTable {
     /// its volume by its own method (into gas.volume, with gas.lo/hi as scratch).
     void (*eval_energies)(const Model&, const Control&, double t, const double* q,
                           const BodyGas& gas, TermEnergies& out);
+    /// Bit k set: registered term k acts in a call with model m and control c.
+    unsigned (*active_terms)(const Model& m, const Control& c);
     /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors.
     StiffnessBounds (*stiffness_bounds)(const Model&, const Control&, const double* q,
                                         const BoundBuffers& w);

@@ -6,88 +6,28 @@
 
 #include "config.hpp"
 #include "enums.hpp"
+#include "fields.hpp"
 #include "parallel.hpp"
 
 namespace softbody {
 
-/// The particles (N): masses and owning bodies.
-struct Particles {
-    index count = 0;                   // N
-    const double* mass = nullptr;      // (N,) [kg]
-    const double* inv_mass = nullptr;  // (N,) [1/kg], 0 for pinned particles
-    const index* body = nullptr;       // (N,) body or -1
-};
-
-/// Damped Hooke springs (S): mesh edges, bending and user springs (terms/springs.hpp).
-struct Springs {
-    index count = 0;                      // S
-    const index* indices = nullptr;       // (S, 2)
-    const double* rest_length = nullptr;  // (S,) [m]
-    const double* stiffness = nullptr;    // (S,) [N/m]
-    const double* damping = nullptr;      // (S,) [N s/m]
-    const index* body = nullptr;          // (S,) its body, -1 for a user's spring
-};
-
-/// Springs from particles to anchors (A) that Control moves (terms/attachments.hpp).
-struct Attachments {
-    index count = 0;                      // A
-    const index* particle = nullptr;      // (A,)
-    const double* rest_length = nullptr;  // (A,) [m]
-    const double* stiffness = nullptr;    // (A,) [N/m]
-    const double* damping = nullptr;      // (A,) [N s/m]
-};
-
-/// The surface triangles (T): faces of the pressure, volume and drag terms.
-struct Triangles {
-    index count = 0;                 // T
-    const index* indices = nullptr;  // (T, 3), outward-wound
-    const index* body = nullptr;     // (T,)
-};
-
-/// The bodies (B): which particles and triangles each owns, and what contacts fit to it.
-struct Bodies {
-    index count = 0;                         // B
-    const index* particle_range = nullptr;   // (B, 2) [begin, end)
-    const index* tri_range = nullptr;        // (B, 2)
-    const double* rest_volume = nullptr;     // (B,) [m^3]
-    const index* closed = nullptr;           // (B,) 1 closed, 0 open surface
-    const index* contact_shape = nullptr;    // (B,) 1 box, 2 sphere, 3 ellipsoid
-};
-
-/// Each body's volume method (terms/volume.hpp) with the Monte Carlo samples (M).
-struct Volumes {
-    index mc_count = 0;                   // M
-    const index* method = nullptr;        // (B,) VolumeMethod
-    const index* mc_range = nullptr;      // (B, 2) rows of mc_samples
-    const double* mc_samples = nullptr;   // (M, 2) in [0, 1)^2
-};
-
-/// Each body's gas law and its schedule of K points (terms/gas.hpp).
-struct Gases {
-    index schedule_count = 0;                  // K
-    const index* law = nullptr;                // (B,) GasLaw
-    const double* value = nullptr;             // (B,) nRT [J] or P0 [Pa]
-    const double* gamma = nullptr;             // (B,)
-    const double* reference_volume = nullptr;  // (B,) [m^3]
-    const double* ambient_pressure = nullptr;  // (B,) [Pa]
-    const index* schedule_range = nullptr;     // (B, 2) rows of the schedule
-    const double* schedule_time = nullptr;     // (K,) [s]
-    const double* schedule_value = nullptr;    // (K,)
-};
-
-/// Pinned particles (P), moved to Control targets.
-struct Pins {
-    index count = 0;                  // P
-    const index* particle = nullptr;  // (P,)
-};
-
-/// Air drag on faces (terms/drag.hpp).
-struct Drag {
-    const double* coefficient = nullptr;  // (B,) C_d [1], 0 = no drag
-    double air_density = 0.0;             // rho [kg/m^3]
-    double wind[3] = {0.0, 0.0, 0.0};     // [m/s], Control.wind may override it
-    bool active = false;  // rho > 0 and some C_d > 0 (else the drag term is skipped)
-};
+// The model's parts (Particles, Gravity, Springs, Attachments, Triangles, Bodies, Volumes,
+// Gases, Pins, Drag, SoftContacts, Colliders), one struct each with its count and one member
+// per field of fields.hpp: an array as a pointer into NumPy memory, a number or a vec3 by
+// value. A term's code names the part it reads (m.springs.stiffness, m.gases.law).
+#define SOFTBODY_MEMBER_f64(name) const double* name = nullptr;
+#define SOFTBODY_MEMBER_i64(name) const index* name = nullptr;
+#define SOFTBODY_MEMBER_f64_value(name) double name = 0.0;
+#define SOFTBODY_MEMBER_i64_value(name) index name = 0;
+#define SOFTBODY_MEMBER_vec3(name) double name[3] = {0.0, 0.0, 0.0};
+#define SOFTBODY_FIELD_MEMBER(part, member, python, type, shape, check, unit, doc) \
+    SOFTBODY_MEMBER_##type(member)
+#define SOFTBODY_PART_STRUCT(Type, part, fields, extra) \
+    struct Type {                                       \
+        extra fields(SOFTBODY_FIELD_MEMBER)             \
+    };
+SOFTBODY_MODEL_PARTS(SOFTBODY_PART_STRUCT)
+#undef SOFTBODY_PART_STRUCT
 
 /// Vertex-major neighbour tables (bindings/core_model.hpp derives them from the springs and
 /// triangles): particles in groups of 8 lanes; group g's slots are [start[g], start[g + 1]),
@@ -120,45 +60,14 @@ struct Slots {
     const index* face_last = nullptr;   // (slots, 8) and k
 };
 
-/// Contacts between soft bodies (collision/soft.hpp).
-struct SoftContacts {
-    int mode = SoftContactMode::NONE;  // SoftContactMode
-    double restitution = 0.0, friction = 0.0;
-    double margin = 0.0, cell_size = 1.0;  // [m]
-};
-
-/// Rigid colliders (C) and their prescribed motions (collision/colliders.hpp).
-struct Colliders {
-    index count = 0;                            // C
-    const index* kind = nullptr;                // (C,) ColliderKind
-    const double* center = nullptr;             // (C, 3) [m]
-    const double* rotation = nullptr;           // (C, 3, 3)
-    const double* size = nullptr;               // (C, 3) [m]
-    const double* restitution = nullptr;        // (C,)
-    const double* friction = nullptr;           // (C,)
-    const index* motion = nullptr;              // (C,) MotionKind
-    const double* motion_vector = nullptr;      // (C, 3)
-    const double* motion_pivot = nullptr;       // (C, 3) [m]
-    const double* motion_frequency = nullptr;   // (C,) [Hz]
-};
-
 /// Everything fixed after ModelBuilder.finalize (softbody.sim.model.Model), SI units,
 /// grouped by what reads it: each term's parameters in its own part, so a term's code names
 /// the part it uses (m.springs, m.gases, m.drag, ...).
 struct Model {
-    Particles particles;
-    double gravity[3] = {0.0, 0.0, 0.0};  // [m/s^2] (terms/gravity.hpp)
-    Springs springs;
-    Attachments attachments;
-    Triangles triangles;
-    Bodies bodies;
-    Volumes volumes;
-    Gases gases;
-    Pins pins;
-    Drag drag;
-    Slots slots;
-    SoftContacts soft_contacts;
-    Colliders colliders;
+#define SOFTBODY_PART_MEMBER(Type, part, fields, extra) Type part;
+    SOFTBODY_MODEL_PARTS(SOFTBODY_PART_MEMBER)
+#undef SOFTBODY_PART_MEMBER
+    Slots slots;  // derived by plan/lanes.cpp
 };
 
 /// Inputs held constant over one call (softbody.sim.control.Control).

@@ -11,6 +11,7 @@ round-off to grow over the run (1e-12 relative to the motion's scale per step).
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 import warnings
@@ -128,21 +129,21 @@ def test_the_core_refuses_inconsistent_model_arrays():
     """An index outside its array, or arrays of mismatched sizes, are ValueErrors at the
     boundary, before any kernel could read out of bounds."""
     model = ball_model(subdivisions=1)
-    bad = model.data._replace(spring_indices=model.spring_indices + model.particle_count)
+    bad = dataclasses.replace(model, spring_indices=model.spring_indices + model.particle_count)
     with pytest.raises(ValueError, match="spring_indices holds"):
         _core.Model(bad)
-    bad = model.data._replace(spring_stiffness=model.spring_stiffness[:-1])
+    bad = dataclasses.replace(model, spring_stiffness=model.spring_stiffness[:-1])
     with pytest.raises(ValueError, match=r"spring_stiffness must have shape"):
         _core.Model(bad)
-    bad = model.data._replace(tri_indices=model.tri_indices.astype(np.int32))
+    bad = dataclasses.replace(model, tri_indices=model.tri_indices.astype(np.int32))
     with pytest.raises(ValueError, match="tri_indices must be a C-contiguous int64 array"):
         _core.Model(bad)
     with pytest.raises(ValueError, match="hash_capacity must be >= 0"):
         _core.ExplicitSolver(core_model(model), hash_capacity=-1)
-    bad = model.data._replace(soft_contact_mode=2, contact_cell_size=0.0)
+    bad = dataclasses.replace(model, soft_contact_mode=2, contact_cell_size=0.0)
     with pytest.raises(ValueError, match="contact_cell_size must be finite and > 0"):
         _core.Model(bad)
-    bad = model.data._replace(soft_contact_mode=2, contact_margin=float("nan"))
+    bad = dataclasses.replace(model, soft_contact_mode=2, contact_margin=float("nan"))
     with pytest.raises(ValueError, match="contact_margin must be finite and >= 0"):
         _core.Model(bad)
     solver = _core.ExplicitSolver(core_model(model))

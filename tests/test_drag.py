@@ -21,6 +21,7 @@ Terminal speed. m dV/dt = m g - 1/2 rho C_d A_eff V^2 from rest gives
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -348,7 +349,7 @@ def test_drag_runs_with_surface_contacts():
         b.add_soft_body(sb.icosphere(1, radius=0.3), mass=1.0, stiffness=50.0, damping=0.1,
                         gas=1.0, drag_coefficient=0.5)  # fmt: skip
         model = b.finalize()
-        assert model.has_drag
+        assert "drag" in sb.core.active_terms(model)
         state = model.state()
         sb.Simulator(model, integrator="midpoint", dt=1e-3).run(state, 200)
         runs.append(state)
@@ -359,7 +360,7 @@ def test_drag_runs_with_surface_contacts():
 def test_drag_without_air_runs_anywhere():
     """C_d > 0 in air of density 0 is no drag: the implicit integrators take it."""
     model = drag_model(0.5, rho=0.0)
-    assert not model.has_drag
+    assert "drag" not in sb.core.active_terms(model)
     sb.Simulator(model, integrator="implicit_euler", dt=1e-3)
 
 
@@ -399,21 +400,24 @@ def test_control_refuses_a_bad_wind():
 
 
 def test_core_checks_the_drag_arrays():
-    """The C++ core checks what it reads (a ModelData edited past the builder): shapes,
+    """The C++ core checks what it reads (a Model edited past the builder): shapes,
     signs and finiteness, with a ValueError naming the array."""
     model = drag_model(0.5)
-    data = model.data
+
+    def edit(**fields):
+        return dataclasses.replace(model, **fields)
+
     bad = [
-        (data._replace(body_drag_coefficient=np.zeros(2)), "body_drag_coefficient must have"),
-        (data._replace(body_drag_coefficient=np.array([-1.0])), "body_drag_coefficient holds"),
-        (data._replace(air_density=float("inf")), "air_density must be finite"),
-        (data._replace(wind=np.array([0.0, np.nan, 0.0])), "wind must be 3 finite"),
-        (data._replace(wind=np.zeros(2)), "wind must have shape"),
+        (edit(body_drag_coefficient=np.zeros(2)), "body_drag_coefficient must have"),
+        (edit(body_drag_coefficient=np.array([-1.0])), "body_drag_coefficient holds"),
+        (edit(air_density=float("inf")), "air_density holds inf at 0; it must be finite"),
+        (edit(wind=np.array([0.0, np.nan, 0.0])), "wind holds nan at 1; it must be finite"),
+        (edit(wind=np.zeros(2)), "wind must have shape"),
     ]
     for edited, message in bad:
         with pytest.raises(ValueError, match=message):
             _core.Model(edited)
-    core = _core.Model(data)
+    core = _core.Model(model)
     control = control_data(model)._replace(wind=np.array([np.nan, 1.0, 0.0]))
     q = np.ascontiguousarray(model.particle_q)
     with pytest.raises(ValueError, match="Control wind must be 3 finite numbers"):
@@ -427,12 +431,12 @@ def test_scene_air_table_and_drag_coefficient():
     from softbody.scenes import SceneError, load_scene
 
     plain = load_scene("hanging-ball").model
-    assert plain.air_density == 1.2 and not plain.has_drag
+    assert plain.air_density == 1.2 and "drag" not in sb.core.active_terms(plain)
     np.testing.assert_array_equal(plain.wind, 0.0)
     scene = load_scene("hanging-ball", ["air.density=1.0", "air.wind=[2.0, 0.0, 0.5]",
                                         "bodies.1.drag_coefficient=0.4"])  # fmt: skip
     model = scene.model
-    assert model.air_density == 1.0 and model.has_drag
+    assert model.air_density == 1.0 and "drag" in sb.core.active_terms(model)
     np.testing.assert_array_equal(model.wind, [2.0, 0.0, 0.5])
     np.testing.assert_array_equal(model.body_drag_coefficient, [0.0, 0.4, 0.0])
     for override, key in (("air.density=-1", "air.density"),

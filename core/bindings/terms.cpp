@@ -208,6 +208,18 @@ nb::dict enums() {
     return out;
 }
 
+/// The names of the registered terms that act with this model and control.
+nb::list active_terms(const CoreModel& core, nb::handle control) {
+    const softbody::Model& m = core.model();
+    CoreControl c(m, control);
+    const softbody::KernelTable& k = softbody::kernels();
+    const unsigned mask = k.active_terms(m, c.view);
+    nb::list out;
+    for (int t = 0; t < k.term_count; ++t)
+        if (mask & (1u << t)) out.append(nb::str(k.terms[t].name));
+    return out;
+}
+
 /// The registered terms in registry order (the order of their sums): each a dict of its
 /// name and traits.
 nb::list term_table() {
@@ -276,6 +288,8 @@ void bind_terms(nb::module_& mod) {
             "body's by its method (the gas's).");
     mod.def("enums", &enums,
             "The core's closed sets: {IntEnum name: {member name: value}} (core/enums.hpp).");
+    mod.def("active_terms", &active_terms, nb::arg("model"), nb::arg("control"),
+            "Names of the registered terms that act with this model and control.");
     mod.def("term_table", &term_table,
             "The registered physics terms in the order their forces are summed: a list of "
             "dicts of 'name' and the traits 'lane' (a vertex-major form), 'projected' "

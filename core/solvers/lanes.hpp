@@ -134,9 +134,9 @@ inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, con
             for (int l = 0; l < kLanesF && first + l < n; ++l) {
                 const index i = first + l;
                 const double mass = m.slots.mass[i];
-                f[3 * i] = mass * m.gravity[0] + static_cast<double>(fx[l]);
-                f[3 * i + 1] = mass * m.gravity[1] + static_cast<double>(fy[l]);
-                f[3 * i + 2] = mass * m.gravity[2] + static_cast<double>(fz[l]);
+                f[3 * i] = mass * m.gravity.acceleration[0] + static_cast<double>(fx[l]);
+                f[3 * i + 1] = mass * m.gravity.acceleration[1] + static_cast<double>(fy[l]);
+                f[3 * i + 2] = mass * m.gravity.acceleration[2] + static_cast<double>(fz[l]);
                 store(gas.volume_gradient, i,
                       {static_cast<double>(gx[l]), static_cast<double>(gy[l]),
                        static_cast<double>(gz[l])});

@@ -36,6 +36,14 @@
 
 namespace softbody::SOFTBODY_KERNELS::drag {
 
+/// Whether the term acts: air of density > 0 and some body with C_d > 0.
+inline bool active(const Model& m) {
+    if (!(m.drag.air_density > 0.0)) return false;
+    for (index b = 0; b < m.bodies.count; ++b)
+        if (m.drag.coefficient[b] > 0.0) return true;
+    return false;
+}
+
 /// F_t [N] of triangle t at q, qd (N, 3) in the wind [m/s]; half_rho_cd = 1/2 rho C_d
 /// [kg/m^3]. With a = A_t n_t (half the edges' cross product) and s = v_rel . a = A_t v_n,
 /// F_t = -1/2 rho C_d A_t v_n |v_n| n_t = -1/2 rho C_d s |s| a / |a|^2: no square root.
@@ -54,10 +62,10 @@ inline V3 face_force(const Model& m, index t, const double* q, const double* qd,
 }
 
 /// f (N, 3) [N] += each face's drag, a third on each corner, for bodies with C_d > 0.
-/// Nothing at all when the model has no drag (Drag::active false).
+/// Nothing at all when the model has no drag (active() false).
 inline void force(const Model& m, const Control& c, const double* q, const double* qd,
                   double* f) {
-    if (!m.drag.active) return;
+    if (!active(m)) return;
     const V3 wind{c.wind[0], c.wind[1], c.wind[2]};
     for (index b = 0; b < m.bodies.count; ++b) {
         const double cd = m.drag.coefficient[b];
@@ -74,7 +82,7 @@ inline void force(const Model& m, const Control& c, const double* q, const doubl
 /// The power [W] drag delivers to the particles, sum_t F_t . v_t (<= 0 in still air): for
 /// diagnostics, since drag has no energy to track.
 inline double power(const Model& m, const Control& c, const double* q, const double* qd) {
-    if (!m.drag.active) return 0.0;
+    if (!active(m)) return 0.0;
     const V3 wind{c.wind[0], c.wind[1], c.wind[2]};
     double total = 0.0;
     for (index b = 0; b < m.bodies.count; ++b) {
@@ -94,7 +102,7 @@ inline double power(const Model& m, const Control& c, const double* q, const dou
 /// The registered term (terms/registry.hpp): a force every solver takes explicitly.
 struct Term : TermBase {
     static constexpr const char* kName = "drag";
-    static bool active(const Model& m, const Control&) { return m.drag.active; }
+    static bool active(const Model& m, const Control&) { return drag::active(m); }
     static void force(const Eval& e, double* f) { drag::force(e.m, e.c, e.q, e.qd, f); }
 };
 

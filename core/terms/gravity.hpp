@@ -14,7 +14,7 @@ namespace softbody::SOFTBODY_KERNELS::gravity {
 
 /// f (N, 3) [N] += m_i g.
 inline void force(const Model& m, double* f) {
-    const double gx = m.gravity[0], gy = m.gravity[1], gz = m.gravity[2];
+    const double gx = m.gravity.acceleration[0], gy = m.gravity.acceleration[1], gz = m.gravity.acceleration[2];
     for (index i = 0; i < m.particles.count; ++i) {
         const double mass = m.particles.mass[i];
         f[3 * i] += mass * gx;
@@ -26,16 +26,16 @@ inline void force(const Model& m, double* f) {
 /// Vertex-major: m g for kLanes particles from `first` [N] (initialises the lanes).
 inline void lane_force(const Model& m, index first, vd& fx, vd& fy, vd& fz) {
     const vd mass = load_lanes(m.slots.mass + first);
-    fx = mass * m.gravity[0];
-    fy = mass * m.gravity[1];
-    fz = mass * m.gravity[2];
+    fx = mass * m.gravity.acceleration[0];
+    fy = mass * m.gravity.acceleration[1];
+    fz = mass * m.gravity.acceleration[2];
 }
 
 /// Potential energy -m_i g . x_i [J] of every particle at q (N, 3), each added to its
 /// body's entry of body_energy (B,) (a free particle's counts in the total only); returns
 /// the total [J]. Pinned particles count too: their weight is balanced, not absent.
 inline double energies(const Model& m, const double* q, double* body_energy) {
-    const double gx = m.gravity[0], gy = m.gravity[1], gz = m.gravity[2];
+    const double gx = m.gravity.acceleration[0], gy = m.gravity.acceleration[1], gz = m.gravity.acceleration[2];
     double total = 0.0;
     for (index i = 0; i < m.particles.count; ++i) {
         const double e =

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import NamedTuple
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -11,67 +10,14 @@ from softbody.gas import GasLaw
 from softbody.volume import VolumeMethod
 
 
-class ModelData(NamedTuple):
-    """The arrays the compiled kernels read, in one bundle (one dispatch per call)."""
-
-    particle_mass: np.ndarray
-    particle_inv_mass: np.ndarray
-    gravity: np.ndarray
-    spring_indices: np.ndarray
-    spring_rest_length: np.ndarray
-    spring_stiffness: np.ndarray
-    spring_damping: np.ndarray
-    spring_body: np.ndarray
-    attachment_particle: np.ndarray
-    attachment_rest_length: np.ndarray
-    attachment_stiffness: np.ndarray
-    attachment_damping: np.ndarray
-    tri_indices: np.ndarray
-    body_particle_range: np.ndarray
-    body_tri_range: np.ndarray
-    body_volume_method: np.ndarray
-    body_mc_range: np.ndarray
-    mc_samples: np.ndarray
-    body_gas_law: np.ndarray
-    body_gas_value: np.ndarray
-    body_gas_gamma: np.ndarray
-    body_gas_reference_volume: np.ndarray
-    body_ambient_pressure: np.ndarray
-    body_schedule_range: np.ndarray
-    schedule_time: np.ndarray
-    schedule_value: np.ndarray
-    body_rest_volume: np.ndarray
-    pin_particle: np.ndarray
-    particle_body: np.ndarray
-    tri_body: np.ndarray
-    body_closed: np.ndarray
-    body_contact_shape: np.ndarray
-    soft_contact_mode: int
-    soft_contact_restitution: float
-    soft_contact_friction: float
-    contact_margin: float
-    contact_cell_size: float
-    collider_kind: np.ndarray
-    collider_center: np.ndarray
-    collider_rotation: np.ndarray
-    collider_size: np.ndarray
-    collider_restitution: np.ndarray
-    collider_friction: np.ndarray
-    collider_motion: np.ndarray
-    collider_motion_vector: np.ndarray
-    collider_motion_pivot: np.ndarray
-    collider_motion_frequency: np.ndarray
-    body_drag_coefficient: np.ndarray
-    air_density: float
-    wind: np.ndarray
-
-
 @dataclass(frozen=True, eq=False)
 class Model:
     """Particles, springs, triangles, bodies and their gas, pins. All arrays are read-only.
 
     Build one with :class:`softbody.ModelBuilder`. Units are SI. N particles, S springs,
-    A attachments, T triangles, B bodies, P pinned particles.
+    A attachments, T triangles, B bodies, P pinned particles. The compiled core reads the
+    fields declared in ``core/fields.hpp`` (``softbody._core.model_fields()``; the tests
+    hold these fields to it).
     """
 
     gravity: np.ndarray
@@ -184,16 +130,11 @@ class Model:
     """Density rho of the air the bodies move through [kg/m^3], >= 0."""
     wind: np.ndarray
     """Velocity of the air [m/s], shape (3,); ``Control.wind`` overrides it per call."""
-    data: ModelData = field(init=False, repr=False)
-    """The same arrays bundled for the compiled kernels."""
-
     def __post_init__(self):
         for name in self.__dataclass_fields__:
             value = getattr(self, name, None)
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
-        data = ModelData(**{name: getattr(self, name) for name in ModelData._fields})
-        object.__setattr__(self, "data", data)
 
     # -- counts --------------------------------------------------------------------------
     @property
@@ -230,11 +171,6 @@ class Model:
     def pin_count(self) -> int:
         """Number of pinned particles P."""
         return int(self.pin_particle.shape[0])
-
-    @property
-    def has_drag(self) -> bool:
-        """Whether any face feels air drag: some body has C_d > 0 in air of density > 0."""
-        return bool(self.air_density > 0 and np.any(self.body_drag_coefficient > 0))
 
     def body_gas_law_of(self, body: int) -> GasLaw:
         """The gas law of ``body``."""
