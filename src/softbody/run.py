@@ -48,17 +48,10 @@ from softbody.errors import StabilityWarning
 from softbody.io.outputs import check_targets, commit, folder_lock, prepare, read_manifest
 from softbody.limits import check_memory
 from softbody.scenes.loader import Scene
+from softbody.scenes.plan import MAX_FRAMES, MAX_STEPS, FramePlan, plan_frames
 from softbody.sim.simulator import Simulator
 
 BOUNDING_METHODS = ("exact", "bounding_box", "bounding_sphere", "bounding_ellipsoid")
-#: Most simulation steps a run may take unless asked for more (``--max-steps``): 10^8
-#: steps are minutes to hours (1 to 100 us a step here for the built-in scenes); more is
-#: almost always a dt or a render.fps off by orders of magnitude.
-MAX_STEPS = 100_000_000
-#: Most frames a run may render unless asked for more (``--max-frames``): 10^5 frames
-#: are 55 minutes of video at 30 fps and about half an hour of rendering at 640 x 480;
-#: more is almost always a duration or a render.fps off by orders of magnitude.
-MAX_FRAMES = 100_000
 #: Longest file stem made from a scene's name [bytes of UTF-8] (:func:`file_stem`).
 MAX_STEM_BYTES = 100
 
@@ -113,65 +106,6 @@ def file_stem(name: str) -> str:
     text = text.lstrip("._-")
     text = text.encode()[:MAX_STEM_BYTES].decode(errors="ignore").rstrip("._-")
     return text or "scene"
-
-
-@dataclass(frozen=True)
-class FramePlan:
-    """How a run is cut into frames: ``frame_count`` frames after the first (t = 0), each
-    ``frame_dt`` [s] of ``steps_per_frame`` steps (estimated from the initial stable
-    step with dt = "auto")."""
-
-    frame_count: int
-    frame_dt: float
-    steps_per_frame: int
-
-    @property
-    def total_steps(self) -> int:
-        return self.frame_count * self.steps_per_frame
-
-
-def plan_frames(
-    duration: float,
-    fps: float,
-    dt: float,
-    *,
-    auto: bool = False,
-    max_steps: int = MAX_STEPS,
-    max_frames: int = MAX_FRAMES,
-) -> FramePlan:
-    """Frames and steps of a run of ``duration`` [s] at ``fps`` [1/s] with steps of ``dt``
-    [s] (the first auto step when ``auto``); :class:`ValueError` when it would take
-    more than ``max_steps`` steps or ``max_frames`` frames (computed in floating point
-    first, so that an absurd request is refused without building huge integers)."""
-    if not (np.isfinite(fps) and fps > 0):
-        raise ValueError(f"render.fps must be a finite number > 0 frames per second, got {fps!r}")
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be finite and > 0 seconds, got {dt!r}")
-    if auto:
-        # each frame is 1 / fps, advanced in substeps re-chosen from the stability estimate
-        frame_dt = 1.0 / fps
-        per_frame = max(1.0, np.ceil(frame_dt / dt - 1e-9))
-    else:
-        per_frame = max(1.0, np.round(1.0 / (fps * dt)))
-        frame_dt = per_frame * dt
-    # a frame is a whole number of steps; the run ends on the first frame at or after
-    # the requested duration
-    frames = max(1.0, np.ceil(duration / frame_dt - 1e-9))
-    step = f"dt = {dt:.3g} s" + (" (auto, from the initial stability estimate)" if auto else "")
-    if frames > max_frames:
-        raise ValueError(
-            f"the run would render {frames:,.0f} frames ({duration:g} s at {1 / frame_dt:.3g} "
-            f"frames per second), over the limit of {max_frames:,}: shorten the duration or "
-            "lower render.fps (or raise the limit with --max-frames)"
-        )
-    if frames * per_frame > max_steps:
-        raise ValueError(
-            f"the run would take {frames * per_frame:,.0f} steps ({frames:,.0f} "
-            f"frame{'s' if frames != 1 else ''} of {per_frame:,.0f} steps of {step}), over the "
-            f"limit of {max_steps:,}: raise dt or render.fps, or shorten the duration (or raise "
-            "the limit with --max-steps)"
-        )
-    return FramePlan(int(frames), float(frame_dt), int(per_frame))
 
 
 def _check_frame_memory(plan: FramePlan, scene: Scene, outputs: Outputs) -> None:

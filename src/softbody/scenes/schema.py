@@ -40,7 +40,7 @@ from softbody.volume import VolumeMethod
 
 #: Shortest time step [s]: a nanosecond is far below any soft body's stable step; a
 #: smaller one is a typo (``dt = 1e-12``). How many steps a run may take is checked where
-#: its length is known (``softbody.run.plan_frames``, with ``--max-steps``).
+#: its length is known (``softbody.scenes.plan.plan_frames``, with ``--max-steps``).
 MIN_DT = 1e-9
 #: Renderer memory per output pixel [bytes]: a 2x2 supersampled float64 colour and depth
 #: buffer (4 x 32 B) plus the 8-bit frame and the encoder's copy, rounded up.

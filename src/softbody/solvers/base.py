@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
+from softbody.amplification import StiffestMode
 from softbody.core import core_model
 from softbody.integrators import Integrator
-from softbody.stability import StiffestMode
 
 
 class Status(IntEnum):

@@ -4,9 +4,9 @@ symplectic Euler and velocity Verlet (core/solvers/explicit.hpp)."""
 from __future__ import annotations
 
 from softbody import _core
+from softbody.amplification import TOLERATED_GROWTH_RATE, StiffestMode, largest_stable_step
 from softbody.integrators import Integrator
 from softbody.solvers.base import RunLimits, RunResult, Solver
-from softbody.stability import TOLERATED_GROWTH_RATE, StiffestMode, largest_stable_step
 
 #: The precisions of the explicit schemes' force pass (``force_precision``).
 FORCE_PRECISIONS = ("float64", "float32")
@@ -48,9 +48,9 @@ class ExplicitSolver(Solver):
     @classmethod
     def step_limit(cls, integrator: Integrator, mode: StiffestMode) -> float:
         """The step at which no mode bounded by ``mode`` grows faster than
-        ``stability.TOLERATED_GROWTH_RATE``: the scheme's amplification over the damped
+        ``amplification.TOLERATED_GROWTH_RATE``: the scheme's amplification over the damped
         spring modes, the undamped (pressure, stretched-spring) ones and both together
-        (``stability.largest_stable_step``)."""
+        (``amplification.largest_stable_step``)."""
         return largest_stable_step(
             integrator,
             mode.omega_damped,

@@ -50,8 +50,8 @@ def run_one(
     """
     from softbody.diagnostics import body_center_of_mass, body_pressure, body_volume, energies
     from softbody.errors import SimulationError
-    from softbody.run import plan_frames
     from softbody.scenes.loader import build_scene
+    from softbody.scenes.plan import plan_frames
     from softbody.sim.simulator import Simulator
     from softbody.sweep.metrics import History, compute_metrics
 
