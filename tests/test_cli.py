@@ -58,8 +58,7 @@ def test_run_writes_every_output(run_dir):
             "bounding-volumes-last-frame.png",
             "bounding-volumes-summary.json",
             "bounding-volumes.usdc",
-            "meshes",
-            "softbody-run.json",
+            "bounding-volumes-meshes",
         ]
     )
     assert not any(p.name.startswith(".") for p in run_dir.iterdir())  # no temp left
@@ -89,7 +88,7 @@ def test_obj_and_usd_hold_the_simulated_points(run_dir):
     initial = sb.scenes.load_scene("bounding-volumes").model.particle_q
     stage = Usd.Stage.Open(str(run_dir / "bounding-volumes.usdc"))
     points = UsdGeom.Mesh(stage.GetPrimAtPath("/softbody/capsule")).GetPointsAttr()
-    files = sorted((run_dir / "meshes").glob("frame_*.obj"))
+    files = sorted((run_dir / "bounding-volumes-meshes").glob("frame_*.obj"))
     assert len(files) == summary["frames"] == 16
     for k, path in enumerate(files):
         obj = np.asarray(trimesh.load(path, process=False, force="mesh").vertices)
