@@ -529,12 +529,23 @@ def test_failed_move_leaves_whole_files(tmp_path, monkeypatch, call):
     assert not any(p.name.startswith(".") for p in out.iterdir())
 
 
-def test_a_file_that_appears_during_the_run_is_not_replaced(tmp_path, monkeypatch):
+@pytest.mark.parametrize("links", [True, False], ids=["hard-link", "no-hard-links"])
+def test_a_file_that_appears_during_the_run_is_not_replaced(tmp_path, monkeypatch, links):
     """Without ``--overwrite`` a file is added with a hard link, which fails on a name
     that exists: a file created under one of the run's names after the check (by
-    another program) is not replaced, and the run stops with one line naming it."""
+    another program) is not replaced, and the run stops with one line naming it. On a
+    file system without hard links (EPERM), a fresh check right before the rename."""
     from softbody.io import outputs
 
+    if not links:
+
+        def no_links(*args, **kwargs):
+            raise OSError(errno.EPERM, "Operation not permitted")
+
+        monkeypatch.setattr(outputs.os, "link", no_links)
+        done = _commit(tmp_path / "other", {"x.txt": b"x", "m/y.txt": b"y"})
+        assert snapshot(tmp_path / "other") == {"x.txt": b"x", "m/y.txt": b"y"}
+        assert [p.name for p in done.written] == ["m", "x.txt"] and done.replaced == []
     out = tmp_path / "out"
     real = outputs.check_targets
 

@@ -122,9 +122,9 @@ class _Folder:
         links, a rename after a fresh check."""
         try:
             if self.fd is None:
-                os.link(source, self.path / name, follow_symlinks=False)
+                os.link(source, self.path / name)
             else:
-                os.link(source, name, dst_dir_fd=self.fd, follow_symlinks=False)
+                os.link(source, name, dst_dir_fd=self.fd)
         except FileExistsError:
             raise
         except OSError as exc:
