@@ -146,7 +146,11 @@ def test_summary_records_parameters_and_diagnostics(run_dir):
             ["run", "bouncing-balls", "--set", "simulation.dtt=1"],
             "unknown scene key simulation.dtt",
         ),
-        (["run", "bouncing-balls", "--dt", "0.05"], "exceeds the stable estimate"),
+        (
+            ["run", "bouncing-balls", "--dt", "0.05"],
+            r"dt = 0.0333 s exceeds the stable estimate .*\(dt = 0.05 s asked for, lowered to "
+            r"0.0333 s so that a frame at 30 fps is 1 whole step\)",
+        ),
         (
             [
                 "run",

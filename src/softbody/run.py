@@ -260,13 +260,22 @@ def run_scene(
         if strict_stability:
             warnings.simplefilter("error", StabilityWarning)
         # a frame is a whole number of steps: the step is dt or a little less
-        sim = Simulator(
-            model,
-            integrator=integrator,
-            dt="auto" if auto else plan.dt,
-            threads=threads,
-            implicit_tolerance=scene.implicit_tolerance,
-        )
+        try:
+            sim = Simulator(
+                model,
+                integrator=integrator,
+                dt="auto" if auto else plan.dt,
+                threads=threads,
+                implicit_tolerance=scene.implicit_tolerance,
+            )
+        except StabilityWarning as exc:
+            if auto or plan.dt == dt:
+                raise
+            raise StabilityWarning(
+                f"{exc} (dt = {dt:.3g} s asked for, lowered to {plan.dt:.3g} s so that a frame "
+                f"at {settings.fps:g} fps is {plan.steps_per_frame:,} whole step"
+                f"{'s' if plan.steps_per_frame != 1 else ''})"
+            ) from None
     if auto:
         plan = plan_frames(duration, settings.fps, sim.dt, auto=True, **limits)
     lowered = "" if auto or plan.dt == dt else f" ({dt * 1e3:.3g} ms asked"
