@@ -379,7 +379,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     where = sweep.add_mutually_exclusive_group()
     where.add_argument(
-        "--workers", type=int, help="local worker processes (default: one per core; 0: no Dask)"
+        "--workers",
+        type=int,
+        help="local worker processes (default and most: one per available core; 0: no Dask)",
     )
     where.add_argument("--address", help="a running Dask scheduler, e.g. tcp://host:8786")
     sweep.add_argument("--no-figure", action="store_true", help="skip the summary figure")
