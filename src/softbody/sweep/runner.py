@@ -376,7 +376,8 @@ def _sweep_into(spec, out, workers, remote, figure, progress, t_start) -> SweepR
 
         figure_path = summary_figure(spec, rows, out / FIGURE)
         _say(progress, f"wrote {figure_path}")
-    status = [r["status"] for r in rows if r["run_id"] in {run.run_id for run in spec.runs}]
+    ids = {run.run_id for run in spec.runs}  # once: not per row of a 10^6-run table
+    status = [r["status"] for r in rows if r["run_id"] in ids]
     _say(progress, f"wrote {out / TABLE} and {out / SERIES}/")
     return SweepResult(
         out=out,
