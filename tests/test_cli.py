@@ -58,8 +58,7 @@ def test_run_writes_every_output(run_dir):
             "bounding-volumes-last-frame.png",
             "bounding-volumes-summary.json",
             "bounding-volumes.usdc",
-            "meshes",
-            "softbody-run.json",
+            "bounding-volumes-meshes",
         ]
     )
     assert not any(p.name.startswith(".") for p in run_dir.iterdir())  # no temp left
@@ -89,7 +88,7 @@ def test_obj_and_usd_hold_the_simulated_points(run_dir):
     initial = sb.scenes.load_scene("bounding-volumes").model.particle_q
     stage = Usd.Stage.Open(str(run_dir / "bounding-volumes.usdc"))
     points = UsdGeom.Mesh(stage.GetPrimAtPath("/softbody/capsule")).GetPointsAttr()
-    files = sorted((run_dir / "meshes").glob("frame_*.obj"))
+    files = sorted((run_dir / "bounding-volumes-meshes").glob("frame_*.obj"))
     assert len(files) == summary["frames"] == 16
     for k, path in enumerate(files):
         obj = np.asarray(trimesh.load(path, process=False, force="mesh").vertices)
@@ -100,9 +99,26 @@ def test_obj_and_usd_hold_the_simulated_points(run_dir):
     assert stage.GetTimeCodesPerSecond() == pytest.approx(summary["fps"])
 
 
+def test_files_play_at_exactly_the_frame_rate_asked(run_dir):
+    """Issue 29 item 10: ``render.fps = 30`` gave MP4s at 29.85 fps and USD at 29.94 time
+    codes per second, because the steps per frame were rounded (the scene's 0.5 ms step:
+    66.7 steps a frame). The step is now lowered to 1 / (30 * 67) s, so a frame is 67
+    whole steps and both files run at exactly 30 per second, read back from the files."""
+    import imageio.v3 as iio
+    from pxr import Usd
+
+    assert sb.scenes.load_scene("bounding-volumes").render.fps == 30.0
+    assert iio.immeta(run_dir / "bounding-volumes.mp4", plugin="FFMPEG")["fps"] == 30.0
+    stage = Usd.Stage.Open(str(run_dir / "bounding-volumes.usdc"))
+    assert stage.GetTimeCodesPerSecond() == 30.0 and stage.GetFramesPerSecond() == 30.0
+    summary = json.loads((run_dir / "bounding-volumes-summary.json").read_text())
+    assert summary["fps"] == 30.0 and summary["dt_requested_s"] == 5e-4
+    assert summary["dt_s"] == 1 / (30 * 67) <= 5e-4
+
+
 def test_summary_records_parameters_and_diagnostics(run_dir):
-    """Frames are whole numbers of steps (round(1 / (30 fps * 0.5 ms)) = 67), and the run
-    ends on the first frame at or after the 0.5 s asked for."""
+    """Frames are whole numbers of steps (the fewest k with 1 / (30 fps k) <= 0.5 ms: 67),
+    and the run ends on the first frame at or after the 0.5 s asked for."""
     summary = json.loads((run_dir / "bounding-volumes-summary.json").read_text())
     assert summary["parameters"]["bodies"][0]["name"] == "capsule"
     assert summary["integrator"] == "velocity_verlet"
@@ -116,7 +132,7 @@ def test_summary_records_parameters_and_diagnostics(run_dir):
         summary["duration_s"] / timings["simulation"], rel=1e-12
     )
     assert summary["steps"] == (summary["frames"] - 1) * 67
-    assert 0.5 <= summary["duration_s"] < 0.5 + 67 * 5e-4
+    assert summary["duration_s"] == pytest.approx(0.5, rel=1e-9)
     body = summary["bodies"][0]
     assert body["pressure_Pa"] == pytest.approx(150.0 / body["volume_m3"], rel=1e-12)
 
@@ -130,7 +146,11 @@ def test_summary_records_parameters_and_diagnostics(run_dir):
             ["run", "bouncing-balls", "--set", "simulation.dtt=1"],
             "unknown scene key simulation.dtt",
         ),
-        (["run", "bouncing-balls", "--dt", "0.05"], "exceeds the stable estimate"),
+        (
+            ["run", "bouncing-balls", "--dt", "0.05"],
+            r"dt = 0.0333 s exceeds the stable estimate .*\(dt = 0.05 s asked for, lowered to "
+            r"0.0333 s so that a frame at 30 fps is 1 whole step\)",
+        ),
         (
             [
                 "run",
@@ -262,7 +282,8 @@ def test_console_script_runs_without_terminal(tmp_path):
 def test_run_says_what_it_prepares_before_the_first_step(tmp_path, capsys):
     """Start-up is never silent: before the first progress line ``softbody run`` prints
     the model's size, what it is preparing, and when it is ready, with the step and the
-    step count it chose (dt = 1 ms from the scene, 0.2 s: 200 or more steps)."""
+    step count it chose (the scene's dt = 1 ms lowered to 1 / (30 fps * 34) s, so that a
+    frame is 34 whole steps; 0.2 s: 6 frames of 34 steps)."""
     code = main(["run", "hanging-ball", "--duration", "0.2", "--no-video", "--no-gif",
                  "--out", str(tmp_path)])  # fmt: skip
     assert code == 0
@@ -271,8 +292,9 @@ def test_run_says_what_it_prepares_before_the_first_step(tmp_path, capsys):
     head = "\n".join(lines[:first_progress])
     assert "486 particles" in head
     assert "preparing midpoint" in head
-    ready = re.search(r"ready in [\d.]+ s: dt = 1 ms, ([\d,]+) steps", head)
-    assert ready and int(ready.group(1).replace(",", "")) >= 200
+    ready = re.search(r"ready in [\d.]+ s: dt = 0.9804 ms \(1 ms asked: 34 steps a frame at "
+                      r"30 fps\), ([\d,]+) steps", head)  # fmt: skip
+    assert ready and int(ready.group(1).replace(",", "")) == 6 * 34
 
 
 def test_readme_test_command_is_what_ci_runs():

@@ -56,3 +56,24 @@ def test_a_bad_variable_is_a_one_line_error(monkeypatch, value):
     monkeypatch.setenv("SOFTBODY_MEMORY_LIMIT", value)
     with pytest.raises(SizeLimitError, match="^SOFTBODY_MEMORY_LIMIT must be"):
         limits.memory_limit()
+
+
+def test_reading_the_container_limit_closes_its_file(tmp_path, monkeypatch, no_variable):
+    """Issue 29 item 16: ``available_memory`` left the cgroup file open, so every sweep
+    row's ``warning`` read ``unclosed file <.../memory.limit_in_bytes>``. Reference: no
+    ResourceWarning at all once the file object is collected, checked with warnings as
+    errors (a warning raised in a finaliser is reported through ``sys.unraisablehook``,
+    which is recorded here too)."""
+    import gc
+    import sys
+    import warnings
+
+    monkeypatch.setattr(limits, "physical_memory", lambda: 24 * GIB)
+    cgroup_file(tmp_path, monkeypatch, str(2 * GIB))
+    unraisable = []
+    monkeypatch.setattr(sys, "unraisablehook", unraisable.append)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("error")
+        assert limits.available_memory() == 2 * GIB
+        gc.collect()
+    assert not caught and not unraisable, [str(w.message) for w in caught] + unraisable

@@ -21,8 +21,6 @@ from pathlib import Path
 
 import pytest
 
-from softbody.io.outputs import MANIFEST
-
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = (ROOT / "src/softbody/scenes/hanging-ball.toml").read_text()
 #: each subprocess may compile the kernels on its first run (about a minute)
@@ -60,8 +58,9 @@ def snapshot(folder: Path) -> dict[str, bytes]:
 def test_user_meshes_folder_survives_out_dot(tmp_path):
     """Issue 19 item 4: in a project folder whose scene loads ``meshes/my.obj``,
     ``softbody run scene.toml --out . --meshes obj`` used to ``rmtree`` the user's
-    ``meshes/`` (any existing folder named like an output). Now the run refuses, with
-    one line naming the folder, and the project folder is unchanged."""
+    ``meshes/``. A run's mesh frames now go to ``NAME-meshes/``, so the user's folder is
+    never in the way; a user's folder of that very name stops the run with one line
+    naming it, and the project folder is unchanged."""
     import softbody as sb
 
     (tmp_path / "meshes").mkdir()
@@ -73,14 +72,20 @@ def test_user_meshes_folder_survives_out_dot(tmp_path):
     )
     assert scene != SCENE
     (tmp_path / "scene.toml").write_text(scene)
+    mine = snapshot(tmp_path)
+    args = ("run", "scene.toml", "--out", ".", "--meshes", "obj", "--duration", "0.01",
+            "--no-video", "--no-gif")  # fmt: skip
+    (tmp_path / "hanging-ball-meshes").mkdir()
+    (tmp_path / "hanging-ball-meshes" / "notes.txt").write_text("mine")
     before = snapshot(tmp_path)
-    result = softbody(
-        "run", "scene.toml", "--out", ".", "--meshes", "obj", "--duration", "0.01",
-        "--no-video", "--no-gif", cwd=tmp_path,
-    )  # fmt: skip
-    one_error_line(result, "meshes exists and softbody did not write it")
+    one_error_line(softbody(*args, cwd=tmp_path), "hanging-ball-meshes/ already exists")
     assert snapshot(tmp_path) == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["meshes", "scene.toml"]
+    shutil.rmtree(tmp_path / "hanging-ball-meshes")
+    result = softbody(*args, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    files = snapshot(tmp_path)
+    assert {k: files[k] for k in mine} == mine
+    assert "hanging-ball-meshes/frame_00000.obj" in files
 
 
 @pytest.mark.parametrize("name", ["../../x", "{tmp}/abs/x", "..", "a/../../b\\c\nd"])
@@ -102,40 +107,66 @@ def test_scene_name_cannot_write_outside_out(tmp_path, name):
     outside = {p for p in snapshot(tmp_path) if not p.startswith("a/b/out/")}
     assert outside == {"s.toml"}
     names = sorted(p.name for p in out.iterdir())
-    assert MANIFEST in names and len(names) == 5
+    assert len(names) == 4
     assert all(not n.startswith(".") and "/" not in n and "\n" not in n for n in names)
 
 
-def test_second_run_leaves_no_stale_outputs(tmp_path):
-    """Issue 19 item 6: a second run with fewer outputs left the first run's GIF and
-    ``meshes/`` beside its own summary. The folder now holds exactly the second run's
-    files, listed in the manifest."""
+ONE_RUN = ["hanging-ball-last-frame.png", "hanging-ball-plots.png", "hanging-ball-summary.json"]
+
+
+def test_a_second_scene_keeps_the_first_scenes_files(tmp_path):
+    """Issue 29 item 8: running another scene into the same ``--out`` silently removed
+    the first scene's video, plots and summary. Each scene's files carry its name, and a
+    run removes nothing: both scenes' files are there, the first's unchanged."""
     out = tmp_path / "out"
-    first = softbody(
-        "run", "hanging-ball", "--out", str(out), "--duration", "0.05", "--no-video",
-        "--meshes", "ply", cwd=tmp_path,
-    )  # fmt: skip
+    args = ("--out", str(out), "--duration", "0.01", "--no-video", "--meshes", "ply")
+    first = softbody("run", "hanging-ball", *args, cwd=tmp_path)
     assert first.returncode == 0, first.stderr
-    assert (out / "hanging-ball.gif").is_file() and (out / "meshes/frame_00002.ply").is_file()
-    second = softbody(
-        "run", "hanging-ball", "--out", str(out), "--duration", "0.01", "--no-video",
-        "--no-gif", cwd=tmp_path,
-    )  # fmt: skip
+    before = snapshot(out)
+    second = softbody("run", "bouncing-balls", *args, "--no-gif", cwd=tmp_path)
     assert second.returncode == 0, second.stderr
-    assert sorted(p.name for p in out.iterdir()) == [
-        "hanging-ball-last-frame.png",
-        "hanging-ball-plots.png",
-        "hanging-ball-summary.json",
-        MANIFEST,
+    after = snapshot(out)
+    assert {k: after[k] for k in before} == before
+    assert {"bouncing-balls-summary.json", "bouncing-balls-meshes/frame_00000.ply"} <= after.keys()
+    assert [line for line in second.stdout.splitlines() if line.startswith("replaced")] == []
+
+
+def test_same_scene_again_needs_overwrite_and_says_what_it_replaced(tmp_path):
+    """Issue 29 item 8: a second run of a scene whose files are in ``--out`` stops with
+    one line naming them (nothing is written); with ``--overwrite`` it replaces exactly
+    its own files and prints each one it replaced. Files of the first run that the
+    second does not write (its GIF after ``--no-gif``, surplus mesh frames) are left as
+    they were, and a note says so."""
+    out = tmp_path / "out"
+    args = ("run", "hanging-ball", "--out", str(out), "--no-video")
+    first = softbody(*args, "--duration", "0.05", "--meshes", "ply", cwd=tmp_path)
+    assert first.returncode == 0, first.stderr
+    before = snapshot(out)
+    again = (*args, "--duration", "0.01", "--no-gif", "--meshes", "ply")
+    line = one_error_line(softbody(*again, cwd=tmp_path), "already exist")
+    assert f"{out}/hanging-ball-last-frame.png" in line and "--overwrite" in line
+    assert snapshot(out) == before
+    result = softbody(*again, "--overwrite", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert [x for x in lines if x.startswith("replaced")] == [
+        f"replaced {out / name}" for name in ONE_RUN
     ]
+    assert f"wrote {out / 'hanging-ball-meshes'} (replacing 2 of its files)" in lines
+    assert any(x.startswith("note: ") and "frame_00002.ply" in x for x in lines), lines
+    after = snapshot(out)
+    assert after.keys() == before.keys()  # nothing removed
+    assert after["hanging-ball.gif"] == before["hanging-ball.gif"]
+    assert after["hanging-ball-summary.json"] != before["hanging-ball-summary.json"]
+    assert json.loads(after["hanging-ball-summary.json"])["frames"] == 2
 
 
 @pytest.mark.parametrize("case", ["foreign", "edited", "foreign-in-meshes"])
 def test_files_softbody_did_not_write_are_never_overwritten(tmp_path, case):
-    """A user's file named like an output (``out/hanging-ball.gif`` not written by
-    softbody), or one of ours the user has edited since, is never overwritten: the
+    """A user's file named like an output (``out/hanging-ball.gif``), or one of a run's
+    files the user has since edited, is never overwritten without ``--overwrite``: the
     run stops with one line naming it, before writing anything. A user's file put in a
-    ``meshes/`` folder that softbody wrote survives a run that drops the meshes."""
+    run's ``NAME-meshes/`` folder survives every later run, with ``--overwrite`` too."""
     out = tmp_path / "out"
     args = ("run", "hanging-ball", "--out", str(out), "--duration", "0.01", "--no-video")
     if case == "foreign":
@@ -147,24 +178,17 @@ def test_files_softbody_did_not_write_are_never_overwritten(tmp_path, case):
         if case == "edited":
             (out / "hanging-ball-summary.json").write_text("{}  # my notes\n")
         else:
-            (out / "meshes" / "notes.txt").write_text("my notes")
+            (out / "hanging-ball-meshes" / "notes.txt").write_text("my notes")
     before = snapshot(out)
-    result = softbody(*args, cwd=tmp_path)
     if case == "foreign-in-meshes":
-        assert result.returncode == 0, result.stderr
-        assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == [
-            "hanging-ball-last-frame.png",
-            "hanging-ball-plots.png",
-            "hanging-ball-summary.json",
-            "hanging-ball.gif",
-            "meshes",
-            "meshes/notes.txt",
-            MANIFEST,
-        ]
-        assert (out / "meshes" / "notes.txt").read_text() == "my notes"
+        for extra in ((), ("--meshes", "obj")):
+            result = softbody(*args, *extra, "--overwrite", cwd=tmp_path)
+            assert result.returncode == 0, result.stderr
+        assert snapshot(out).keys() == before.keys()
+        assert (out / "hanging-ball-meshes" / "notes.txt").read_text() == "my notes"
         return
-    match = "did not write it" if case == "foreign" else "changed since softbody wrote it"
-    one_error_line(result, match)
+    name = "hanging-ball.gif" if case == "foreign" else "hanging-ball-last-frame.png"
+    one_error_line(softbody(*args, cwd=tmp_path), f"{out / name}")
     assert snapshot(out) == before
 
 
@@ -240,7 +264,7 @@ def test_step_guards_refuse_endless_runs(tmp_path):
     cases = [
         (("--duration", "0.01", "--set", "render.fps=1e-6"), "render.fps: must be >= 0.01"),
         (("--dt", "1e-12",), "--max-steps"),
-        (("--duration", "10", "--max-frames", "100"), "304 frames"),
+        (("--duration", "10", "--max-frames", "100"), "300 frames"),
     ]  # fmt: skip
     for args, match in cases:
         result = softbody(*base, *args, cwd=tmp_path, timeout=120)
@@ -296,7 +320,7 @@ def test_run_scene_refuses_a_users_file(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "hanging-ball-plots.png").write_bytes(b"mine")
-    with pytest.raises(OutputError, match="hanging-ball-plots.png exists"):
+    with pytest.raises(OutputError, match="hanging-ball-plots.png already exists"):
         run_scene(
             load_scene("hanging-ball"), out, duration=0.01, outputs=Outputs(video=False, gif=False)
         )
@@ -345,10 +369,10 @@ def test_failed_ffmpeg_is_one_line(tmp_path):
     assert not any("ffmpeg" in name for name in _children(os.getpid()).values())
 
 
-# --- symlinks below --out, interrupted commits, stale temporary folders --------------
+# --- links below --out, forged manifests, failed moves, temporary folders -------------
 
 
-def _commit(out: Path, files: dict[str, bytes]) -> list[Path]:
+def _commit(out: Path, files: dict[str, bytes], overwrite: bool = False):
     """Commit ``files`` (relative path -> contents) into ``out`` as a run does: written
     into a fresh temporary folder inside ``out`` and moved in by ``commit``, under the
     folder lock. No simulation: the output-folder code alone, in milliseconds."""
@@ -361,24 +385,9 @@ def _commit(out: Path, files: dict[str, bytes]) -> list[Path]:
             for rel, data in files.items():
                 (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
                 (tmp / rel).write_bytes(data)
-            return outputs.commit(tmp, out)
+            return outputs.commit(tmp, out, list(files), overwrite=overwrite)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
-
-
-def _listed(out: Path) -> list[str]:
-    """The paths the manifest in ``out`` lists."""
-    return sorted(item["path"] for item in json.loads((out / MANIFEST).read_text())["files"])
-
-
-def _forge_manifest(out: Path, files: dict[str, Path]) -> None:
-    """Write a manifest in ``out`` (the format softbody has always written) listing each
-    path with the size and hash of the file it names (``files``: listed path -> file)."""
-    items = [
-        {"path": rel, "size": len(data), "sha256": hashlib.sha256(data).hexdigest()}
-        for rel, data in ((rel, f.read_bytes()) for rel, f in files.items())
-    ]
-    (out / MANIFEST).write_text(json.dumps({"format": "softbody-run/1", "files": items}))
 
 
 def _quick_run(out: Path, **outputs) -> dict:
@@ -386,147 +395,166 @@ def _quick_run(out: Path, **outputs) -> dict:
     from softbody.run import Outputs, run_scene
     from softbody.scenes import load_scene
 
+    overwrite = outputs.pop("overwrite", False)
     return run_scene(
         load_scene("hanging-ball"),
         out,
         duration=outputs.pop("duration", 0.01),
         outputs=Outputs(video=False, gif=False, **outputs),
+        overwrite=overwrite,
     )
 
 
-def test_meshes_moved_behind_a_link_are_not_deleted(tmp_path):
-    """Review, defect 1a: after ``--meshes obj`` the user moved ``out/meshes`` away and
-    left a link in its place (``mv out/meshes keep && ln -s keep out/meshes``); the next
-    run without ``--meshes`` deleted every ``keep/frame_*.obj`` through the link (only
-    the last path component was checked for a link). Files reached through a link below
-    ``--out`` are not ours: nothing outside ``out`` is deleted, the link stays, and a run
-    that would write meshes through it stops with one line before moving anything."""
-    from softbody.io.outputs import OutputError
-
-    out, keep = tmp_path / "out", tmp_path / "keep"
-    _quick_run(out, meshes="obj", duration=0.05)
-    assert len(list((out / "meshes").iterdir())) > 1
-    (out / "meshes").rename(keep)
-    (out / "meshes").symlink_to(keep, target_is_directory=True)
-    kept = snapshot(keep)
-    _quick_run(out)
-    assert snapshot(keep) == kept
-    assert (out / "meshes").is_symlink()
-    assert _listed(out) == [
-        "hanging-ball-last-frame.png",
-        "hanging-ball-plots.png",
-        "hanging-ball-summary.json",
-    ]
-    before = snapshot(out)
-    with pytest.raises(OutputError, match="meshes is not a folder softbody wrote"):
-        _quick_run(out, meshes="obj")
-    assert snapshot(keep) == kept and snapshot(out) == before
-
-
 @pytest.mark.parametrize("at", [True, False], ids=["dir_fd", "lstat-walk"])
-@pytest.mark.parametrize("case", ["link", "deep-link", "link-write", "parent", "absolute"])
-def test_forged_manifest_never_reaches_outside_out(tmp_path, monkeypatch, case, at):
-    """Review, defect 1b: a downloaded project folder holding a link ``home -> ~`` and a
-    forged ``softbody-run.json`` listing ``home/.bashrc`` with that file's hash made
-    ``softbody run s.toml --out .`` delete ``~/.bashrc``. A manifest path through a
-    link (at any depth) is not ours: it is neither deleted nor written through (a run
-    writing there stops with one line); one naming ``../x`` or an absolute path makes
-    the manifest not one softbody wrote. Checked with the ``dir_fd`` calls and with
-    the lstat walk used where a platform lacks them."""
+def test_meshes_folder_behind_a_link_is_never_written_through(tmp_path, monkeypatch, at):
+    """Review, defect 1a: after ``--meshes obj`` the user moved the frames away and left a
+    link in their place (``mv out/NAME-meshes keep && ln -s keep out/NAME-meshes``). A
+    link below ``--out`` is never followed: a run without meshes leaves it and what it
+    points to alone, and one that would write frames there stops with one line, with
+    ``--overwrite`` too, before moving anything. Checked with the ``dir_fd`` calls and
+    with the lstat walk used where a platform lacks them."""
     from softbody.io import outputs
 
     monkeypatch.setattr(outputs, "_AT", at, raising=False)
-    home, out = tmp_path / "home", tmp_path / "project"
-    home.mkdir()
-    out.mkdir()
-    bashrc = home / ".bashrc"
-    bashrc.write_text("export PATH=~/bin:$PATH\n")
-    if case == "deep-link":
-        (out / "a").mkdir()
-        (out / "a" / "b").symlink_to(home, target_is_directory=True)
-        listed = "a/b/.bashrc"
-    else:
-        (out / "home").symlink_to(home, target_is_directory=True)
-        listed = {"parent": "../home/.bashrc", "absolute": str(bashrc)}.get(case, "home/.bashrc")
-    _forge_manifest(out, {listed: bashrc})
-    before = snapshot(tmp_path)
-    files = {"s-summary.json": b"{}"}
-    if case == "link-write":  # a new file in the folder the manifest says is ours
-        files["home/run.sh"] = b"echo owned\n"
-    match = {"link-write": "home is not a folder", "parent": "not a manifest softbody wrote"}
-    match["absolute"] = match["parent"]
-    if case in match:
-        with pytest.raises(outputs.OutputError, match=match[case]):
-            _commit(out, files)
-        assert snapshot(tmp_path) == before
-    else:
-        _commit(out, files)
-        assert _listed(out) == ["s-summary.json"]
-    assert bashrc.read_text() == "export PATH=~/bin:$PATH\n"
-    assert snapshot(home) == {".bashrc": bashrc.read_bytes()}
+    out, keep = tmp_path / "out", tmp_path / "keep"
+    _quick_run(out, meshes="obj", duration=0.05)
+    assert len(list((out / "hanging-ball-meshes").iterdir())) > 1
+    (out / "hanging-ball-meshes").rename(keep)
+    (out / "hanging-ball-meshes").symlink_to(keep, target_is_directory=True)
+    kept = snapshot(keep)
+    _quick_run(out, overwrite=True)
+    assert snapshot(keep) == kept and (out / "hanging-ball-meshes").is_symlink()
+    before = snapshot(out)
+    with pytest.raises(outputs.OutputError, match="hanging-ball-meshes is not a folder"):
+        _quick_run(out, meshes="obj", overwrite=True)
+    assert snapshot(keep) == kept and snapshot(out) == before
+    # a link swapped in for a file of the run's: not replaced, not written through
+    (out / "hanging-ball-plots.png").unlink()
+    (out / "hanging-ball-plots.png").symlink_to(keep / "frame_00000.obj")
+    with pytest.raises(outputs.OutputError, match="is not a file softbody can replace"):
+        _quick_run(out, overwrite=True)
+    assert snapshot(keep) == kept
 
 
-@pytest.mark.parametrize("step,call", [("move", 1), ("move", 2), ("move", 3), ("delete", 1),
-                                       ("delete", 2)])  # fmt: skip
-def test_interrupted_commit_is_recovered(tmp_path, monkeypatch, step, call):
-    """Review, defect 2: the interim manifest written before the moves listed only the
-    new hash of a path both runs write, so a commit stopped after some moves (a full
-    disk, SIGKILL) left that path holding the old file under a manifest that did not
-    accept it: every later run refused it as "changed since softbody wrote it", for
-    good. The interim manifest now accepts the old or the new file there: whichever
-    move or deletion the commit stops at, the next run accepts the folder and leaves
-    exactly its own files."""
-    from softbody.io import outputs
-
-    out = tmp_path / "out"
-    _commit(out, {"a.txt": b"a1", "b.txt": b"b1", "meshes/f0.obj": b"m1", "x.gif": b"g1"})
-    real = {"move": os.replace, "delete": os.unlink}[step]
-    calls = []
-
-    def fail(src, *args, **kwargs):
-        if not os.fspath(src).rpartition("/")[2].startswith("."):  # not the manifest
-            calls.append(src)
-            if len(calls) == call:
-                raise OSError(errno.ENOSPC, "No space left on device")
-        return real(src, *args, **kwargs)
-
-    with monkeypatch.context() as m:
-        m.setattr(outputs.os, "replace" if step == "move" else "unlink", fail)
-        with pytest.raises(OSError, match="No space left"):
-            _commit(out, {"a.txt": b"a2", "b.txt": b"b2", "c.txt": b"c2"})
-    assert len(calls) == call
-    # moved in order: a.txt, b.txt, c.txt
-    assert (out / "b.txt").read_bytes() == (b"b1" if step == "move" and call <= 2 else b"b2")
-    _commit(out, {"b.txt": b"b3", "d.txt": b"d3"})
-    files = snapshot(out)
-    assert files.pop(MANIFEST) and files == {"b.txt": b"b3", "d.txt": b"d3"}
-    assert sorted(os.listdir(out)) == ["b.txt", "d.txt", MANIFEST]
-    assert _listed(out) == ["b.txt", "d.txt"]
+def _forge_manifest(out: Path, files: dict[str, Path]) -> None:
+    """Write a manifest ``softbody-run.json`` in ``out`` in the format softbody once
+    wrote, listing each path with the real size and SHA-256 of the file it names
+    (``files``: listed path -> file)."""
+    items = [
+        {"path": rel, "size": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+        for rel, data in ((rel, f.read_bytes()) for rel, f in files.items())
+    ]
+    (out / "softbody-run.json").write_text(json.dumps({"format": "softbody-run/1",
+                                                       "files": items}))  # fmt: skip
 
 
-def test_stale_temporary_folder_is_removed(tmp_path):
-    """Review, defect 3: a run killed with SIGKILL leaves its ``.softbody-run-*``
-    temporary folder (frames, meshes) in ``--out`` for good. The next run, holding the
-    folder lock (so no other run can be using it), removes such folders: only real
-    folders named exactly as the run's ``tempfile.mkdtemp`` names them; a user's
-    ``.softbody-run-notes`` folder or a link with a matching name stays, as does what
-    the link points to."""
+def test_forged_manifest_deletes_nothing(tmp_path):
+    """Issue 29 item 9: a ``softbody-run.json`` shipped in a repository, listing
+    ``README.md`` and ``.git/HEAD`` with their real sizes and hashes, made
+    ``softbody run ... --out .`` delete them (ownership rested on a file anyone can
+    write). A run now deletes nothing, and replaces only its own file names: with and
+    without ``--overwrite`` every file of the repository is unchanged, the manifest
+    included."""
+    repo = tmp_path / "repo"
+    (repo / ".git").mkdir(parents=True)
+    (repo / "README.md").write_text("# my project\n")
+    (repo / ".git" / "HEAD").write_text("ref: refs/heads/main\n")
+    _forge_manifest(repo, {"README.md": repo / "README.md", ".git/HEAD": repo / ".git/HEAD"})
+    before = snapshot(repo)
+    for overwrite in (False, True):
+        _quick_run(repo, overwrite=overwrite)
+        files = snapshot(repo)
+        assert {k: files[k] for k in before} == before
+        assert sorted(files.keys() - before.keys()) == ONE_RUN
+
+
+def test_users_folder_named_like_a_temporary_one_is_kept(tmp_path):
+    """Issue 29 item 9: a folder named like a run's temporary folder (``.softbody-run-``
+    and 8 characters, as ``tempfile.mkdtemp`` names them) was deleted, recursively, with
+    the user's files in it, by the next run into that folder. A run removes only the
+    temporary folder it made itself: such a folder, its files, and a link of such a name
+    (and what it points to) all stay."""
     out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
-    stale = out / ".softbody-run-k3j_9x0q"
-    (stale / "meshes").mkdir(parents=True)
-    (stale / "meshes" / "frame_00000.obj").write_text("v 0 0 0\n")
-    (stale / "hanging-ball.mp4").write_bytes(b"\0" * 1000)
-    (out / ".softbody-run-notes").mkdir()
-    (out / ".softbody-run-notes" / "n.txt").write_text("mine")
+    mine = out / ".softbody-run-k3j_9x0q"
+    (mine / "meshes").mkdir(parents=True)
+    (mine / "meshes" / "frame_00000.obj").write_text("v 0 0 0\n")
+    (mine / "notes.txt").write_text("mine")
     elsewhere.mkdir()
     (elsewhere / "f.txt").write_text("mine too")
     (out / ".softbody-run-zzzzzzzz").symlink_to(elsewhere, target_is_directory=True)
+    before = snapshot(out)
     _quick_run(out)
-    assert not os.path.lexists(stale)
-    assert (out / ".softbody-run-notes" / "n.txt").read_text() == "mine"
-    assert (out / ".softbody-run-zzzzzzzz").is_symlink()
+    files = snapshot(out)
+    assert {k: files[k] for k in before} == before
+    assert sorted(files.keys() - before.keys()) == ONE_RUN
     assert snapshot(elsewhere) == {"f.txt": b"mine too"}
     assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == [
-        ".softbody-run-notes",
+        ".softbody-run-k3j_9x0q",
         ".softbody-run-zzzzzzzz",
     ]
+
+
+@pytest.mark.parametrize("call", [1, 2, 3])
+def test_failed_move_leaves_whole_files(tmp_path, monkeypatch, call):
+    """A move that fails half way (a full disk, an I/O error) raises; each file in
+    ``--out`` is then whole: the earlier run's version or this run's, never a part,
+    and nothing is deleted. A later ``--overwrite`` run ends with exactly its files."""
+    from softbody.io import outputs
+
+    out = tmp_path / "out"
+    _commit(out, {"a.txt": b"a1", "b.txt": b"b1", "m/f0.obj": b"m1"})
+    calls = []
+    real = os.replace
+
+    def fail(src, *args, **kwargs):
+        calls.append(src)
+        if len(calls) == call:
+            raise OSError(errno.EIO, "Input/output error")
+        return real(src, *args, **kwargs)
+
+    with monkeypatch.context() as m:
+        m.setattr(outputs.os, "replace", fail)
+        with pytest.raises(OSError, match="Input/output error"):
+            _commit(out, {"a.txt": b"a2", "b.txt": b"b2", "m/f0.obj": b"m2"}, overwrite=True)
+    files = snapshot(out)
+    new = {"a.txt": b"a2", "b.txt": b"b2", "m/f0.obj": b"m2"}
+    old = {"a.txt": b"a1", "b.txt": b"b1", "m/f0.obj": b"m1"}
+    assert files.keys() == new.keys()
+    assert all(files[k] in (old[k], new[k]) for k in files), files
+    assert [k for k in sorted(files) if files[k] == new[k]] == sorted(new)[: call - 1]
+    done = _commit(out, {"b.txt": b"b3", "c.txt": b"c3"}, overwrite=True)
+    assert [p.name for p in done.replaced] == ["b.txt"]
+    assert snapshot(out) == {"a.txt": files["a.txt"], "b.txt": b"b3", "c.txt": b"c3",
+                             "m/f0.obj": files["m/f0.obj"]}  # fmt: skip
+    assert not any(p.name.startswith(".") for p in out.iterdir())
+
+
+@pytest.mark.parametrize("links", [True, False], ids=["hard-link", "no-hard-links"])
+def test_a_file_that_appears_during_the_run_is_not_replaced(tmp_path, monkeypatch, links):
+    """Without ``--overwrite`` a file is added with a hard link, which fails on a name
+    that exists: a file created under one of the run's names after the check (by
+    another program) is not replaced, and the run stops with one line naming it. On a
+    file system without hard links (EPERM), a fresh check right before the rename."""
+    from softbody.io import outputs
+
+    if not links:
+
+        def no_links(*args, **kwargs):
+            raise OSError(errno.EPERM, "Operation not permitted")
+
+        monkeypatch.setattr(outputs.os, "link", no_links)
+        done = _commit(tmp_path / "other", {"x.txt": b"x", "m/y.txt": b"y"})
+        assert snapshot(tmp_path / "other") == {"x.txt": b"x", "m/y.txt": b"y"}
+        assert [p.name for p in done.written] == ["m", "x.txt"] and done.replaced == []
+    out = tmp_path / "out"
+    real = outputs.check_targets
+
+    def then_a_file_appears(*args, **kwargs):
+        result = real(*args, **kwargs)
+        (out / "b.txt").write_bytes(b"another program's")
+        return result
+
+    monkeypatch.setattr(outputs, "check_targets", then_a_file_appears)
+    with pytest.raises(outputs.OutputError, match="b.txt appeared while the run was writing"):
+        _commit(out, {"a.txt": b"a", "b.txt": b"b"})
+    assert (out / "b.txt").read_bytes() == b"another program's"

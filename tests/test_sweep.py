@@ -315,3 +315,208 @@ def test_import_softbody_does_not_import_dask():
             "bad = [m for m in ('dask', 'distributed', 'pyarrow', 'zarr') if m in sys.modules]\n"
             "assert not bad, bad\nassert callable(softbody.sweep)")  # fmt: skip
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+# -- issue 29: links, identity, sizes, a wrong --address ----------------------------------
+
+
+def _tiny_sweep(scene: Path, out: Path, **kwargs):
+    """Two runs of the tiny drop in this process (no Dask), no figure."""
+    kwargs.setdefault("vary", {"bodies.0.gas.nrt": [5.0, 10.0]})
+    return sweeps.sweep(str(scene), out, workers=0, figure=False, progress=None, **kwargs)
+
+
+def test_series_link_is_never_followed(scene, tmp_path):
+    """Issue 29 item 12: with ``series/`` a link to another folder, a resumed sweep
+    deleted that folder's ``part-*.parquet`` files (any part no table row named). A link
+    in place of ``series/`` now stops the sweep with one line and nothing behind it is
+    touched."""
+    out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
+    _tiny_sweep(scene, out)
+    (out / "series").rename(elsewhere)
+    shutil.copy(elsewhere / "part-00000.parquet", elsewhere / "part-00007.parquet")
+    (out / "series").symlink_to(elsewhere, target_is_directory=True)
+    kept = sorted(p.name for p in elsewhere.iterdir())
+    from softbody.io.outputs import OutputError
+
+    with pytest.raises(OutputError, match="series is not a folder"):
+        _tiny_sweep(scene, out)
+    assert kept == ["part-00000.parquet", "part-00007.parquet"]
+    assert sorted(p.name for p in elsewhere.iterdir()) == kept
+
+
+def test_resume_removes_only_series_parts_it_wrote(scene, tmp_path):
+    """Issue 29 item 12: a resumed sweep removes a series part no row names (left by a
+    crash between two renames) only when it is a regular file holding run ids of this
+    sweep alone: a copy of one of its parts goes, a user's Parquet file named like a
+    part (other run ids) and a link named like one stay."""
+    import pyarrow as pa
+
+    out = tmp_path / "out"
+    _tiny_sweep(scene, out)
+    series = out / "series"
+    shutil.copy(series / "part-00000.parquet", series / "part-00005.parquet")  # ours
+    pq.write_table(pa.table({"run_id": ["mine"], "x": [1.0]}), series / "part-00006.parquet")
+    (tmp_path / "t.parquet").write_bytes((series / "part-00000.parquet").read_bytes())
+    (series / "part-00008.parquet").symlink_to(tmp_path / "t.parquet")
+    _tiny_sweep(scene, out)
+    assert sorted(p.name for p in series.iterdir()) == [
+        "part-00000.parquet",
+        "part-00006.parquet",
+        "part-00008.parquet",
+    ]
+    assert (tmp_path / "t.parquet").exists()
+
+
+def test_changed_set_is_another_sweep(scene, tmp_path):
+    """Issue 29 item 13: rerunning a sweep with another ``--set`` mixed two sweeps in one
+    table (rows of mass 1 and mass 5 under one nRT, no column saying which). Every fixed
+    override is now part of the table's identity: the second sweep is refused with one
+    line naming the override in both, and the table keeps its two rows."""
+    out = tmp_path / "out"
+    _tiny_sweep(scene, out, set={"bodies.0.mass": 1.0})
+    message = (r"holds a sweep with other fixed overrides \(bodies.0.mass=1.0; this one: "
+               r"bodies.0.mass=5.0\)")  # fmt: skip
+    with pytest.raises(sweeps.SweepError, match=message):
+        _tiny_sweep(scene, out, set={"bodies.0.mass": 5.0})
+    with pytest.raises(sweeps.SweepError, match="bodies.0.mass unset"):
+        _tiny_sweep(scene, out)
+    assert len(_table(out)) == 2
+    again = _tiny_sweep(scene, out, set={"bodies.0.mass": 1.0})
+    assert (again.executed, again.skipped) == (0, 2)
+
+
+def test_scene_file_changed_since_is_another_sweep(scene, tmp_path):
+    """Issue 29 item 13: the base scene's contents are part of the identity too: a sweep
+    resumed after its scene file was edited is refused with one line saying so."""
+    out = tmp_path / "out"
+    _tiny_sweep(scene, out)
+    scene.write_text(SCENE.replace("damping = 0.5", "damping = 0.7"))
+    with pytest.raises(sweeps.SweepError, match="the scene has changed since"):
+        _tiny_sweep(scene, out)
+
+
+def test_huge_grid_is_refused_before_any_list_is_built(scene, tmp_path):
+    """Issue 29 item 14: a grid of 10^9 combinations built its whole list first (7.7 GB)
+    before refusing. The count is now the product of the value counts, refused at once:
+    run under a 4 GiB address-space limit, the command ends with one line giving the
+    count and the limit, and writes nothing."""
+    import resource
+
+    def limit_memory():
+        resource.setrlimit(resource.RLIMIT_AS, (4 * 1024**3, 4 * 1024**3))
+
+    argv = [sys.executable, "-m", "softbody.cli", "sweep", str(scene), "--out",
+            str(tmp_path / "out"), "--workers", "0"]  # fmt: skip
+    for key in ("bodies.0.gas.nrt", "bodies.0.mass", "bodies.0.stiffness"):
+        argv += ["--vary", f"{key}=1:100:1000"]
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=120,
+                            preexec_fn=limit_memory)  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.splitlines() == [
+        "softbody: error: softbody sweep: the grid would have at least 1,000,000,000 runs "
+        "(1,000 x 1,000 x 1,000 values), over the limit of 1,000,000"
+    ]
+    assert not (tmp_path / "out").exists()
+
+
+def test_each_varied_value_is_validated_once_not_each_run(scene, monkeypatch):
+    """Issue 29 item 14: a 10^6-run sweep validated every run's scene (8 minutes before
+    printing anything). The scene schema now checks the first run, each key's distinct
+    values in it (a range's past 64 values: its smallest and largest, as the schema's
+    bounds are intervals), and the last run: 1 + (4 + 2) + 1 validations for a
+    4 x 5,000 grid of 20,000 runs. A bad value is still one error naming the key."""
+    from softbody.scenes import loader
+
+    calls = []
+    real = loader.validate
+    monkeypatch.setattr(loader, "validate", lambda data: calls.append(1) or real(data))
+    vary = {"bodies.0.gas.nrt": [5.0, 10.0, 20.0, 40.0],
+            "bodies.0.stiffness": {"low": 100.0, "high": 300.0, "count": 5000}}  # fmt: skip
+    spec = sweeps.build_spec(str(scene), vary=vary)
+    assert len(spec.runs) == 20_000 and len(calls) == 8
+    assert spec.runs[-1].data["bodies"][0]["stiffness"] == 300.0
+    vary["bodies.0.gas.nrt"][2] = -1.0
+    with pytest.raises(sweeps.SweepError, match=r"vary.bodies.0.gas.nrt=-1.0: .*\bnrt\b"):
+        sweeps.build_spec(str(scene), vary=vary)
+
+
+def test_oversized_sweep_file_is_refused_before_it_is_read(tmp_path, capsys):
+    """Issue 29 item 14: a sweep file is refused by its size (``stat``) before it is read,
+    as ``softbody run`` refuses a scene file: a 3 GB file was read whole (6.4 GB peak)
+    first. A sparse file one byte over the 64 MiB limit: one line naming it and the
+    limit, and well under 64 MiB allocated while refusing it."""
+    import tracemalloc
+
+    from softbody import limits
+
+    big = tmp_path / "big.toml"
+    with big.open("wb") as f:
+        f.write(b'scene = "hanging-ball"\n#')
+        f.truncate(limits.MAX_SCENE_FILE_BYTES + 1)
+    tracemalloc.start()
+    try:
+        code = main(["sweep", str(big), "--out", str(tmp_path / "out"), "--workers", "0"])
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "big.toml" in err and "64 MiB" in err, err
+    assert peak < 16 * 1024**2
+    with pytest.raises(ValueError, match="larger than the 64 MiB"):
+        sweeps.load_sweep_file(big)
+
+
+def test_workers_above_the_available_cores_are_refused(scene, tmp_path, capsys):
+    """Issue 29 item 14: ``--workers 100000`` (or 50 on 2 cores) started that many
+    processes. More workers than the cores this process may use is now one line saying
+    how many it may have, before any cluster starts or anything is written."""
+    from softbody.sweep.runner import available_cores
+
+    cores = available_cores()
+    code = main(["sweep", str(scene), "--out", str(tmp_path / "out"), "--workers",
+                 str(cores + 1), "--vary", "bodies.0.gas.nrt=5,10"])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err, err
+    assert f"--workers {cores + 1}" in err and f"at most {cores} workers" in err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("server", ["silent", "http"])
+def test_address_of_something_else_is_one_line_in_bounded_time(scene, tmp_path, server):
+    """Issue 29 item 15: ``--address`` at a port where something else listens (an HTTP
+    server, a listener that never answers) hung for over 90 s with no output. The
+    handshake is bounded now (a Dask scheduler greets at once): the command ends with
+    one line saying what answered, exit 2, within the 60 s given here, and writes
+    nothing."""
+    import http.server
+    import socket
+    import threading
+
+    if server == "http":
+        httpd = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+        httpd.RequestHandlerClass.log_message = lambda *args: None
+        port = httpd.server_address[1]
+        threading.Thread(target=httpd.serve_forever, daemon=True).start()
+        close = httpd.shutdown
+        match = "is not a Dask scheduler: an HTTP server answered (HTTP/1.0 "
+    else:
+        listener = socket.socket()
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(8)  # accepted by the kernel, never read nor answered
+        port = listener.getsockname()[1]
+        close = listener.close
+        match = "is not a Dask scheduler: something accepts connections there but sent nothing"
+    try:
+        result = subprocess.run(
+            [sys.executable, "-m", "softbody.cli", "sweep", str(scene), "--out",
+             str(tmp_path / "out"), "--address", f"tcp://127.0.0.1:{port}",
+             "--vary", "bodies.0.gas.nrt=5,10"],
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+    finally:
+        close()
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and f"tcp://127.0.0.1:{port} {match}" in lines[0], lines
+    assert not (tmp_path / "out").exists()

@@ -8,13 +8,13 @@
     softbody info MESH
 
 User mistakes (unknown scene or key, invalid mesh, unstable settings, a run that blows
-up, a run too long or too large for this machine, an output folder holding files
-softbody did not write) print one line ``softbody: error: ...`` to stderr and exit with
-status 2; nothing is written unless the run succeeds. Running out of memory is one line
-too (status 2). Ctrl-C and SIGTERM stop a command with one line, remove its temporary
-files and child processes, and exit with 130 and 143 (128 + the signal number). An
-unexpected exception is a bug: one line naming it, status 1; set the environment
-variable ``SOFTBODY_DEBUG=1`` to see the traceback as well.
+up, a run too long or too large for this machine, an output folder already holding a
+file of a run's names without ``--overwrite``) print one line ``softbody: error: ...``
+to stderr and exit with status 2; nothing is written unless the run succeeds. Running
+out of memory is one line too (status 2). Ctrl-C and SIGTERM stop a command with one
+line, remove its temporary files and child processes, and exit with 130 and 143 (128 +
+the signal number). An unexpected exception is a bug: one line naming it, status 1; set
+the environment variable ``SOFTBODY_DEBUG=1`` to see the traceback as well.
 """
 
 from __future__ import annotations
@@ -102,6 +102,7 @@ def _run(args) -> int:
         threads=args.threads,
         max_steps=args.max_steps,
         max_frames=args.max_frames,
+        overwrite=args.overwrite,
     )
     t = summary["timings_s"]
     print(
@@ -109,8 +110,23 @@ def _run(args) -> int:
         f"({t['simulated_per_wall_second']:.1f}x real time), rendered in "
         f"{t['rendering']:.2f} s (first step {t['kernel_compile_or_load']:.2f} s)"
     )
+    replaced = summary["replaced"]
     for path in summary["files"]:
-        print(f"wrote {path}")
+        inside = [p for p in replaced if Path(p).parent == Path(path)]
+        if path in replaced:
+            print(f"replaced {path}")
+        elif inside:
+            print(f"wrote {path} (replacing {len(inside)} of its files)")
+        else:
+            print(f"wrote {path}")
+    others = summary["others"]
+    if others:
+        shown = ", ".join(Path(p).name for p in others[:3]) + (", ..." if len(others) > 3 else "")
+        print(
+            f"note: {Path(others[0]).parent} also holds {len(others)} file"
+            f"{'s' if len(others) != 1 else ''} this run did not write ({shown}); left as "
+            f"{'they were' if len(others) != 1 else 'it was'}"
+        )
     return 0
 
 
@@ -292,6 +308,11 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="simulate a scene and write video, plots and summary")
     run.add_argument("scene", help="built-in scene name (see `softbody scenes`) or .toml file")
     run.add_argument("--out", default="out", help="output folder (default: out)")
+    run.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace this run's files (named after the scene) where they exist already",
+    )
     run.add_argument("--duration", type=_positive_float, help="simulated seconds")
     run.add_argument("--dt", type=_dt, help='time step in seconds, or "auto"')
     run.add_argument("--integrator", choices=INTEGRATORS)
@@ -358,7 +379,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     where = sweep.add_mutually_exclusive_group()
     where.add_argument(
-        "--workers", type=int, help="local worker processes (default: one per core; 0: no Dask)"
+        "--workers",
+        type=int,
+        help="local worker processes (default and most: one per available core; 0: no Dask)",
     )
     where.add_argument("--address", help="a running Dask scheduler, e.g. tcp://host:8786")
     sweep.add_argument("--no-figure", action="store_true", help="skip the summary figure")

@@ -68,7 +68,8 @@ def available_memory() -> int:
     total = physical_memory()
     for name in CGROUP_LIMIT_FILES:
         try:
-            text = open(name).read().strip()
+            with open(name) as f:  # closed at once: no ResourceWarning in a sweep's rows
+                text = f.read().strip()
         except OSError:
             continue
         # v2 writes "max" when there is no limit; v1 a huge number, which min() passes over

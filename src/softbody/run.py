@@ -1,15 +1,15 @@
 """Run a scene to files: video, plots, summary, and on request mesh sequences and USD.
 
-The output folder holds exactly one run's files, and softbody never overwrites or
-deletes a file it did not write (:mod:`softbody.io.outputs`): everything is written to
-a temporary folder ``.softbody-run-*`` inside the output folder; only when the whole
-run has succeeded are the files moved into place, the previous run's files that this
-run did not write removed, and the manifest ``softbody-run.json`` (what the folder's
-run wrote, with sizes and hashes) replaced. A target that exists and is not listed
-there (a user's file or folder) stops the run with a one-line error, checked before
-simulating and again before moving anything. A failed or interrupted run (an error,
-Ctrl-C, SIGTERM) removes its temporary folder and kills its ffmpeg, and leaves the
-folder as the previous run left it.
+A run adds its files to the output folder by name and never deletes or replaces a file
+it did not write (:mod:`softbody.io.outputs`): everything is written to a temporary
+folder ``.softbody-run-*`` that the run makes inside the output folder, and only when the
+whole run has succeeded are the files moved into place. Every name starts with the
+scene's file stem (``NAME.mp4``, ``NAME-summary.json``, ``NAME-meshes/``), so runs of
+different scenes share a folder; a file or folder of one of this run's names that
+exists already stops the run with a one-line error before simulating (checked again
+before moving anything), unless ``overwrite`` is given, which replaces exactly those
+files. A failed or interrupted run (an error, Ctrl-C, SIGTERM) removes its temporary
+folder and kills its ffmpeg, and leaves the output folder as it was.
 
 File names come from the scene's ``name`` made into a safe file stem
 (:func:`file_stem`): a scene file cannot write outside the output folder.
@@ -45,7 +45,7 @@ from softbody.diagnostics import (
     energies,
 )
 from softbody.errors import StabilityWarning
-from softbody.io.outputs import check_targets, commit, folder_lock, prepare, read_manifest
+from softbody.io.outputs import check_targets, commit, folder_lock, prepare
 from softbody.limits import check_memory
 from softbody.scenes.loader import Scene
 from softbody.scenes.plan import MAX_FRAMES, MAX_STEPS, FramePlan, plan_frames
@@ -63,7 +63,7 @@ class Outputs:
     video: bool = True
     gif: bool = True
     meshes: str | None = None
-    """``"obj"`` or ``"ply"``: one mesh file per frame in ``meshes/``."""
+    """``"obj"`` or ``"ply"``: one mesh file per frame in ``NAME-meshes/``."""
     usd: bool = False
     """A USD point cache (needs usd-core)."""
 
@@ -128,12 +128,12 @@ def _expected_files(stem: str, plan: FramePlan, outputs: Outputs, bounding: bool
     names += [f"{stem}.mp4"] * outputs.video + [f"{stem}.gif"] * outputs.gif
     names += [f"{stem}-bounding-volumes.png"] * bounding + [f"{stem}.usdc"] * outputs.usd
     if outputs.meshes:
-        names += [_mesh_frame(k, outputs.meshes) for k in range(plan.frame_count + 1)]
+        names += [_mesh_frame(stem, k, outputs.meshes) for k in range(plan.frame_count + 1)]
     return names
 
 
-def _mesh_frame(frame: int, fmt: str) -> str:
-    return f"meshes/frame_{frame:05d}.{fmt}"
+def _mesh_frame(stem: str, frame: int, fmt: str) -> str:
+    return f"{stem}-meshes/frame_{frame:05d}.{fmt}"
 
 
 def run_scene(
@@ -149,15 +149,20 @@ def run_scene(
     threads: int = 1,
     max_steps: int = MAX_STEPS,
     max_frames: int = MAX_FRAMES,
+    overwrite: bool = False,
 ) -> dict:
-    """Simulate ``scene`` and write its files into ``out``; returns the JSON summary.
+    """Simulate ``scene`` and write its files into ``out``; returns the JSON summary, with
+    ``"files"`` (the top-level paths written), ``"replaced"`` (the files that existed and
+    were replaced) and ``"others"`` (files in this run's ``NAME-meshes/`` folder that it
+    did not write, left as they were) added.
 
     ``strict_stability`` turns a dt above the stability estimate into an error (the
     CLI's behaviour) instead of a warning. ``threads``: the simulator's opt-in threads
     for the force terms (``Simulator``). ``max_steps``, ``max_frames``: the run is
     refused (ValueError) before it starts when it would take more (:func:`plan_frames`).
-    ``OutputError`` when ``out`` holds a file or folder softbody did not write where
-    this run's files go (see the module docstring).
+    ``OutputError`` when ``out`` holds a file or folder where this run's files go, unless
+    ``overwrite`` (then those files are replaced; a link or a folder in the way is refused
+    all the same; see the module docstring).
     """
     model = scene.model
     integrator = integrator or scene.integrator
@@ -175,7 +180,7 @@ def run_scene(
     stem = file_stem(scene.name)
     limits = {"max_steps": max_steps, "max_frames": max_frames}
     if not auto:  # refuse an endless run at once, before the stability analysis
-        plan_frames(duration, settings.fps, dt, **limits)
+        plan = plan_frames(duration, settings.fps, dt, **limits)
     # say what happens before the first step: the stability estimate (Lanczos runs) and
     # the solver's set-up (multigrid hierarchy, projective factor) take seconds on large
     # meshes, and a silent terminal looks hung
@@ -184,19 +189,34 @@ def run_scene(
     with warnings.catch_warnings():
         if strict_stability:
             warnings.simplefilter("error", StabilityWarning)
-        sim = Simulator(
-            model,
-            integrator=integrator,
-            dt=dt,
-            threads=threads,
-            implicit_tolerance=scene.implicit_tolerance,
-        )
-    plan = plan_frames(duration, settings.fps, sim.dt, auto=auto, **limits)
+        # a frame is a whole number of steps: the step is dt or a little less
+        try:
+            sim = Simulator(
+                model,
+                integrator=integrator,
+                dt="auto" if auto else plan.dt,
+                threads=threads,
+                implicit_tolerance=scene.implicit_tolerance,
+            )
+        except StabilityWarning as exc:
+            if auto or plan.dt == dt:
+                raise
+            raise StabilityWarning(
+                f"{exc} (dt = {dt:.3g} s asked for, lowered to {plan.dt:.3g} s so that a frame "
+                f"at {settings.fps:g} fps is {plan.steps_per_frame:,} whole step"
+                f"{'s' if plan.steps_per_frame != 1 else ''})"
+            ) from None
+    if auto:
+        plan = plan_frames(duration, settings.fps, sim.dt, auto=True, **limits)
+    lowered = "" if auto or plan.dt == dt else f" ({dt * 1e3:.3g} ms asked"
+    if lowered:
+        lowered += f": {plan.steps_per_frame:,} steps a frame at {settings.fps:g} fps)"
     _check_frame_memory(plan, scene, outputs)
     _say(
         progress_stream,
-        f"ready in {time.perf_counter() - t_setup:.1f} s: dt = {sim.dt * 1e3:.3g} ms"
-        f"{' (auto)' if auto else ''}, {plan.total_steps:,} steps, {plan.frame_count + 1} frames",
+        f"ready in {time.perf_counter() - t_setup:.1f} s: dt = {sim.dt * 1e3:.4g} ms"
+        f"{' (auto)' if auto else lowered}, {plan.total_steps:,} steps, "
+        f"{plan.frame_count + 1} frames",
     )
 
     out = Path(out)
@@ -204,7 +224,7 @@ def run_scene(
     with folder_lock(out):
         # a user's file where ours would go: say so now, not after the simulation
         expected = _expected_files(stem, plan, outputs, settings.bounding_objects)
-        check_targets(out, expected, read_manifest(out))
+        check_targets(out, expected, overwrite=overwrite)
         # compile (first run) or load the kernels now, so that the timings below are the
         # simulation's and not the compiler's
         t0 = time.perf_counter()
@@ -215,7 +235,10 @@ def run_scene(
             summary = _simulate_and_write(
                 scene, sim, tmp, stem, plan, outputs, dt, progress_stream, prepare_seconds
             )
-            summary["files"] = [str(p) for p in commit(tmp, out)]
+            done = commit(tmp, out, expected, overwrite=overwrite)
+            summary["files"] = [str(p) for p in done.written]
+            summary["replaced"] = [str(p) for p in done.replaced]
+            summary["others"] = [str(p) for p in done.others]
             return summary
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -248,7 +271,7 @@ def _simulate_and_write(
     settings = scene.render
     integrator = sim.integrator.name.lower()
     frame_count, frame_dt, steps_per_frame = plan.frame_count, plan.frame_dt, plan.steps_per_frame
-    fps = 1.0 / frame_dt
+    fps = settings.fps  # exactly: a frame is 1 / fps, a whole number of steps
     video = None
     try:
         renderer = FrameRenderer(model, settings, open_bodies=model.body_closed == 0)
@@ -257,7 +280,7 @@ def _simulate_and_write(
 
             video = VideoWriter(tmp / f"{stem}.mp4", fps, gif=outputs.gif)
         if outputs.meshes:
-            (tmp / "meshes").mkdir()
+            (tmp / f"{stem}-meshes").mkdir()
         state = model.state()
         times, vol, pres, kin, total = [], [], [], [], []
         bounding = {m: [] for m in BOUNDING_METHODS} if settings.bounding_objects else None
@@ -287,7 +310,7 @@ def _simulate_and_write(
                 from softbody.io.sequence import write_mesh_frame
 
                 write_mesh_frame(
-                    tmp / _mesh_frame(frame, outputs.meshes),
+                    tmp / _mesh_frame(stem, frame, outputs.meshes),
                     model,
                     state.particle_q,
                     scene.body_names,
@@ -325,7 +348,7 @@ def _simulate_and_write(
         series,
         scene.body_names,
         f"{scene.name}: {model.particle_count} particles, {integrator}, "
-        f"dt = {'auto' if auto else f'{dt:g} s'}",
+        f"dt = {'auto' if auto else f'{sim.dt:.4g} s'}",
     )
     if bounding is not None:
         plot_bounding_volumes(
@@ -350,7 +373,8 @@ def _simulate_and_write(
         "integrator": sim.integrator.name.lower(),
         "threads": sim.threads,
         "implicit_tolerance": sim.implicit_tolerance if sim.integrator.implicit else None,
-        "dt_s": sim.dt if auto else dt,
+        "dt_s": sim.dt,
+        "dt_requested_s": None if auto else dt,
         "dt_auto": auto,
         "stable_dt_estimate_s": sim.stable_dt,
         "duration_s": float(times[-1]),

@@ -25,12 +25,14 @@ MAX_FRAMES = 100_000
 @dataclass(frozen=True)
 class FramePlan:
     """How a run is cut into frames: ``frame_count`` frames after the first (t = 0), each
-    ``frame_dt`` [s] of ``steps_per_frame`` steps (estimated from the initial stable
-    step with dt = "auto")."""
+    ``frame_dt`` = 1 / fps [s] long and of ``steps_per_frame`` steps of ``dt`` [s]; with
+    dt = "auto", ``dt`` is the initial stable step and ``steps_per_frame`` the estimate
+    it gives (the substeps are re-chosen as the run goes)."""
 
     frame_count: int
     frame_dt: float
     steps_per_frame: int
+    dt: float
 
     @property
     def total_steps(self) -> int:
@@ -46,36 +48,38 @@ def plan_frames(
     max_steps: int = MAX_STEPS,
     max_frames: int = MAX_FRAMES,
 ) -> FramePlan:
-    """Frames and steps of a run of ``duration`` [s] at ``fps`` [1/s] with steps of ``dt``
-    [s] (the first auto step when ``auto``); :class:`ValueError` when it would take
-    more than ``max_steps`` steps or ``max_frames`` frames (computed in floating point
-    first, so that an absurd request is refused without building huge integers)."""
+    """Frames and steps of a run of ``duration`` [s] at ``fps`` [1/s] with steps of at most
+    ``dt`` [s] (the first auto step when ``auto``).
+
+    A frame is exactly 1 / ``fps`` and a whole number of steps: the fewest steps k with
+    1 / (fps k) <= dt, each of 1 / (fps k) [s] (``FramePlan.dt``: ``dt`` or less), so that a
+    video plays and a USD's time codes run at exactly ``fps``. :class:`ValueError` when
+    the run would take more than ``max_steps`` steps or ``max_frames`` frames (computed
+    in floating point first, so that an absurd request is refused without building huge
+    integers)."""
     if not (np.isfinite(fps) and fps > 0):
         raise ValueError(f"render.fps must be a finite number > 0 frames per second, got {fps!r}")
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be finite and > 0 seconds, got {dt!r}")
-    if auto:
-        # each frame is 1 / fps, advanced in substeps re-chosen from the stability estimate
-        frame_dt = 1.0 / fps
-        per_frame = max(1.0, np.ceil(frame_dt / dt - 1e-9))
-    else:
-        per_frame = max(1.0, np.round(1.0 / (fps * dt)))
-        frame_dt = per_frame * dt
-    # a frame is a whole number of steps; the run ends on the first frame at or after
-    # the requested duration
+    frame_dt = 1.0 / fps
+    # the relative slack keeps a dt that divides the frame already (1 / (100 * 0.002) is
+    # 5 up to round-off) from gaining a step
+    per_frame = max(1.0, np.ceil(frame_dt / dt * (1 - 1e-9)))
+    step = dt if auto else 1.0 / (fps * per_frame)
+    # the run ends on the first frame at or after the requested duration
     frames = max(1.0, np.ceil(duration / frame_dt - 1e-9))
-    step = f"dt = {dt:.3g} s" + (" (auto, from the initial stability estimate)" if auto else "")
+    what = f"dt = {dt:.3g} s" + (" (auto, from the initial stability estimate)" if auto else "")
     if frames > max_frames:
         raise ValueError(
-            f"the run would render {frames:,.0f} frames ({duration:g} s at {1 / frame_dt:.3g} "
+            f"the run would render {frames:,.0f} frames ({duration:g} s at {fps:.3g} "
             f"frames per second), over the limit of {max_frames:,}: shorten the duration or "
             "lower render.fps (or raise the limit with --max-frames)"
         )
     if frames * per_frame > max_steps:
         raise ValueError(
             f"the run would take {frames * per_frame:,.0f} steps ({frames:,.0f} "
-            f"frame{'s' if frames != 1 else ''} of {per_frame:,.0f} steps of {step}), over the "
+            f"frame{'s' if frames != 1 else ''} of {per_frame:,.0f} steps of {what}), over the "
             f"limit of {max_steps:,}: raise dt or render.fps, or shorten the duration (or raise "
             "the limit with --max-steps)"
         )
-    return FramePlan(int(frames), float(frame_dt), int(per_frame))
+    return FramePlan(int(frames), float(frame_dt), int(per_frame), float(step))

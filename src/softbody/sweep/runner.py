@@ -25,6 +25,19 @@ from softbody.sweep.spec import Run, SweepSpec
 
 #: Seconds between writes of the table while results arrive (and at the end).
 FLUSH_SECONDS = 2.0
+#: Seconds a scheduler given by address has to accept the connection and greet (a Dask
+#: scheduler greets at once), and then to answer an HTTP request when it stayed silent.
+HANDSHAKE_SECONDS = 5.0
+#: Seconds :class:`dask.distributed.Client` then has to register with the scheduler.
+CONNECT_SECONDS = 10.0
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its CPU affinity; all of them elsewhere)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
 
 
 def _one_line(exc: BaseException) -> str:
@@ -227,15 +240,25 @@ def run_sweep(
 ) -> SweepResult:
     """Run every run of ``spec`` not yet in ``out``'s table and write the results.
 
-    ``workers``: worker processes of the local cluster (default: one per core; 0 runs
-    everything in this process, without Dask); ``address``: a running Dask scheduler
-    (``tcp://host:8786``) to use instead. ``progress``: a text stream for progress lines
-    (None: quiet).
+    ``workers``: worker processes of the local cluster (default: one per available core,
+    and at most that many: a run is one process on one core; 0 runs everything in this
+    process, without Dask); ``address``: a running Dask scheduler (``tcp://host:8786``)
+    to use instead, which must greet within :data:`HANDSHAKE_SECONDS`. ``progress``: a
+    text stream for progress lines (None: quiet).
     """
     t_start = time.perf_counter()
     out = Path(out)
-    if workers is not None and (isinstance(workers, bool) or workers < 0):
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or workers < 0
+    ):
         raise ValueError(f"workers must be a whole number >= 0, got {workers!r}")
+    cores = available_cores()
+    if workers is not None and workers > cores:
+        raise ValueError(
+            f"--workers {workers:,}: this machine has {cores} core{'s' if cores != 1 else ''} "
+            f"available, so at most {cores} workers (each run is one process on one core; "
+            "more only compete for them and take memory)"
+        )
     # a cluster given by address is reached first: an unreachable one writes nothing
     remote = _connect(address) if address is not None else None
     try:
@@ -246,13 +269,73 @@ def run_sweep(
 
 
 def _connect(address: str):
-    """A Dask client of the scheduler at ``address``; ValueError when it cannot be reached."""
+    """A Dask client of the scheduler at ``address``; ValueError (one line) when it cannot
+    be reached or what answers there is not a Dask scheduler (:func:`_probe`)."""
     from dask.distributed import Client
 
+    _probe(address)
     try:
-        return Client(address, timeout=10)
+        return Client(address, timeout=CONNECT_SECONDS)
     except (OSError, TimeoutError) as exc:
         raise ValueError(f"cannot reach the Dask scheduler at {address} ({exc})") from None
+
+
+def _probe(address: str, timeout: float = HANDSHAKE_SECONDS) -> None:
+    """Check that a Dask scheduler answers at a ``tcp://`` ``address``, in bounded time:
+    it greets a new connection at once with its handshake (a msgpack message naming its
+    ``compression`` and ``pickle-protocol``). :class:`ValueError` naming what answered
+    instead: nothing (refused, or no greeting within ``timeout`` seconds), an HTTP
+    server (asked ``HEAD /`` after the silence), or other bytes. ``Client`` itself would
+    wait for ever on a listener that never answers. Other schemes (``tls://``) are left
+    to ``Client``."""
+    import socket
+
+    from distributed.comm import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        host, port = parse_host_port(location)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"--address {address!r} is not a scheduler address ({exc})") from None
+    if scheme != "tcp":
+        return
+    where = f"the Dask scheduler at {address}"
+    deadline = time.monotonic() + timeout
+    try:
+        conn = socket.create_connection((host, port), timeout=timeout)
+    except OSError as exc:
+        reason = "timed out" if isinstance(exc, TimeoutError) else exc.strerror or exc
+        raise ValueError(f"cannot reach {where} ({reason})") from None
+    with conn:
+        data = b""
+        try:
+            while len(data) < 4096 and time.monotonic() < deadline:
+                conn.settimeout(max(0.01, deadline - time.monotonic()))
+                chunk = conn.recv(4096)
+                if not chunk:
+                    break
+                data += chunk
+                if b"pickle-protocol" in data and b"compression" in data:
+                    return  # a Dask comm's greeting
+        except TimeoutError:
+            pass
+        except OSError as exc:
+            raise ValueError(f"cannot reach {where} ({exc.strerror or exc})") from None
+        if not data:
+            try:  # silent: an HTTP server waits for a request
+                conn.settimeout(2.0)
+                conn.sendall(b"HEAD / HTTP/1.0\r\n\r\n")
+                data = conn.recv(4096)
+            except OSError:
+                data = b""
+    if data.startswith(b"HTTP/"):
+        status = data.split(b"\r\n", 1)[0].decode("latin-1")[:80]
+        answer = f"an HTTP server answered ({status})"
+    elif data:
+        answer = f"it answered {data[:60]!r}"
+    else:
+        answer = f"something accepts connections there but sent nothing in {timeout:g} s"
+    raise ValueError(f"{where} is not a Dask scheduler: {answer}")
 
 
 def _sweep_into(spec, out, workers, remote, figure, progress, t_start) -> SweepResult:
@@ -293,7 +376,8 @@ def _sweep_into(spec, out, workers, remote, figure, progress, t_start) -> SweepR
 
         figure_path = summary_figure(spec, rows, out / FIGURE)
         _say(progress, f"wrote {figure_path}")
-    status = [r["status"] for r in rows if r["run_id"] in {run.run_id for run in spec.runs}]
+    ids = {run.run_id for run in spec.runs}  # once: not per row of a 10^6-run table
+    status = [r["status"] for r in rows if r["run_id"] in ids]
     _say(progress, f"wrote {out / TABLE} and {out / SERIES}/")
     return SweepResult(
         out=out,
@@ -326,7 +410,7 @@ def _run_on_dask(
     t0 = time.perf_counter()
     cluster = None
     if remote is None:
-        n = workers or os.cpu_count() or 1
+        n = min(workers or available_cores(), len(todo))  # no idle processes
         cluster = LocalCluster(
             n_workers=n,
             threads_per_worker=1,

@@ -25,8 +25,14 @@ every entry of a list (``bodies.*.stiffness``). On the command line a varied val
 list ``1,4,16``, a range ``low:high:count`` with an optional ``:log``, or a distribution
 ``uniform:low:high``, ``loguniform:low:high``, ``normal:mean:std`` (with ``--samples``).
 
-Every run's scene is resolved and validated against the scene schema before anything
-runs, so that a typo is one line naming the key (:class:`SweepError`).
+Before anything runs the sweep is sized and checked, in time that does not grow with its
+run count: the number of runs is computed from the value counts (a grid of 10^9 is
+refused before any list is built), the base scene (with the fixed overrides) is checked
+against the scene schema once, and each varied key once per distinct value (or, past
+:data:`MAX_CHECKED_VALUES` distinct numbers, at its smallest and largest: the schema's
+bounds are intervals), and the first and last run whole; a typo or a bad value is one
+line naming the key (:class:`SweepError`). A combination that is invalid only together is
+an ``error`` row of the table, as its worker builds the scene.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ import copy
 import hashlib
 import json
 import math
+import os
 import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -45,10 +52,15 @@ from typing import Any
 
 import numpy as np
 
+from softbody import limits
+from softbody.errors import SizeLimitError
 from softbody.scenes import loader
 
 #: Most runs one sweep may hold: more is almost always a count off by orders of magnitude.
 MAX_RUNS = 1_000_000
+#: A varied key's distinct values each checked against the schema up to this many; past
+#: it, its smallest and largest numbers and each value that is not a number.
+MAX_CHECKED_VALUES = 64
 SWEEP_KEYS = {"scene", "set", "vary", "random", "metrics", "sample_rate", "description", "name"}
 RANDOM_KEYS = {"samples", "seed", "latin", "vary"}
 DISTRIBUTIONS = {"uniform": ("low", "high"), "loguniform": ("low", "high"),
@@ -59,16 +71,24 @@ class SweepError(ValueError):
     """A sweep description is wrong; the message is one line saying where and why."""
 
 
-@dataclass
+@dataclass(slots=True)
 class Run:
-    """One run of a sweep: its id, its varied values and its resolved scene table."""
+    """One run of a sweep: its id, its varied values and the sweep's base scene table."""
 
     run_id: str
-    """Hash of the resolved scene table (16 hex digits): the same run has the same id."""
+    """Hash of the base scene table (with the fixed overrides) and the run's varied values
+    (16 hex digits): the same run has the same id."""
     params: dict[str, Any]
     """Varied key -> value, as the sweep names them (``bodies.*.stiffness``)."""
-    data: dict
-    """The scene table with every override applied."""
+    base: dict = field(repr=False, compare=False)
+    """The base scene table with the fixed overrides, shared by every run of the sweep
+    (never modified)."""
+
+    @property
+    def data(self) -> dict:
+        """The scene table with every override applied (a new copy, made when asked for:
+        a sweep of 10^6 runs holds one scene table, not 10^6)."""
+        return _resolved(self.base, self.params, "sweep")
 
 
 @dataclass
@@ -87,20 +107,29 @@ class SweepSpec:
     user_metrics: dict[str, Callable] = field(default_factory=dict)
     sample_rate: float = 100.0
     description: str = ""
+    fixed: dict[str, Any] = field(default_factory=dict)
+    """The fixed overrides (``set``, ``--set``): dotted key -> value."""
+    scene_hash: str = ""
+    """:func:`run_id` of the base scene's table before the overrides: its contents."""
 
     def fingerprint(self) -> dict:
-        """What makes two sweeps the same sweep (stored in the output folder)."""
-        return {
+        """What makes two sweeps the same sweep (stored in the output folder): the scene
+        and its contents, every fixed override, the varied keys, the sampling and the
+        metrics. Runs of sweeps that differ in any of these never share a table."""
+        return json.loads(json.dumps({
             "scene": self.scene_name,
+            "scene_hash": self.scene_hash,
+            "set": dict(sorted(self.fixed.items())),
             "varied": self.varied,
             "sample_rate": self.sample_rate,
             "metrics": self.metrics,
             "user_metrics": sorted(self.user_metrics),
-        }
+        }, default=str))  # fmt: skip
 
 
 def run_id(data: dict) -> str:
-    """A run's id: SHA-256 of the resolved scene table as canonical JSON, 16 hex digits."""
+    """SHA-256 of ``data`` as canonical JSON, 16 hex digits: a run's id from its base scene's
+    and its values (:func:`build_spec`)."""
     text = json.dumps(data, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -316,24 +345,41 @@ def build_spec(
     from softbody.sweep.metrics import BUILTIN_METRICS
 
     scene, name, base_data, base = _scene_data(scene, folder)
+    scene_hash = run_id(base_data)
     fixed = _flatten(set or {})
     vary = _flatten(vary or {}, _is_range)
     for key, value in fixed.items():
         _apply(base_data, key, value, f"{label}: set.{key}")
 
-    grid = {k: _values(v, f"{label}: vary.{k}") for k, v in (vary or {}).items()}
-    points: list[dict] = [dict(zip(grid, combo, strict=True)) for combo in product(*grid.values())]
+    # sizes first: the run count from the value counts, before any list of runs is built
+    grid: dict[str, list] = {}
+    count = 1
+    for k, v in vary.items():
+        grid[k] = _values(v, f"{label}: vary.{k}")
+        count *= len(grid[k])
+        if count > MAX_RUNS:
+            raise SweepError(
+                f"{label}: the grid would have at least {count:,} runs ("
+                f"{' x '.join(f'{len(g):,}' for g in grid.values())} values), over the limit "
+                f"of {MAX_RUNS:,}"
+            )
     varied = list(grid)
+    draws: list[dict] = [{}]
     if random:
         unknown = builtins.set(random) - RANDOM_KEYS
         if unknown:
             raise SweepError(f"{label}: unknown key random.{sorted(unknown)[0]}; "
                              f"valid keys: {', '.join(sorted(RANDOM_KEYS))}")  # fmt: skip
-        count, seed = random.get("samples"), random.get("seed", 0)
-        if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= MAX_RUNS:
+        samples, seed = random.get("samples"), random.get("seed", 0)
+        if (isinstance(samples, bool) or not isinstance(samples, int)
+                or not 1 <= samples <= MAX_RUNS):  # fmt: skip
             raise SweepError(f"{label}: random.samples must be a whole number in [1, {MAX_RUNS:,}]")
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise SweepError(f"{label}: random.seed must be a whole number >= 0, got {seed!r}")
+        if count * samples > MAX_RUNS:
+            raise SweepError(f"{label}: {count:,} grid points x {samples:,} samples = "
+                             f"{count * samples:,} runs, over the limit of "
+                             f"{MAX_RUNS:,}")  # fmt: skip
         dists = {k: _distribution(v, f"{label}: random.vary.{k}")
                  for k, v in _flatten(random.get("vary") or {}, _is_range).items()}  # fmt: skip
         if not dists:
@@ -341,11 +387,8 @@ def build_spec(
         clash = builtins.set(dists) & builtins.set(grid)
         if clash:
             raise SweepError(f"{label}: {sorted(clash)[0]} is in both vary and random.vary")
-        draws = _samples(dists, count, seed, bool(random.get("latin", False)))
-        points = [{**p, **d} for p in points for d in draws]
+        draws = _samples(dists, samples, seed, bool(random.get("latin", False)))
         varied += list(dists)
-    if len(points) > MAX_RUNS:
-        raise SweepError(f"{label}: {len(points):,} runs, over the limit of {MAX_RUNS:,}")
 
     known = builtins.set(BUILTIN_METRICS)
     for m in metrics or ():
@@ -355,21 +398,32 @@ def build_spec(
     if not (isinstance(sample_rate, int | float) and 0 < sample_rate < math.inf):
         raise SweepError(f"{label}: sample_rate must be a number > 0 per second")
 
+    # validity once, not per run: the first run, then each key's values in it, then the
+    # last run
+    first = {**{k: v[0] for k, v in grid.items()}, **draws[0]}
+    _check(base_data, first, label, f"{label}: run 0 ({_shown(first)})")
+    for key, values in grid.items():
+        for value in _to_check(values):
+            _check(base_data, {**first, key: value}, label, f"{label}: vary.{key}={value}")
+    for key in varied[len(grid) :]:  # drawn numbers: the smallest and the largest
+        for value in (min(d[key] for d in draws), max(d[key] for d in draws)):
+            where = f"{label}: random.vary.{key} drew {value:.6g}"
+            _check(base_data, {**first, key: value}, label, where)
+    points = (
+        {**dict(zip(grid, combo, strict=True)), **d}
+        for combo in product(*grid.values())
+        for d in draws
+    )
+    base_id = run_id(base_data)
     runs: list[Run] = []
     seen: builtins.set[str] = builtins.set()
-    for i, point in enumerate(points):
-        data = copy.deepcopy(base_data)
-        for key, value in point.items():
-            _apply(data, key, value, f"{label}: vary.{key}")
-        try:
-            loader.validate(data)
-        except (loader.SceneError, ValueError) as exc:
-            shown = ", ".join(f"{k}={v}" for k, v in point.items())
-            raise SweepError(f"{label}: run {i} ({shown}): {exc}") from None
-        rid = run_id(data)
-        if rid not in seen:  # the same scene twice is one run
+    for point in points:
+        rid = run_id({"scene": base_id, "params": point})
+        if rid not in seen:  # the same values twice are one run
             seen.add(rid)
-            runs.append(Run(rid, point, data))
+            runs.append(Run(rid, point, base_data))
+    last = runs[-1].params
+    _check(base_data, last, label, f"{label}: run {len(runs) - 1} ({_shown(last)})")
     return SweepSpec(
         scene=scene,
         scene_name=name,
@@ -380,7 +434,50 @@ def build_spec(
         user_metrics=dict(user_metrics or {}),
         sample_rate=float(sample_rate),
         description=description,
+        fixed=fixed,
+        scene_hash=scene_hash,
     )
+
+
+def _resolved(base_data: dict, point: dict[str, Any], label: str) -> dict:
+    """The base scene table with the point's values applied (a copy)."""
+    data = copy.deepcopy(base_data)
+    for key, value in point.items():
+        _apply(data, key, value, f"{label}: vary.{key}")
+    return data
+
+
+def _shown(point: dict[str, Any]) -> str:
+    return ", ".join(f"{k}={v}" for k, v in point.items())
+
+
+def _check(base_data: dict, point: dict[str, Any], label: str, where: str) -> None:
+    """Validate the base scene with ``point`` applied; :class:`SweepError` naming ``where``
+    (or the key, for a key that names nothing)."""
+    data = _resolved(base_data, point, label)
+    try:
+        loader.validate(data)
+    except (loader.SceneError, ValueError) as exc:
+        raise SweepError(f"{where}: {exc}") from None
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool)
+
+
+def _to_check(values: list) -> list:
+    """The values of one key to check against the schema: each distinct one, or past
+    :data:`MAX_CHECKED_VALUES`, the smallest and largest number and every other value
+    (the schema's numeric bounds are intervals)."""
+
+    def distinct(items: list) -> list:
+        return list({json.dumps(v, sort_keys=True, default=str): v for v in items}.values())
+
+    if len(values) <= MAX_CHECKED_VALUES:
+        return distinct(values)
+    numbers = [v for v in values if _is_number(v)]
+    others = distinct([v for v in values if not _is_number(v)])
+    return ([min(numbers), max(numbers)] if numbers else []) + others
 
 
 def load_sweep_file(path: str | Path, *, extra_set: dict | None = None) -> SweepSpec:
@@ -388,7 +485,7 @@ def load_sweep_file(path: str | Path, *, extra_set: dict | None = None) -> Sweep
     ``set`` table (the command line's ``--set``)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = _read_text(p)
     except OSError as exc:
         raise SweepError(f"{p}: cannot read the sweep file ({exc.strerror or exc})") from None
     except UnicodeDecodeError:
@@ -431,6 +528,17 @@ def load_sweep_file(path: str | Path, *, extra_set: dict | None = None) -> Sweep
     )
 
 
+def _read_text(p: Path) -> str:
+    """A sweep file's text, refused by size (``SizeLimitError``) before it is read, as a
+    scene file is (:data:`softbody.limits.MAX_SCENE_FILE_BYTES`)."""
+    with p.open("rb") as f:
+        size = os.fstat(f.fileno()).st_size
+        limits.check_file_size(str(p), size, factor=4, maximum=limits.MAX_SCENE_FILE_BYTES)
+        raw = f.read(limits.MAX_SCENE_FILE_BYTES + 1)  # st_size is 0 for a pipe
+    limits.check_file_size(str(p), len(raw), factor=4, maximum=limits.MAX_SCENE_FILE_BYTES)
+    return raw.decode("utf-8")
+
+
 def import_metric(text: str, where: Path | str = "sweep") -> Callable:
     """``"module:function"`` -> the function (a user metric of a run's history)."""
     import importlib
@@ -451,7 +559,7 @@ def is_sweep_file(path: str | Path) -> bool:
     if p.suffix != ".toml" or not p.is_file():
         return False
     try:
-        table = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
-        return False
+        table = tomllib.loads(_read_text(p))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, SizeLimitError):
+        return False  # a scene file then, or none: its reader says why
     return isinstance(table.get("scene"), str) and "bodies" not in table

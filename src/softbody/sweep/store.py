@@ -8,9 +8,19 @@
 Results are written as they arrive, in batches: a batch's series part first, then the
 whole table, each to a temporary file in the same folder renamed over the old one (with
 SIGINT/SIGTERM held for those milliseconds), so that the table on disk is always whole
-and lists only runs whose series are on disk. A series part that no table row names
-(a crash between the two renames) is removed when the sweep is resumed. The folder is
-locked while a sweep writes to it; nothing but these files is ever written or removed.
+and lists only runs whose series are on disk. The folder is locked while a sweep writes
+to it; nothing but these files is ever written.
+
+Nothing is written or removed through a link: each of these names must be absent or a
+regular file (``series`` a real folder), or the sweep stops with one line. The only file
+a sweep ever removes is a series part that no table row names (a crash between the two
+renames), when the sweep is resumed, and only when it is a regular file in that real
+folder whose ``run_id`` column holds run ids of this sweep alone: what this sweep wrote.
+
+A folder holds one sweep: its identity (:meth:`SweepSpec.fingerprint`: the scene and its
+contents, every fixed override, the varied keys, the sampling, the metrics) is kept in
+``sweep.json``, and a sweep that differs in any of them is refused with one line saying
+what differs, rather than mixing its rows into the table.
 """
 
 from __future__ import annotations
@@ -19,6 +29,7 @@ import contextlib
 import json
 import os
 import re
+import stat
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -105,6 +116,7 @@ class SweepStore:
     def _open(self) -> None:
         import pyarrow.parquet as pq
 
+        self._refuse_links()
         manifest = self.out / MANIFEST
         fingerprint = self.spec.fingerprint()
         if manifest.exists():
@@ -114,8 +126,8 @@ class SweepStore:
                 raise OutputError(f"{manifest}: not a softbody sweep manifest") from None
             if held != fingerprint:
                 raise SweepError(
-                    f"{self.out} holds a different sweep ({held.get('scene')}, varying "
-                    f"{', '.join(held.get('varied', [])) or 'nothing'}); choose another --out"
+                    f"{self.out} holds {_difference(held, fingerprint)}; choose another --out "
+                    "(rows of the two would mix in one table)"
                 )
         else:
             ours = [n for n in (TABLE, SERIES, FIGURE) if os.path.lexists(self.out / n)]
@@ -124,20 +136,40 @@ class SweepStore:
                     f"{self.out / ours[0]} exists and was not written by a sweep here; "
                     "choose another --out"
                 )
-            text = json.dumps({"softbody_sweep": 1, "sweep": fingerprint}, indent=2)
+            text = json.dumps({"softbody_sweep": 2, "sweep": fingerprint}, indent=2)
             _atomic(manifest, lambda tmp: Path(tmp).write_text(text))
-        (self.out / SERIES).mkdir(exist_ok=True)
+        with contextlib.suppress(FileExistsError):
+            (self.out / SERIES).mkdir()
+        self._refuse_links()  # a link put in place of series/ since the first look
         if (self.out / TABLE).exists():
             self.rows = pq.read_table(self.out / TABLE).to_pylist()
         named = {r.get("series_file") for r in self.rows}
+        ids = {run.run_id for run in self.spec.runs}
         self._next_part = 0
         for entry in os.listdir(self.out / SERIES):
             m = PART.fullmatch(entry)
             if not m:
                 continue
             self._next_part = max(self._next_part, int(m.group(1)) + 1)
-            if f"{SERIES}/{entry}" not in named:  # ours, but no row lists it: a crash
-                os.unlink(self.out / SERIES / entry)
+            path = self.out / SERIES / entry
+            if f"{SERIES}/{entry}" not in named and _written_by(path, ids):
+                os.unlink(path)  # ours, but no row lists it: a crash between two renames
+
+    def _refuse_links(self) -> None:
+        """:class:`OutputError` when one of the sweep's names in the folder is a link or
+        not what the sweep writes there (``series`` a real folder, the rest files)."""
+        for name in (MANIFEST, TABLE, SERIES, FIGURE):
+            try:
+                mode = os.lstat(self.out / name).st_mode
+            except FileNotFoundError:
+                continue
+            kind = stat.S_ISDIR if name == SERIES else stat.S_ISREG
+            if not kind(mode):
+                what = "a folder" if name == SERIES else "a file"
+                raise OutputError(
+                    f"{self.out / name} is not {what} (a link?); a sweep writes nothing "
+                    "through a link: move it away or choose another --out"
+                )
 
     # -- writing -------------------------------------------------------------------------
     @property
@@ -186,6 +218,46 @@ class SweepStore:
         _atomic(self.out / TABLE, lambda tmp: pq.write_table(table, tmp))
         self.rows = every
         self._pending_rows, self._pending_series = [], []
+
+
+def _written_by(path: Path, ids: set[str]) -> bool:
+    """Whether ``path`` is a regular file (not a link) holding a Parquet table whose
+    ``run_id`` column names runs of ``ids`` only: a series part this sweep wrote."""
+    import pyarrow.parquet as pq
+
+    try:
+        if not stat.S_ISREG(os.lstat(path).st_mode):
+            return False
+        found = set(pq.read_table(path, columns=["run_id"]).column("run_id").to_pylist())
+    except Exception:  # not Parquet, no run_id column, unreadable: not ours
+        return False
+    return bool(found) and found <= ids
+
+
+def _difference(held: dict, wanted: dict) -> str:
+    """What the sweep in a folder (``held``) is, said by how it differs from ``wanted``."""
+    if not isinstance(held, dict):
+        return "something else"
+    if held.get("scene") != wanted["scene"]:
+        return f"a sweep of another scene ({held.get('scene')})"
+    if "set" not in held:
+        return "a sweep by an older softbody, with no record of its fixed overrides"
+    if held.get("scene_hash") != wanted["scene_hash"]:
+        return f"a sweep of another version of {wanted['scene']} (the scene has changed since)"
+    if held["set"] != wanted["set"]:
+        keys = sorted(set(held["set"]) | set(wanted["set"]))
+        diff = [k for k in keys if held["set"].get(k, None) != wanted["set"].get(k, None)]
+
+        def shown(table: dict) -> str:
+            return ", ".join(f"{k}={table[k]}" if k in table else f"{k} unset" for k in diff)
+
+        return (
+            f"a sweep with other fixed overrides ({shown(held['set'])}; this one: "
+            f"{shown(wanted['set'])})"
+        )
+    if held.get("varied") != wanted["varied"]:
+        return f"a different sweep (varying {', '.join(held.get('varied') or []) or 'nothing'})"
+    return "a different sweep (other sample rate or metrics)"
 
 
 def _table(rows: list[dict]):
