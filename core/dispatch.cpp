@@ -7,13 +7,44 @@
 
 #include "kernels.hpp"
 
+#if defined(SOFTBODY_HAVE_X86_SIMD) && defined(_MSC_VER)
+#include <intrin.h>
+#include <immintrin.h>
+#endif
+
 namespace softbody {
 
 namespace {
 
+#if defined(SOFTBODY_HAVE_X86_SIMD) && defined(_MSC_VER)
+// clang-cl on Windows: __builtin_cpu_supports needs compiler-rt, which the MSVC linker does
+// not bring, so ask CPUID directly. An instruction set counts only when the processor has it
+// and the operating system saves its registers (XCR0: SSE and AVX state for AVX2, and the
+// opmask and ZMM state too for AVX-512), as __builtin_cpu_supports checks.
+bool cpuid_runs(const std::string& name) {
+    int r[4];
+    __cpuid(r, 0);
+    if (r[0] < 7) return false;
+    __cpuidex(r, 1, 0);
+    const bool fma = (r[2] & (1 << 12)) != 0, osxsave = (r[2] & (1 << 27)) != 0;
+    if (!fma || !osxsave) return false;
+    const unsigned long long xcr0 = _xgetbv(0);
+    __cpuidex(r, 7, 0);
+    const unsigned ebx = static_cast<unsigned>(r[1]);
+    const bool avx2 = (ebx & (1u << 5)) != 0 && (xcr0 & 0x6) == 0x6;
+    if (name == "avx2") return avx2;
+    if (name == "avx512")
+        return avx2 && (ebx & (1u << 16)) != 0 && (ebx & (1u << 17)) != 0 &&
+               (ebx & (1u << 31)) != 0 && (xcr0 & 0xe6) == 0xe6;  // F, DQ, VL
+    return false;
+}
+#endif
+
 bool cpu_runs(const std::string& name) {
     if (name == "scalar") return true;
-#if defined(SOFTBODY_HAVE_X86_SIMD) && (defined(__GNUC__) || defined(__clang__))
+#if defined(SOFTBODY_HAVE_X86_SIMD) && defined(_MSC_VER)
+    return cpuid_runs(name);
+#elif defined(SOFTBODY_HAVE_X86_SIMD) && (defined(__GNUC__) || defined(__clang__))
     __builtin_cpu_init();
     if (name == "avx2") return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
     if (name == "avx512")

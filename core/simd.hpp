@@ -10,6 +10,16 @@
 
 #include "config.hpp"
 
+// A variant compiled without its instruction set would quietly be the scalar code under
+// another name: the build's flags (CMakeLists.txt) must turn it on.
+#if defined(SOFTBODY_ISA_avx2) && !(defined(__AVX2__) && defined(__FMA__))
+#error "the avx2 kernels need AVX2 and FMA enabled (-mavx2 -mfma, or /arch:AVX2)"
+#endif
+#if defined(SOFTBODY_ISA_avx512) && !(defined(__AVX512F__) && defined(__AVX512DQ__) && \
+                                      defined(__AVX512VL__))
+#error "the avx512 kernels need AVX-512 F, DQ and VL enabled (-mavx512f ..., or /arch:AVX512)"
+#endif
+
 #if defined(__AVX512F__) || defined(__AVX2__)
 #include <immintrin.h>
 #endif

@@ -70,7 +70,8 @@ napoleon_use_ivar = True  # a class's Attributes section is a field list, not a 
 # "tuple of (time [s], value)" in a type names a word, not an object
 suppress_warnings = ["ref.python"]
 
-exclude_patterns += ["benchmarks/notes/*", "generated/integrator-table.md"]  # included only
+exclude_patterns += ["benchmarks/notes/*", "generated/integrator-table.md",
+                     "generated/benchmark-summary.md"]  # included only
 
 
 _SECTION = re.compile(r"^(Parameters|Attributes|Returns|Yields|Raises|Other Parameters)$")

@@ -78,6 +78,57 @@ def test_readme_speed_matches_benchmark():
     assert f"10,242-vertex ball drop at {speed:.2f}x real time" in (ROOT / "README.md").read_text()
 
 
+def _summary() -> dict:
+    return json.loads((ROOT / "benchmarks" / "results" / "summary.json").read_text())
+
+
+def test_benchmark_summary_is_the_result_files():
+    """benchmarks/results/summary.json is what ``benchmarks/summary.py`` takes from the
+    result files now (so a rerun benchmark cannot leave the table behind), and each row
+    names an existing result file and script, an integrator and a step."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import summary
+
+    assert json.loads(json.dumps(summary.summarise())) == _summary()
+    assert (ROOT / "benchmarks" / "results" / "summary.png").is_file()
+    for row in _summary()["rows"]:
+        assert (ROOT / "benchmarks" / "results" / row["source"]).is_file(), row
+        script = row["command"].split()[1]
+        assert script == f"benchmarks/{row['source'].removesuffix('.json')}.py", row
+        assert (ROOT / script).is_file() and row["integrator"] and row["step"], row
+
+
+def test_readme_speed_figures_name_their_integrator_and_step():
+    """Each speed the README quotes is a row of benchmarks/results/summary.json, given with
+    the integrator and step it ran at: the five balls' 75x is symplectic Euler at its 2.0 ms
+    step, and the scene as `softbody run` runs it (midpoint at 0.5 ms) is quoted beside it;
+    the explicit step's throughput is symplectic Euler's; the 40,962-vertex drop's is
+    implicit Euler's at 1/60 s. Reference: issue 29, item 19 (a 75x headline beside a CLI
+    that prints 7-10x)."""
+    rows = {row["key"]: row for row in _summary()["rows"]}
+    readme = (ROOT / "README.md").read_text().splitlines()
+    feature = next(line for line in readme if line.startswith("| measured speed |"))
+    target = next(line for line in readme if line.startswith("| the paper's five balls"))
+    explicit = next(line for line in readme if line.startswith("| explicit step >= 60 M"))
+    drop = next(line for line in readme if line.startswith("| a bouncing ball drop"))
+    fast, scene = rows["five-balls-symplectic"], rows["five-balls-scene-step"]
+    five_balls = [
+        f"{fast['value']:.0f}x", "symplectic Euler", f"{1e3 * fast['dt_s']:.1f} ms",
+        f"{scene['value']:.1f}x", f"midpoint at {1e3 * scene['dt_s']:.1f} ms",
+        "softbody run bouncing-balls",
+    ]  # fmt: skip
+    for line in (feature, target):
+        missing = [phrase for phrase in five_balls if phrase not in line]
+        assert not missing, (missing, line)
+    assert f"{rows['five-balls-symplectic-f32']['value']:.0f}x with float32" in target
+    for line in (feature, explicit):
+        assert f"{rows['explicit-step']['value']:.0f} M" in line
+        assert "symplectic Euler" in line and "AVX-512" in line
+    big, drop_10k = rows["ball-drop-40962-implicit"], rows["ball-drop-implicit"]
+    assert f"{big['value']:.2f}x" in drop and "implicit Euler at 1/60 s" in drop
+    assert f"{drop_10k['value']:.2f}x real time (implicit Euler at 1/60 s" in feature
+
+
 @pytest.mark.parametrize(
     "page", sorted(p.relative_to(ROOT / "docs").as_posix()
                    for p in (ROOT / "docs").rglob("*.md")

@@ -6,6 +6,8 @@
   (:func:`softbody.cli.build_parser`).
 - ``generated/benchmarks/*.md``: one page per ``benchmarks/results/*.json`` with its
   plot, date, machine and command, and the notes in ``docs/benchmarks/notes/NAME.md``.
+- ``generated/benchmark-summary.md``: the benchmarks index's table of headline figures,
+  from ``benchmarks/results/summary.json`` (``benchmarks/summary.py``), and its plot.
 - ``generated/integrator-table.md``: the integrator decision table, from the ball-drop
   benchmarks' JSON.
 - ``generated/verification.md``: every test with its docstring (its reference and
@@ -163,6 +165,8 @@ def benchmark_pages() -> list[str]:
     names = []
     for path in sorted(RESULTS.glob("*.json")):
         name = path.stem
+        if name == "summary":  # the index's table (benchmark_summary)
+            continue
         data = json.loads(path.read_text())
         machine = data.get("machine")
         if isinstance(machine, dict):
@@ -190,6 +194,26 @@ def benchmark_pages() -> list[str]:
         _write(out / f"{name}.md", "\n".join(lines))
         names.append(name)
     return names
+
+
+def benchmark_summary() -> str:
+    """The headline figures as a Markdown table (and their plot copied beside the pages)."""
+    summary = json.loads((RESULTS / "summary.json").read_text())
+    shutil.copyfile(RESULTS / "summary.png", OUT / "benchmarks" / "summary.png")
+    units = {"x real time": "{:.3g}x real time", "M vertex-steps/s": "{:.3g} M vertex-steps/s",
+             "s": "{:.2g} s"}  # fmt: skip
+    lines = ["| case | vertices | integrator | step | measured | check | from |",
+             "|---|---:|---|---|---:|---|---|"]  # fmt: skip
+    for row in summary["rows"]:
+        lines.append("| " + " | ".join(_cell(c) for c in [
+            row["case"], f"{row['vertices']:,}", row["integrator"], row["step"],
+            units[row["unit"]].format(row["value"]), row["check"],
+            f"`{row['source']}` ({row['date']}), `{row['command']}`",
+        ]) + " |")  # fmt: skip
+    lines.extend(["", f"Machine: {summary['machine']}. Written by `{summary['command']}` "
+                  "from the result files named in each row; nothing is measured again.",
+                  ""])  # fmt: skip
+    return "\n".join(lines)
 
 
 def integrator_table() -> str:
@@ -282,6 +306,7 @@ def generate(app=None) -> None:
     _write(OUT / "integrator-table.md", integrator_table())
     _write(OUT / "verification.md", verification_page())
     benchmark_pages()
+    _write(OUT / "benchmark-summary.md", benchmark_summary())
 
 
 def setup(app):
