@@ -444,3 +444,31 @@ def test_notebook_display_is_a_bounded_inline_gif(model):
     assert "250 frames" in html
     rec.close()
     assert "closed" in rec._repr_html_()
+
+
+def test_engine_does_not_import_the_application_layer():
+    """Layering: ``Simulator.advance(record=)`` takes the recorder by its methods alone;
+    no engine module (sim, solvers, collision, mesh, reference, diagnostics, ...) imports
+    the application layer (render, viewer, io, run, scenes, sweep, cli), at the top or
+    inside a function."""
+    import ast
+
+    src = Path(sb.__file__).parent
+    app = ("render", "viewer", "io", "run", "scenes", "sweep", "cli")
+    engine = ["sim", "solvers", "collision", "mesh", "reference"]
+    files = [f for d in engine for f in (src / d).rglob("*.py")]
+    files += [src / f"{m}.py" for m in ("diagnostics", "stability", "gas", "volume", "core",
+                                         "integrators", "errors", "limits")]  # fmt: skip
+    bad = []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            for name in names:
+                parts = name.split(".")
+                if parts[0] == "softbody" and len(parts) > 1 and parts[1] in app:
+                    bad.append(f"{path.relative_to(src)}: {name}")
+    assert not bad, bad

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import operator
 import warnings
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -20,14 +20,20 @@ from softbody.solvers.implicit import check_options as check_implicit_options
 from softbody.solvers.projective import check_iterations as check_projective_iterations
 from softbody.stability import stiffest_mode
 
-if TYPE_CHECKING:
 
-    class FrameRecorder(Protocol):
-        """What :meth:`Simulator.advance` needs of ``record=`` (``softbody.Recorder``)."""
+class FrameRecorder(Protocol):
+    """What :meth:`Simulator.advance` needs of ``record=``: ``softbody.Recorder`` (in the
+    application layer, which the engine does not import) or any object with these two
+    methods."""
 
-        def frame_offsets(self, time: float, duration: float) -> np.ndarray: ...
+    def frame_offsets(self, time: float, duration: float) -> np.ndarray:
+        """Offsets [s] from ``time``, increasing, in [0, ``duration``], at which to
+        capture, shape (K,)."""
+        ...
 
-        def capture(self, state: State, control: Control | None = None) -> None: ...
+    def capture(self, state: State, control: Control | None = None) -> None:
+        """Keep ``state`` (advanced with ``control``) as a frame."""
+        ...
 
 
 #: With dt="auto": the fraction of the stability estimate used, and the largest step [s].
