@@ -399,6 +399,10 @@ def test_existing_files_are_replaced_only_when_asked(recorded, tmp_path):
     assert target.read_bytes() == b"keep"
     rec.save(target, overwrite=True)
     assert target.read_bytes()[:6] == b"GIF89a"
+    (tmp_path / "clip.mp4").mkdir()  # a folder named like a video is not replaced
+    with pytest.raises(IsADirectoryError, match="folder"):
+        rec.save(tmp_path / "clip.mp4", overwrite=True)
+    (tmp_path / "clip.mp4").rmdir()
     folder = tmp_path / "frames"
     folder.mkdir()
     (folder / "notes.txt").write_text("mine")

@@ -84,3 +84,31 @@ def test_show_quiet_prints_nothing_and_with_closes(capsys):
         assert listening(port)
         assert capsys.readouterr().out == ""
     assert viewer.closed and not listening(port)
+
+
+def test_a_script_that_forgets_close_exits_cleanly(tmp_path):
+    """A script that starts a viewer with block=False and ends without close() exits at
+    once with status 0, and the viewer is stopped on the way out: no nanobind "leaked
+    instances" report of the objects its simulation thread still held."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = tmp_path / "script.py"
+    script.write_text(
+        "import softbody as sb\n"
+        "from softbody.viewer import show\n"
+        "b = sb.ModelBuilder()\n"
+        "b.add_soft_body(sb.icosphere(1, radius=0.3, center=(0, 0.5, 0)), mass=1.0,\n"
+        "                stiffness=400.0, damping=0.5, gas=300.0)\n"
+        "viewer = show(b.finalize(), port=0, block=False)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(Path(sb.__file__).parents[1]), os.environ.get("PYTHONPATH", "")])}  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, timeout=60, env=env
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "?token=" in proc.stdout
+    assert "leaked" not in proc.stderr, proc.stderr

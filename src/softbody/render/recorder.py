@@ -473,10 +473,10 @@ class Recorder:
         suffix = target.suffix.lower()
         if mesh_format not in ("obj", "ply"):
             raise ValueError(f"mesh_format must be 'obj' or 'ply', got {mesh_format!r}")
-        if target.is_dir() or suffix == "":
-            kind = mesh_format
-        elif suffix in _FORMATS:
+        if suffix in _FORMATS:
             kind = _FORMATS[suffix]
+        elif suffix == "" or target.is_dir():
+            kind = mesh_format
         else:
             raise ValueError(
                 f"cannot tell the format of {str(target)!r} from its suffix: use .mp4, .gif, "

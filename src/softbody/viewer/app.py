@@ -11,6 +11,7 @@ are changed by building a new Model with ``dataclasses.replace``; gas goes throu
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import dataclasses
 import html
@@ -222,6 +223,9 @@ class Viewer:
             raise
         self._thread = threading.Thread(target=self._loop, name="softbody-viewer", daemon=True)
         self._thread.start()
+        # a script that ends without close() stops the viewer on the way out, before the
+        # interpreter tears down the objects the simulation thread still uses
+        atexit.register(self.stop)
 
     # -- public ----------------------------------------------------------------------------
     @property
@@ -258,6 +262,7 @@ class Viewer:
             if self._closed:
                 return
             self._closed = True
+        atexit.unregister(self.stop)
         self._stop.set()
         self._thread.join(timeout=5)
         self.server.stop()
@@ -962,7 +967,8 @@ def show(
     script that goes on needs: ``viewer.url`` is the address, ``viewer.close()`` stops
     the simulation and the server and frees the port (a ``with`` block does it too; in
     a notebook the viewer shows as a link). The server's threads do not keep a script
-    alive: call ``viewer.wait()`` at its end to serve until Ctrl-C.
+    alive (it stops the viewer as it exits): call ``viewer.wait()`` at its end to serve
+    until Ctrl-C.
 
     Raises ValueError for a port outside 0..65535 or a host that names no address, and
     RuntimeError if the server does not start (within 30 s) or its access checks
