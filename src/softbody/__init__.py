@@ -40,6 +40,7 @@ from softbody.mesh import (
     uv_sphere,
     validate_mesh,
 )
+from softbody.render.recorder import Recorder
 from softbody.sim import Control, Model, ModelBuilder, Simulator, State
 from softbody.stability import stable_dt
 from softbody.volume import VolumeMethod
@@ -74,6 +75,7 @@ __all__ = [
     "MotionOscillation",
     "MotionRotation",
     "MotionTranslation",
+    "Recorder",
     "SimulationError",
     "Simulator",
     "StabilityWarning",

@@ -216,6 +216,7 @@ def _view(args) -> int:
             body_names=scene.body_names,
             body_colors=scene.render.body_colors,
             camera=(cam.eye, cam.target),
+            quiet=True,  # the lines below say it, with the scene's name
         )
     except KeyboardInterrupt:
         print("softbody: interrupted", file=sys.stderr)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import operator
 import warnings
+from typing import Protocol
 
 import numpy as np
 
@@ -18,6 +19,22 @@ from softbody.solvers.explicit import check_force_precision
 from softbody.solvers.implicit import check_options as check_implicit_options
 from softbody.solvers.projective import check_iterations as check_projective_iterations
 from softbody.stability import stiffest_mode
+
+
+class FrameRecorder(Protocol):
+    """What :meth:`Simulator.advance` needs of ``record=``: ``softbody.Recorder`` (in the
+    application layer, which the engine does not import) or any object with these two
+    methods."""
+
+    def frame_offsets(self, time: float, duration: float) -> np.ndarray:
+        """Offsets [s] from ``time``, increasing, in [0, ``duration``], at which to
+        capture, shape (K,)."""
+        ...
+
+    def capture(self, state: State, control: Control | None = None) -> None:
+        """Keep ``state`` (advanced with ``control``) as a frame."""
+        ...
+
 
 #: With dt="auto": the fraction of the stability estimate used, and the largest step [s].
 AUTO_SAFETY = 0.8
@@ -243,7 +260,14 @@ class Simulator:
             text += "; reduce dt, stiffness or pressure, or add mass"
         return text
 
-    def advance(self, state: State, duration: float, control: Control | None = None) -> State:
+    def advance(
+        self,
+        state: State,
+        duration: float,
+        control: Control | None = None,
+        *,
+        record: FrameRecorder | None = None,
+    ) -> State:
         """Advance ``state`` by ``duration`` [s] in equal substeps.
 
         With ``dt="auto"`` the substep is chosen from the stability estimate at the
@@ -252,10 +276,19 @@ class Simulator:
         simulated seconds, so the run stays stable as the gas and shape change;
         otherwise the substeps are no longer than ``dt``. The state
         ends exactly ``duration`` later.
+
+        ``record``: a :class:`softbody.Recorder` (or any object with its
+        ``frame_offsets(time, duration)`` and ``capture(state, control)`` methods) that
+        captures the state at its frame times within the call: every 1 / fps seconds,
+        the start included when it is the recording's first frame. The call advances from
+        frame to frame (each stretch in equal substeps, as above) and ends exactly
+        ``duration`` later; if a step blows up, the frames before it are kept.
         """
         duration = float(duration)
         if not (np.isfinite(duration) and duration >= 0):
             raise ValueError(f"duration must be finite and >= 0 seconds, got {duration!r}")
+        if record is not None:
+            return self._advance_recorded(state, duration, control, record)
         if duration == 0:
             return state
         state.conform(self.model)
@@ -286,6 +319,37 @@ class Simulator:
         finally:
             if not self.auto_dt:
                 self.dt = saved
+        return state
+
+    def _advance_recorded(
+        self, state: State, duration: float, control: Control | None, record: FrameRecorder
+    ) -> State:
+        """:meth:`advance` in stretches between ``record``'s frame times, capturing at each."""
+        for name in ("frame_offsets", "capture"):
+            if not callable(getattr(record, name, None)):
+                raise TypeError(
+                    "record must be a softbody.Recorder (an object with frame_offsets(time, "
+                    f"duration) and capture(state, control)), got {type(record).__name__}"
+                )
+        state.conform(self.model)
+        offsets = np.asarray(record.frame_offsets(float(state.time), duration), dtype=float)
+        if offsets.ndim != 1 or not (
+            np.all(np.isfinite(offsets))
+            and np.all(offsets >= 0)
+            and np.all(offsets <= duration)
+            and np.all(np.diff(offsets) >= 0)
+        ):
+            raise ValueError(
+                "record.frame_offsets must return increasing offsets within [0, duration]"
+            )
+        done = 0.0
+        for offset in offsets:
+            if offset > done:
+                self.advance(state, offset - done, control)
+                done = float(offset)
+            record.capture(state, control)
+        if duration > done:
+            self.advance(state, duration - done, control)
         return state
 
     def step(self, state: State, control: Control | None = None) -> State:

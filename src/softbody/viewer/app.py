@@ -11,8 +11,10 @@ are changed by building a new Model with ``dataclasses.replace``; gas goes throu
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import dataclasses
+import html
 import io
 import math
 import socket
@@ -193,6 +195,8 @@ class Viewer:
         #: the last accepted value of each control, by id of its handle
         self._good: dict[int, object] = {}
         self._stop = threading.Event()
+        self._close_lock = threading.Lock()
+        self._closed = False
         self._history: deque = deque()
         self._restoring = False
         self._last_readout = 0.0
@@ -219,6 +223,9 @@ class Viewer:
             raise
         self._thread = threading.Thread(target=self._loop, name="softbody-viewer", daemon=True)
         self._thread.start()
+        # a script that ends without close() stops the viewer on the way out, before the
+        # interpreter tears down the objects the simulation thread still uses
+        atexit.register(self.stop)
 
     # -- public ----------------------------------------------------------------------------
     @property
@@ -243,11 +250,46 @@ class Viewer:
         network; the token still protects it)."""
         return not self.guard.loopback
 
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` (or :meth:`stop`) ended the viewer."""
+        return self._closed
+
     def stop(self) -> None:
-        """Stop the simulation thread and the server."""
+        """Stop the simulation thread and the server, freeing its port; safe to call more
+        than once."""
+        with self._close_lock:
+            if self._closed:
+                return
+            self._closed = True
+        atexit.unregister(self.stop)
         self._stop.set()
         self._thread.join(timeout=5)
         self.server.stop()
+
+    def close(self) -> None:
+        """Same as :meth:`stop`: end the simulation and the server, free the port."""
+        self.stop()
+
+    def __enter__(self) -> Viewer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else self.url
+        return f"Viewer({state})"
+
+    def _repr_html_(self) -> str:
+        """A link to the page (a notebook shows it as the cell's output)."""
+        if self._closed:
+            return "<p>softbody viewer (closed)</p>"
+        url = html.escape(self.url, quote=True)
+        return (
+            f'<p>softbody viewer: <a href="{url}" target="_blank" rel="noopener">{url}</a> '
+            "(<code>.close()</code> stops it)</p>"
+        )
 
     def wait(self) -> None:
         """Block until interrupted (Ctrl-C), then stop."""
@@ -910,14 +952,27 @@ def show(
     body_names: list[str] | None = None,
     body_colors: tuple[str, ...] | None = None,
     camera: tuple | None = None,
+    quiet: bool = False,
 ) -> Viewer:
     """Open a browser viewer on ``model`` (from ``state``, stepped like ``simulator``).
 
-    Prints nothing; the page is at ``viewer.url`` (with its access token). Raises
-    ValueError for a port outside 0..65535 or a host that names no address, and
+    Prints the page's address with its access token,
+    ``http://127.0.0.1:PORT/?token=...`` (also ``viewer.url``; ``quiet=True`` prints
+    nothing). The server listens on loopback only unless ``host`` says otherwise, and
+    serves only a client that has the token (the user guide's viewer page says what
+    it checks). ``port=0`` takes any free port; a taken port moves to the next free one.
+
+    With ``block=True`` (default) it runs until Ctrl-C, then stops. With
+    ``block=False`` it returns the running :class:`Viewer` at once, as a notebook or a
+    script that goes on needs: ``viewer.url`` is the address, ``viewer.close()`` stops
+    the simulation and the server and frees the port (a ``with`` block does it too; in
+    a notebook the viewer shows as a link). The server's threads do not keep a script
+    alive (it stops the viewer as it exits): call ``viewer.wait()`` at its end to serve
+    until Ctrl-C.
+
+    Raises ValueError for a port outside 0..65535 or a host that names no address, and
     RuntimeError if the server does not start (within 30 s) or its access checks
-    cannot be installed. With ``block=True`` it runs until
-    Ctrl-C; with ``block=False`` it returns the running :class:`Viewer` (call ``stop()``).
+    cannot be installed.
     """
     state = model.state() if state is None else state
     if simulator is None:
@@ -934,6 +989,18 @@ def show(
         body_colors=body_colors,
         camera=camera,
     )
+    if not quiet:
+        if viewer.exposed:
+            print(
+                f"softbody viewer: listening on {host}, reachable from the network; anyone "
+                "with the token in the URL can drive it",
+                flush=True,
+            )
+        print(
+            f"softbody viewer: open {viewer.url} in a browser"
+            + (" (Ctrl-C to stop)" if block else " (viewer.close() stops it)"),
+            flush=True,
+        )
     if block:
         viewer.wait()
     return viewer
