@@ -349,7 +349,7 @@ def test_drag_runs_with_surface_contacts():
         b.add_soft_body(sb.icosphere(1, radius=0.3), mass=1.0, stiffness=50.0, damping=0.1,
                         gas=1.0, drag_coefficient=0.5)  # fmt: skip
         model = b.finalize()
-        assert "drag" in sb.core.active_terms(model)
+        assert "drag" in sb.diagnostics.active_terms(model)
         state = model.state()
         sb.Simulator(model, integrator="midpoint", dt=1e-3).run(state, 200)
         runs.append(state)
@@ -360,7 +360,7 @@ def test_drag_runs_with_surface_contacts():
 def test_drag_without_air_runs_anywhere():
     """C_d > 0 in air of density 0 is no drag: the implicit integrators take it."""
     model = drag_model(0.5, rho=0.0)
-    assert "drag" not in sb.core.active_terms(model)
+    assert "drag" not in sb.diagnostics.active_terms(model)
     sb.Simulator(model, integrator="implicit_euler", dt=1e-3)
 
 
@@ -431,12 +431,12 @@ def test_scene_air_table_and_drag_coefficient():
     from softbody.scenes import SceneError, load_scene
 
     plain = load_scene("hanging-ball").model
-    assert plain.air_density == 1.2 and "drag" not in sb.core.active_terms(plain)
+    assert plain.air_density == 1.2 and "drag" not in sb.diagnostics.active_terms(plain)
     np.testing.assert_array_equal(plain.wind, 0.0)
     scene = load_scene("hanging-ball", ["air.density=1.0", "air.wind=[2.0, 0.0, 0.5]",
                                         "bodies.1.drag_coefficient=0.4"])  # fmt: skip
     model = scene.model
-    assert model.air_density == 1.0 and "drag" in sb.core.active_terms(model)
+    assert model.air_density == 1.0 and "drag" in sb.diagnostics.active_terms(model)
     np.testing.assert_array_equal(model.wind, [2.0, 0.0, 0.5])
     np.testing.assert_array_equal(model.body_drag_coefficient, [0.0, 0.4, 0.0])
     for override, key in (("air.density=-1", "air.density"),

@@ -16,7 +16,7 @@ import weakref
 
 from softbody import _core
 
-__all__ = ["active_terms", "available_threads", "simd_path", "simd_paths", "terms", "use_simd"]
+__all__ = ["available_threads", "simd_path", "simd_paths", "terms", "use_simd"]
 
 _MODELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -52,19 +52,6 @@ def terms() -> list[dict]:
     Euler pass covers it), ``energy`` (it has one) and ``external`` (its energy is work
     done from outside the model, such as the grab spring's)."""
     return [dict(t) for t in _core.term_table()]
-
-
-def active_terms(model, control=None) -> list[str]:
-    """Names of the registered terms (:func:`terms`) that act in ``model`` under ``control``
-    (default: the model's own), in registry order: ``"drag"`` only with air of density > 0
-    and some body with a drag coefficient > 0, ``"attachments"`` only with attachments,
-    ``"grab"`` only with a grabbed particle."""
-    from softbody.sim.control import Control, control_data
-
-    data = control_data(model)
-    if isinstance(control, Control):
-        data = control.write(model, data)
-    return [str(name) for name in _core.active_terms(core_model(model), data)]
 
 
 def available_threads() -> int:

@@ -34,6 +34,14 @@ def _gas_values(model: Model, time: float, control: Control | None) -> np.ndarra
     return ref_gas.driving_values(model, _control(model, control), time)
 
 
+def active_terms(model: Model, control: Control | None = None) -> list[str]:
+    """Names of the registered terms (:func:`softbody.core.terms`) that act in ``model``
+    under ``control`` (default: the model's own), in registry order: ``"drag"`` only with
+    air of density > 0 and some body with a drag coefficient > 0, ``"attachments"`` only
+    with attachments, ``"grab"`` only with a grabbed particle."""
+    return [str(name) for name in _core.active_terms(core_model(model), _control(model, control))]
+
+
 def body_volume_by(model: Model, state: State, method: str) -> np.ndarray:
     """Volume of every body by one given method (``"exact"``, ``"bounding_box"``, ...)
     whatever method it simulates with [m^3], shape (B,): to compare the paper's bounding
