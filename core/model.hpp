@@ -11,9 +11,8 @@
 
 namespace softbody {
 
-// The model's parts (Particles, Gravity, Springs, Attachments, Triangles, Bodies, Volumes,
-// Gases, Pins, Drag, SoftContacts, Colliders), one struct each with its count and one member
-// per field of fields.hpp: an array as a pointer into NumPy memory, a number or a vec3 by
+// The model's parts (SOFTBODY_MODEL_PARTS in fields.hpp), one struct each with its count and
+// one member per field: an array as a pointer into NumPy memory, a number or a vec3 by
 // value. A term's code names the part it reads (m.springs.stiffness, m.gases.law).
 #define SOFTBODY_MEMBER_f64(name) const double* name = nullptr;
 #define SOFTBODY_MEMBER_i64(name) const index* name = nullptr;
@@ -62,7 +61,7 @@ struct Slots {
 
 /// Everything fixed after ModelBuilder.finalize (softbody.sim.model.Model), SI units,
 /// grouped by what reads it: each term's parameters in its own part, so a term's code names
-/// the part it uses (m.springs, m.gases, m.drag, ...).
+/// the part it uses (m.springs, m.gases, ...).
 struct Model {
 #define SOFTBODY_PART_MEMBER(Type, part, fields, extra) Type part;
     SOFTBODY_MODEL_PARTS(SOFTBODY_PART_MEMBER)
@@ -82,7 +81,7 @@ struct Control {
     double grab_target[3] = {0.0, 0.0, 0.0};  // [m]
     double grab_stiffness = 0.0;              // [N/m]
     double grab_damping = 0.0;                // [N s/m]
-    double wind[3] = {0.0, 0.0, 0.0};         // [m/s], the model's unless overridden
+    double wind[3] = {0.0, 0.0, 0.0};         // [m/s] the air's velocity in this call
 };
 
 /// The changing state a run advances in place (softbody.sim.state.State).

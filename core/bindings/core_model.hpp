@@ -149,16 +149,13 @@ struct CoreControl {
         for (int k = 0; k < 3; ++k) view.grab_target[k] = grab.data()[k];
         view.grab_stiffness = nb::cast<double>(d.attr("grab_stiffness"));
         view.grab_damping = nb::cast<double>(d.attr("grab_damping"));
-        wind_from(m, attribute<ConstF64>(d, "wind", {3}).data());
+        const double* wind = attribute<ConstF64>(d, "wind", {3}).data();
+        for (int k = 0; k < 3; ++k) {
+            if (!std::isfinite(wind[k])) fail("Control wind must be 3 finite numbers [m/s]");
+            view.wind[k] = wind[k];
+        }
     }
 
-    // Control.wind: 3 finite numbers [m/s], or all NaN for the model's wind.
-    void wind_from(const softbody::Model& m, const double* w) {
-        const bool given = std::isfinite(w[0]) && std::isfinite(w[1]) && std::isfinite(w[2]);
-        const bool unset = std::isnan(w[0]) && std::isnan(w[1]) && std::isnan(w[2]);
-        if (!given && !unset) fail("Control wind must be 3 finite numbers [m/s] or all NaN");
-        for (int k = 0; k < 3; ++k) view.wind[k] = given ? w[k] : m.drag.wind[k];
-    }
     ConstF64 gas, particle_f, anchor, pin, target;
     softbody::Control view;
 };

@@ -36,9 +36,10 @@ def _gas_values(model: Model, time: float, control: Control | None) -> np.ndarra
 
 def active_terms(model: Model, control: Control | None = None) -> list[str]:
     """Names of the registered terms (:func:`softbody.core.terms`) that act in ``model``
-    under ``control`` (default: the model's own), in registry order: ``"drag"`` only with
-    air of density > 0 and some body with a drag coefficient > 0, ``"attachments"`` only
-    with attachments, ``"grab"`` only with a grabbed particle."""
+    under ``control`` (default: the model's own), in registry order: a term acts when its
+    data and the control give it something to do (``"attachments"`` only with
+    attachments, ``"grab"`` only with a grabbed particle, the air on faces only with air
+    of density > 0 and a body's coefficient > 0)."""
     return [str(name) for name in _core.active_terms(core_model(model), _control(model, control))]
 
 

@@ -1,12 +1,9 @@
 """A readable NumPy reference for every physics term of the compiled core.
 
-One module per term, mirroring ``core/terms/``: :mod:`~softbody.reference.gravity`,
-:mod:`~softbody.reference.springs` (mesh edges, bending and user springs: all rows of the
-model's spring arrays), :mod:`~softbody.reference.attachments`,
-:mod:`~softbody.reference.external` (``Control.particle_f`` and the grab spring),
-:mod:`~softbody.reference.volume`, :mod:`~softbody.reference.gas` and
-:mod:`~softbody.reference.drag`; :mod:`~softbody.reference.forces` sums them in the order
-of ``core/solvers/explicit.hpp: eval_forces`` and :mod:`~softbody.reference.jacobians`
+One module per term, mirroring ``core/terms/`` (each module's ``TERMS`` maps the names it
+serves in the core's registry to their force), with :mod:`~softbody.reference.volume`
+for the volumes; :mod:`~softbody.reference.forces` sums every registered term in the
+registry's order and :mod:`~softbody.reference.jacobians`
 applies (alpha_m M + alpha_c C + alpha_k K) p as the implicit solvers do;
 :mod:`~softbody.reference.steps` takes one backward Euler step (a dense Newton step) and
 one projective-dynamics step (dense local-global iterations) on small meshes.
@@ -21,30 +18,14 @@ both are negative semi-definite for a spring.
 
 from __future__ import annotations
 
-from softbody.reference import (
-    attachments,
-    drag,
-    external,
-    forces,
-    gas,
-    gravity,
-    jacobians,
-    springs,
-    steps,
-    volume,
-)
+import importlib
+import pkgutil
+
 from softbody.reference._inputs import control_arrays
 
-__all__ = [
-    "attachments",
-    "control_arrays",
-    "drag",
-    "external",
-    "forces",
-    "gas",
-    "gravity",
-    "jacobians",
-    "springs",
-    "steps",
-    "volume",
-]
+# every module of the package (one per term, and the compositions)
+_MODULES = sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
+for _name in _MODULES:
+    globals()[_name] = importlib.import_module(f"softbody.reference.{_name}")
+
+__all__ = ["control_arrays", *_MODULES]

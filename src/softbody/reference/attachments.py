@@ -77,3 +77,7 @@ def jacobian_product(
     out = np.zeros_like(p, dtype=np.float64)
     np.add.at(out, i, -((alpha_k * iso)[:, None] * p[i] + axial[:, None] * u))
     return out
+
+
+#: This term's force for softbody.reference.forces (by its name in the core's registry).
+TERMS = {"attachments": lambda model, control, t, q, qd, gas: force(model, control, q, qd)}

@@ -49,3 +49,7 @@ def power(model: Model, control: ControlData, q: np.ndarray, qd: np.ndarray) -> 
     tri = model.tri_indices
     v = (qd[tri[:, 0]] + qd[tri[:, 1]] + qd[tri[:, 2]]) / 3.0
     return float(np.einsum("tk,tk->", face_forces(model, control, q, qd), v))
+
+
+#: This term's force for softbody.reference.forces (by its name in the core's registry).
+TERMS = {"drag": lambda model, control, t, q, qd, gas: force(model, control, q, qd)}

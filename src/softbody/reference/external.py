@@ -51,3 +51,11 @@ def grab_jacobian_product(
     if g >= 0:
         out[g] = -(alpha_k * control.grab_stiffness + alpha_c * control.grab_damping) * p[g]
     return out
+
+
+#: These terms' forces for softbody.reference.forces (by their names in the core's
+#: registry): Control's per-particle forces and the grab spring.
+TERMS = {
+    "external": lambda model, control, t, q, qd, gas: force(model, control),
+    "grab": lambda model, control, t, q, qd, gas: grab_force(control, q, qd),
+}

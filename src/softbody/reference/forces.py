@@ -1,22 +1,19 @@
-"""All forces of a state: the list of physics terms of ``core/solvers/explicit.hpp:
-eval_forces``, summed in its order, and the potential energy of the conservative ones.
-
-    f = m g                              gravity
-      + sum_s springs                    edges, bending and user springs (damped Hooke)
-      + (P - P_a) dV/dx                  gas, P by each body's law at its volume (method)
-      + attachments                      springs to anchors
-      + Control.particle_f               external forces
-      + grab spring                      a grabbed particle pulled to a target
-      + drag                             air drag on faces
+"""All forces of a state: every term the core registers (``core/terms/registry.hpp``,
+``softbody.core.terms()``), each by its reference module's ``TERMS`` entry, summed in the
+registry's order; and the potential energy of the conservative ones.
 """
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
 from typing import NamedTuple
 
 import numpy as np
 
-from softbody.reference import attachments, drag, external, gas, gravity, springs, volume
+import softbody.reference
+from softbody.core import terms as registered_terms
+from softbody.reference import attachments, external, gas, gravity, springs, volume
 from softbody.sim.control import ControlData
 from softbody.sim.model import Model
 
@@ -43,18 +40,23 @@ def gas_state(
 def terms(
     model: Model, control: ControlData, t: float, q: np.ndarray, qd: np.ndarray
 ) -> dict[str, np.ndarray]:
-    """Each term's force (N, 3) [N] at time t [s], q, qd (N, 3), by name, in the order
-    the core adds them."""
-    _, pressure, grad = gas_state(model, control, t, q)
+    """Each registered term's force (N, 3) [N] at time t [s], q, qd (N, 3), by name, in
+    the order the core adds them. A term without a reference is a KeyError."""
+    state = gas_state(model, control, t, q)
+    forms = reference_terms()
     return {
-        "gravity": gravity.force(model),
-        "springs": springs.force(model, q, qd),
-        "gas": gas.force(model, pressure, grad),
-        "attachments": attachments.force(model, control, q, qd),
-        "external": external.force(model, control),
-        "grab": external.grab_force(control, q, qd),
-        "drag": drag.force(model, control, q, qd),
+        name: forms[name](model, control, t, q, qd, state)
+        for name in (term["name"] for term in registered_terms())
     }
+
+
+def reference_terms() -> dict:
+    """Every reference module's ``TERMS``: term name -> its force function."""
+    out: dict = {}
+    for info in pkgutil.iter_modules(softbody.reference.__path__):
+        module = importlib.import_module(f"softbody.reference.{info.name}")
+        out.update(getattr(module, "TERMS", {}))
+    return out
 
 
 def eval_forces(
@@ -71,7 +73,7 @@ def eval_forces(
 def potential_energy(model: Model, control: ControlData, t: float, q: np.ndarray) -> float:
     """Energy [J] of the conservative terms at q (N, 3): gravity, springs, attachments,
     the grab spring and the closed bodies' gas (at their exact volumes). At zero
-    velocities, without drag and external forces, and with every body closed and of the
+    velocities, without dissipative and external forces, and with every body closed and of the
     exact volume, -dE/dx is the total force."""
     return (
         gravity.energy(model, q)

@@ -171,3 +171,8 @@ def potential_energy(model: Model, control: ControlData, t: float, q: np.ndarray
     from softbody.reference.volume import exact_volumes
 
     return float(energies(model, control, t, exact_volumes(model, q)).sum())
+
+
+#: This term's force for softbody.reference.forces (by its name in the core's registry);
+#: gas is the state (volume (B,), pressure (B,), dV/dx (N, 3)) at the point.
+TERMS = {"gas": lambda model, control, t, q, qd, gas: force(model, gas[1], gas[2])}

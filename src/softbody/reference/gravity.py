@@ -24,3 +24,7 @@ def energies(model: Model, q: np.ndarray) -> np.ndarray:
 def energy(model: Model, q: np.ndarray) -> float:
     """Total gravitational energy -sum_i m_i g . x_i [J]; -dE/dx = :func:`force`."""
     return float(energies(model, q).sum())
+
+
+#: This term's force for softbody.reference.forces (by its name in the core's registry).
+TERMS = {"gravity": lambda model, control, t, q, qd, gas: force(model)}

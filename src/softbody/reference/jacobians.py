@@ -6,8 +6,8 @@ with M the (diagonal) particle masses and C, K summed over the springs, the atta
 (optional: the stability estimate adds its own), the grab spring and the gas. K drops the
 compressive geometric stiffness of springs and attachments (see
 :mod:`softbody.reference.springs`), so it is df/dx exactly where every spring is at or
-beyond its rest length. Gravity, external forces and drag add nothing (drag is stepped
-explicitly).
+beyond its rest length. Gravity, external forces and terms without a Jacobian add
+nothing (they are stepped explicitly).
 """
 
 from __future__ import annotations

@@ -123,3 +123,7 @@ def jacobian_product(
     np.add.at(out, i, w)
     np.add.at(out, j, -w)
     return out
+
+
+#: This term's force for softbody.reference.forces (by its name in the core's registry).
+TERMS = {"springs": lambda model, control, t, q, qd, gas: force(model, q, qd)}

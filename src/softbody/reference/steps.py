@@ -6,15 +6,17 @@ linearised at the step's start x0, v0 (time t, step h):
     (M - h C - h^2 K) dv = h (f0 + K y),   y = h v0,
     v1 = v0 + dv,   x1 = x0 + h v1,
 
-with f0 = f(x0, v0, t) every force (drag included, explicitly), C = df/dv and K = df/dx
-the products of :mod:`softbody.reference.jacobians`. Pinned particles (inverse mass 0) are
-no unknowns: dv = 0 there. The core solves by preconditioned conjugate gradients; here the
-matrix is built column by column and solved directly.
+with f0 = f(x0, v0, t) every force (those without a Jacobian included, explicitly),
+C = df/dv and K = df/dx the products of :mod:`softbody.reference.jacobians`. Pinned
+particles (inverse mass 0) are no unknowns: dv = 0 there. The core solves by
+preconditioned conjugate gradients; here the matrix is built column by column and solved
+directly.
 
 Projective dynamics (``core/solvers/projective.hpp``; Liu et al. 2013), backward Euler by
 local-global iterations: from x = y = x0 + h v0, each iteration takes v = (x - x0) / h,
-the forces it keeps explicit at (x, v, t + h) (gravity, external and grab forces, gas,
-drag) and each spring's projections (:func:`spring_projection`) at x, and solves
+the forces it keeps explicit at (x, v, t + h) (every registered term without a
+projection: ``softbody.core.terms()``) and each spring's projections
+(:func:`spring_projection`) at x, and solves
 
     (M / h^2 + sum_s (k_s + c_s / h) A_s^T A_s) x = M y / h^2 + f + sum_s A_s^T t_s
 
@@ -30,6 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from softbody.core import terms as registered_terms
 from softbody.reference import forces, jacobians
 from softbody.sim.control import ControlData
 from softbody.sim.model import Model
@@ -105,7 +108,8 @@ def projective_rhs(model: Model, control: ControlData, t: float, h: float, x: np
     free = model.particle_inv_mass > 0.0
     v = (x - x0) / h
     term = forces.terms(model, control, t, x, v)
-    f = sum(term[name] for name in ("gravity", "external", "grab", "gas", "drag"))
+    explicit = [t["name"] for t in registered_terms() if not t["projected"]]
+    f = sum(term[name] for name in explicit)
     rhs = np.where(free[:, None], model.particle_mass[:, None] / h**2 * y + f, y)
     i, j = model.spring_indices.T
     k, c_h = model.spring_stiffness, model.spring_damping / h

@@ -302,17 +302,8 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
         if rot is not None:
             mesh = mesh.rotated(rot)
         mesh = mesh.translated(np.array(body.position))
-        common = dict(
-            mass=body.mass,
-            stiffness=body.stiffness,
-            damping=body.damping,
-            pinned=_pins(body.pin, mesh, f"{where}.pin"),
-            bend_stiffness=body.bend_stiffness,
-            bend_damping=body.bend_damping,
-            mass_distribution=body.mass_distribution,
-            velocity=body.velocity,
-            drag_coefficient=body.drag_coefficient,
-        )
+        common = {key: getattr(body, key) for key in body.BUILDER_ARGUMENTS}
+        common["pinned"] = _pins(body.pin, mesh, f"{where}.pin")
         if isinstance(body, schema.Cloth):
             builder.add_cloth(mesh, pressure=_gas(body.pressure, cloth=True), **common)
         else:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from importlib import resources
 from itertools import pairwise
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import (
     AllowInfNan,
@@ -506,6 +506,13 @@ class Pin(Table):
 
 
 class _BodyBase(Table):
+    #: Keys passed as they are to ModelBuilder.add_soft_body / add_cloth, under the same
+    #: names (a new builder argument of a body is one field here and its name in this list)
+    BUILDER_ARGUMENTS: ClassVar[tuple[str, ...]] = (
+        "mass", "stiffness", "damping", "bend_stiffness", "bend_damping",
+        "mass_distribution", "velocity", "drag_coefficient",
+    )  # fmt: skip
+
     name: Label | None = Field(None, max_length=200, description="label (default: body N)")
     mesh: Mesh
     position: Vec3 = Field((0.0, 0.0, 0.0), description="translation [m]")

@@ -26,7 +26,7 @@ class ControlData(NamedTuple):
     grab_target: np.ndarray  # (3,) where the grab spring pulls it [m]
     grab_stiffness: float  # [N/m]
     grab_damping: float  # [N s/m]
-    wind: np.ndarray  # (3,) air velocity [m/s], NaN = the model's wind
+    wind: np.ndarray  # (3,) air velocity [m/s] of this call
 
 
 @dataclass(eq=False)
@@ -63,8 +63,8 @@ class Control:
     grab_damping: float = 0.0
     """Grab spring damping [N s/m] (on the particle's absolute velocity)."""
     wind: np.ndarray | None = None
-    """Air velocity [m/s], shape (3,), for this call's drag (a gust); None keeps the
-    model's ``wind``."""
+    """Air velocity [m/s], shape (3,), for this call (a gust); None keeps the model's
+    ``wind``."""
 
     @classmethod
     def neutral(cls, model: Model) -> Control:
@@ -135,7 +135,7 @@ class Control:
                 if not (np.isfinite(v) and v >= 0):
                     raise ValueError(f"Control.{name} must be finite and >= 0")
         if self.wind is None:
-            out.wind[:] = np.nan
+            np.copyto(out.wind, model.wind)
         else:
             wind = arr("wind", self.wind, (3,))
             if not np.all(np.isfinite(wind)):
@@ -162,5 +162,5 @@ def control_data(model: Model) -> ControlData:
         grab_target=np.zeros(3),
         grab_stiffness=0.0,
         grab_damping=0.0,
-        wind=np.full(3, np.nan),
+        wind=np.array(model.wind, dtype=np.float64),
     )

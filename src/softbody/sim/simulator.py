@@ -129,11 +129,11 @@ class Simulator:
     A step that blows up raises :class:`SimulationError` naming the body or particle, the
     step and the time; the state is left at the last good step.
 
-    Air drag on faces (``drag_coefficient`` > 0) is stepped by every integrator:
-    projective dynamics takes it, like the pressure, as a force at each iterate, and
-    ``implicit_euler`` and ``bdf2`` explicitly (its force at the step's start enters the
-    solve, its Jacobian does not, which is stable while dt < 2 m / (dF/dv), v_t / g for a
-    body falling at its terminal speed v_t).
+    Every registered term (``softbody.core.terms()``) is stepped by every integrator. A term
+    with no Jacobian product (the air on faces) enters ``implicit_euler`` and ``bdf2``
+    explicitly, its force at the step's start (stable while dt < 2 m / (dF/dv): v_t / g
+    for a body falling through air at its terminal speed v_t), and projective dynamics
+    takes every term without a projection, like the pressure, as a force at each iterate.
     """
 
     def __init__(

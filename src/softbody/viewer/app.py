@@ -463,8 +463,8 @@ class Viewer:
             self.bounding_box = gui.add_checkbox("Bounding objects", False)
         with gui.add_folder("Interaction"):
             gui.add_markdown(
-                "Drag the orange ball's arrows to hit a body. Click a body to "
-                "grab the nearest vertex, then drag the small arrows."
+                "Pull the orange ball's arrows to hit a body. Click a body to "
+                "grab the nearest vertex, then pull the small arrows."
             )
             self.release_button = gui.add_button("Release vertex")
             self.release_button.on_click(on(lambda _: self._release(), "Release"))
