@@ -12,6 +12,7 @@ value that breaks it, naming the field.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -36,6 +37,25 @@ def _models():
     yield "every-term", build_case("every-term", "midpoint")[0]
     yield "surface-two-balls", build_case("surface-two-balls", "midpoint")[0]
     yield "bouncing-balls", load_scene("bouncing-balls").model
+
+
+def test_python_fields_are_generated_from_the_table():
+    """softbody.sim._model_fields (the build's output) is exactly what
+    tools/gen_model_fields.py makes from core/fields.hpp now (so a changed table with a
+    stale build fails here), and its FIELDS equal what the compiled core declares."""
+    import importlib.util
+
+    from softbody.sim import _model_fields
+
+    root = Path(__file__).resolve().parent.parent
+    spec = importlib.util.spec_from_file_location("gen", root / "tools" / "gen_model_fields.py")
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    expected = gen.generate((root / "core" / "fields.hpp").read_text())
+    assert Path(_model_fields.__file__).read_text() == expected
+    core = [(f["name"], f["type"], f["shape"].replace(" ", ""), f["check"], f["unit"])
+            for f in FIELDS]  # fmt: skip
+    assert list(_model_fields.FIELDS) == core
 
 
 def test_every_python_model_field_the_core_reads_is_declared_once():

@@ -65,6 +65,12 @@ def build(
     tmp = target.with_name(target.name + ".tmp")
     shutil.copy2(built, tmp)
     tmp.replace(target)
+    # the generated declaration of the model's core fields (core/fields.hpp), beside sim/
+    fields = out_dir / "sim" / "_model_fields.py"
+    fields.parent.mkdir(parents=True, exist_ok=True)
+    tmp = fields.with_name(fields.name + ".tmp")
+    shutil.copy2(build_dir / "_model_fields.py", tmp)
+    tmp.replace(fields)
     return target
 
 

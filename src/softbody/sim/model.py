@@ -7,129 +7,29 @@ from dataclasses import dataclass
 import numpy as np
 
 from softbody.gas import GasLaw
+from softbody.sim._model_fields import CoreFields
 from softbody.volume import VolumeMethod
 
 
 @dataclass(frozen=True, eq=False)
-class Model:
+class Model(CoreFields):
     """Particles, springs, triangles, bodies and their gas, pins. All arrays are read-only.
 
     Build one with :class:`softbody.ModelBuilder`. Units are SI. N particles, S springs,
-    A attachments, T triangles, B bodies, P pinned particles. The compiled core reads the
-    fields declared in ``core/fields.hpp`` (``softbody._core.model_fields()``; the tests
-    hold these fields to it).
+    A attachments, T triangles, B bodies, P pinned particles. The fields the compiled core
+    reads come from :class:`~softbody.sim._model_fields.CoreFields`, generated at build time
+    from their one declaration in ``core/fields.hpp``; the fields below are Python's alone.
     """
 
-    gravity: np.ndarray
-    """Gravitational acceleration [m/s^2], shape (3,)."""
     particle_q: np.ndarray
     """Initial particle positions [m], shape (N, 3)."""
     particle_qd: np.ndarray
     """Initial particle velocities [m/s], shape (N, 3)."""
-    particle_mass: np.ndarray
-    """Particle masses [kg], shape (N,)."""
-    particle_inv_mass: np.ndarray
-    """Inverse masses [1/kg], shape (N,); 0 for pinned particles."""
-    particle_body: np.ndarray
-    """Body of each particle, shape (N,); -1 for free particles."""
-    spring_indices: np.ndarray
-    """Particle pair of each spring, shape (S, 2)."""
-    spring_rest_length: np.ndarray
-    """Spring rest lengths [m], shape (S,)."""
-    spring_stiffness: np.ndarray
-    """Spring stiffnesses [N/m], shape (S,)."""
-    spring_damping: np.ndarray
-    """Spring damping coefficients [N s/m], shape (S,)."""
-    spring_body: np.ndarray
-    """Body of each spring, shape (S,); -1 for springs between free particles."""
-    attachment_particle: np.ndarray
-    """Particle tied by each attachment spring, shape (A,)."""
     attachment_anchor: np.ndarray
     """Default anchor points [m], shape (A, 3); ``Control.attachment_anchor`` moves them."""
-    attachment_rest_length: np.ndarray
-    """Attachment rest lengths [m], shape (A,)."""
-    attachment_stiffness: np.ndarray
-    """Attachment stiffnesses [N/m], shape (A,)."""
-    attachment_damping: np.ndarray
-    """Attachment damping coefficients [N s/m], shape (A,)."""
-    tri_indices: np.ndarray
-    """Particle indices of each surface triangle, outward-wound, shape (T, 3)."""
-    body_particle_range: np.ndarray
-    """[begin, end) particle indices of each body, shape (B, 2)."""
-    body_tri_range: np.ndarray
-    """[begin, end) triangle indices of each body, shape (B, 2)."""
     body_mass: np.ndarray
     """Total mass of each body [kg], shape (B,)."""
-    body_volume_method: np.ndarray
-    """``VolumeMethod`` of each body, shape (B,)."""
-    body_mc_range: np.ndarray
-    """[begin, end) rows of ``mc_samples`` used by each Monte Carlo body, shape (B, 2)."""
-    mc_samples: np.ndarray
-    """Seeded sample points in [0, 1)^2 for Monte Carlo volumes, shape (M, 2)."""
-    body_gas_law: np.ndarray
-    """``GasLaw`` of each body, shape (B,)."""
-    body_gas_value: np.ndarray
-    """Driving gas value: nRT [J] (isothermal, adiabatic) or P0 [Pa] (fixed), shape (B,)."""
-    body_gas_gamma: np.ndarray
-    """Adiabatic exponent, shape (B,)."""
-    body_gas_reference_volume: np.ndarray
-    """Volume at which an adiabatic gas has P = nRT / V [m^3], shape (B,)."""
-    body_ambient_pressure: np.ndarray
-    """Pressure outside each body [Pa], shape (B,)."""
-    body_schedule_range: np.ndarray
-    """[begin, end) rows of the gas schedule of each body (empty: none), shape (B, 2)."""
-    schedule_time: np.ndarray
-    """Gas schedule times [s], shape (K,)."""
-    schedule_value: np.ndarray
-    """Gas schedule values (nRT [J] or P0 [Pa]), shape (K,)."""
-    body_rest_volume: np.ndarray
-    """Volume of each body at its initial positions by its own method [m^3], shape (B,)."""
-    pin_particle: np.ndarray
-    """Pinned (kinematic) particles, shape (P,); ``Control.pin_target`` moves them."""
-    tri_body: np.ndarray
-    """Body of each triangle, shape (T,)."""
-    body_closed: np.ndarray
-    """1 for a closed body holding gas, 0 for an open surface (cloth), shape (B,)."""
-    body_contact_shape: np.ndarray
-    """Bounding object of each body for ``bounding`` soft contacts: 1 box, 2 sphere,
-    3 ellipsoid (``VolumeMethod`` numbering), shape (B,)."""
-    soft_contact_mode: int
-    """Soft-soft contacts: 0 none, 1 bounding objects (the paper), 2 surfaces."""
-    soft_contact_restitution: float
-    """Restitution of soft-soft contacts, in [0, 1]."""
-    soft_contact_friction: float
-    """Fraction of tangential relative speed removed by a soft-soft contact, in [0, 1]."""
-    contact_margin: float
-    """Distance [m] within which surface contacts look for the nearest triangle."""
-    contact_cell_size: float
-    """Grid cell [m] of the spatial hash for surface contacts."""
-    collider_kind: np.ndarray
-    """``ColliderKind`` of each rigid collider, shape (C,)."""
-    collider_center: np.ndarray
-    """Collider centres at t = 0 [m] (a plane: a point on it), shape (C, 3)."""
-    collider_rotation: np.ndarray
-    """Collider orientations at t = 0, shape (C, 3, 3) (a plane's normal is column 1)."""
-    collider_size: np.ndarray
-    """Box half-extents or sphere radius (repeated) [m], shape (C, 3)."""
-    collider_restitution: np.ndarray
-    """Restitution of each collider, shape (C,)."""
-    collider_friction: np.ndarray
-    """Fraction of tangential speed each collider removes at contact, shape (C,)."""
-    collider_motion: np.ndarray
-    """``MotionKind`` of each collider, shape (C,)."""
-    collider_motion_vector: np.ndarray
-    """Angular velocity [rad/s], velocity [m/s] or amplitude [m] of the motion, (C, 3)."""
-    collider_motion_pivot: np.ndarray
-    """Pivot of rotating colliders [m], shape (C, 3)."""
-    collider_motion_frequency: np.ndarray
-    """Frequency of oscillating colliders [Hz], shape (C,)."""
-    body_drag_coefficient: np.ndarray
-    """Aerodynamic drag coefficient C_d [1] of each body's faces, >= 0, shape (B,); 0
-    leaves the body out of the drag term (``core/terms/drag.hpp``)."""
-    air_density: float
-    """Density rho of the air the bodies move through [kg/m^3], >= 0."""
-    wind: np.ndarray
-    """Velocity of the air [m/s], shape (3,); ``Control.wind`` overrides it per call."""
+
     def __post_init__(self):
         for name in self.__dataclass_fields__:
             value = getattr(self, name, None)
