@@ -325,6 +325,8 @@ def test_add_soft_body_takes_a_trimesh():
         models.append(builder.finalize())
     np.testing.assert_array_equal(models[0].particle_q, models[1].particle_q)
     np.testing.assert_array_equal(models[0].tri_indices, models[1].tri_indices)
+    with pytest.raises(TypeError, match="mesh must be a softbody.TriMesh or a trimesh.Trimesh"):
+        sb.ModelBuilder().add_soft_body([1, 2], mass=1.0, stiffness=1.0, damping=0.0, gas=1.0)
 
 
 def test_body_mesh_is_the_deformed_surface():
