@@ -202,7 +202,7 @@ def test_progress_auto_shows_a_bar_only_for_long_calls(capsys, monkeypatch):
 
 def test_an_exception_from_the_progress_callback_stops_the_run_on_any_thread():
     """Contract of the solvers' simulate(): the compiled loop calls progress(steps_done)
-    every 20 ms or so on any thread; its exception stops a run of 10**9 steps, and the
+    every 50 ms or so on any thread; its exception stops a run of 10**9 steps, and the
     state's clock (time, step_count) has advanced by the steps done before it is raised."""
     model = ball_model(subdivisions=1)
     sim = sb.Simulator(model, integrator="symplectic_euler", dt=1e-4)

@@ -18,7 +18,9 @@ namespace softbody::bindings {
 /// run (STOPPED); finish() raises it once the state's clock is written.
 class RunPoll {
 public:
-    static constexpr std::chrono::milliseconds kCheckInterval{20};
+    // Taking the GIL waits up to Python's switch interval (5 ms) while another thread runs
+    // Python code: every 50 ms keeps that below 10% of the run, and a stop within 0.1 s.
+    static constexpr std::chrono::milliseconds kCheckInterval{50};
 
     RunPoll(softbody::RunParams& p, nb::handle progress) : progress_(progress) {
         signals_ = PyThread_get_thread_ident() == main_thread();
@@ -102,6 +104,6 @@ private:
 /// The docstring of the solvers' simulate() arguments clock and progress.
 #define RUN_POLL_DOC                                                                          \
     "clock: an object whose time [s] and step_count the call advances by the steps done "   \
-    "before it returns or raises. progress: called with the steps done every 20 ms or so. " \
+    "before it returns or raises. progress: called with the steps done every 50 ms or so. " \
     "Python's signal handlers run between steps (on the main thread): an exception from "    \
     "one (KeyboardInterrupt) or from progress stops the run and is raised."

@@ -1,6 +1,6 @@
 """Progress bars for long :class:`~softbody.Simulator` calls (tqdm, notebook-aware).
 
-The compiled loop calls a run's callback with the steps done every 20 ms or so (between
+The compiled loop calls a run's callback with the steps done every 50 ms or so (between
 two steps, where it also runs Python's signal handlers), so a bar costs the run nothing and
 the steps are the same with or without one.
 """

@@ -141,8 +141,8 @@ class Simulator:
 
     **Interrupting.** Ctrl-C, a Jupyter interrupt, or any Python signal handler that
     raises (the ``softbody`` command line turns SIGTERM into one) stops a long
-    :meth:`run` or :meth:`advance` within 20 ms and one step: the compiled loop runs
-    Python's signal handlers between steps every 20 ms, and the exception
+    :meth:`run` or :meth:`advance` within 50 ms and one step: the compiled loop runs
+    Python's signal handlers between steps every 50 ms, and the exception
     (``KeyboardInterrupt``) is raised with the state at the last whole step: positions,
     velocities, ``time`` and ``step_count`` all describe it (as after a blow-up).
     Without a handler SIGTERM ends the process at once (Python's default). Signal handlers

@@ -118,7 +118,7 @@ class Solver:
         The core writes the arrays in place and, before it returns or raises, ``state.time``
         and ``state.step_count`` (by the steps done), so no interrupt can leave them behind
         the positions. Between steps it runs Python's signal handlers (on the main thread)
-        and, every 20 ms or so, calls ``progress(steps_done)`` (when not None); an exception
+        and, every 50 ms or so, calls ``progress(steps_done)`` (when not None); an exception
         from either (``KeyboardInterrupt`` on Ctrl-C) stops the run after its last whole
         step and is raised here.
         """
