@@ -283,7 +283,8 @@ struct TermTraits {
 /// OK; NONFINITE: a position or velocity became NaN or infinite; RUNAWAY: a particle moved
 /// faster than the speed limit; BAD_VOLUME: a body volume became NaN, zero or negative;
 /// SHRUNK / EXPLODED: a body volume fell below / grew past its limit; NEED_HASH: the
-/// spatial hash needs more room (enums.hpp lists them).
+/// spatial hash needs more room; STOPPED: RunParams::poll asked to stop (an interrupt), the
+/// steps done are kept (enums.hpp lists them).
 enum Status : int { SOFTBODY_ENUM_STATUS(SOFTBODY_ENUM_MEMBER) };
 
 struct RunResult {
@@ -309,6 +310,17 @@ struct RunParams {
     double t0 = 0.0, dt = 0.0;
     double max_speed = 1e4;
     double ratio_min = 1e-3, ratio_max = 1e3;
+    // Called before every step with the steps done so far; nonzero stops the run with
+    // STOPPED (the bindings: Python's signal handlers and a progress callback, so Ctrl-C
+    // stops a long run between two steps). It rate-limits itself; null: never called.
+    int (*poll)(void* context, index steps_done) = nullptr;
+    void* poll_context = nullptr;
 };
+
+/// Whether the run's poll asks to stop before step `step_index` (the steps before it done):
+/// every solver's step loop asks first thing in each step.
+inline bool stop_requested(const RunParams& p, index step_index) {
+    return p.poll != nullptr && p.poll(p.poll_context, step_index) != 0;
+}
 
 }  // namespace softbody

@@ -1,6 +1,7 @@
 // softbody._core.ExplicitSolver: the explicit schemes (core/solvers/explicit.hpp).
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
+#include "bindings/poll.hpp"
 #include "threads.hpp"
 
 namespace softbody::bindings {
@@ -34,18 +35,21 @@ public:
                                                    nb::handle qd, nb::handle collider_q,
                                                    nb::handle collider_rot,
                                                    nb::handle collider_impulse, double max_speed,
-                                                   double ratio_min, double ratio_max) {
+                                                   double ratio_min, double ratio_max,
+                                                   nb::handle clock, nb::handle progress) {
         const softbody::Model& m = model_.model();
         if (scheme < Integrator::EULER || scheme > Integrator::VELOCITY_VERLET) fail("scheme must be an explicit Integrator (0-4)");
         CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
                                      collider_impulse, max_speed, ratio_min, ratio_max);
         run.params.scheme = scheme;
         CoreControl c(m, control);
+        RunPoll poll(run.params, progress);
         softbody::RunResult r;
         {
             nb::gil_scoped_release release;
             r = softbody::kernels().simulate_explicit(m, c.view, run.params, run.state, w_);
         }
+        poll.finish(clock, run.params, r);
         return {r.status, r.steps_done, r.where, r.value};
     }
 
@@ -104,7 +108,8 @@ void bind_explicit(nb::module_& mod) {
              nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
              nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
              nb::arg("max_speed"), nb::arg("ratio_min"), nb::arg("ratio_max"),
-             "Advance q, qd in place; returns (status, steps_done, index, value).");
+             nb::arg("clock") = nb::none(), nb::arg("progress") = nb::none(),
+             "Advance q, qd in place; returns (status, steps_done, index, value). " RUN_POLL_DOC);
 }
 
 }  // namespace softbody::bindings

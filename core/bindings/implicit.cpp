@@ -2,6 +2,7 @@
 // preconditions with (core/solvers/implicit.hpp, multigrid.hpp), checked once.
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
+#include "bindings/poll.hpp"
 #include "threads.hpp"
 
 namespace softbody::bindings {
@@ -157,7 +158,7 @@ public:
         bool bdf2, Index steps, double t0, double dt, nb::handle control, nb::handle q,
         nb::handle qd, nb::handle collider_q, nb::handle collider_rot, nb::handle collider_impulse,
         double max_speed, double ratio_min, double ratio_max, double tolerance,
-        Index max_iterations, bool history) {
+        Index max_iterations, bool history, nb::handle clock, nb::handle progress) {
         const softbody::Model& m = model_.model();
         if (!(std::isfinite(tolerance) && tolerance > 0.0 && tolerance < 1.0))
             fail("tolerance must lie in (0, 1)");
@@ -171,12 +172,14 @@ public:
         ip.max_iterations = max_iterations;
         ip.history = history;
         const softbody::MultigridView* mg = multigrid_ ? &multigrid_->view : nullptr;
+        RunPoll poll(run.params, progress);
         softbody::RunResult r;
         {
             nb::gil_scoped_release release;
             r = softbody::kernels().simulate_implicit(m, c.view, run.params, ip, run.state, w_,
                                                       mg);
         }
+        poll.finish(clock, run.params, r);
         return {r.status, r.steps_done, r.where, r.value};
     }
 
@@ -268,8 +271,9 @@ void bind_implicit(nb::module_& mod) {
              nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
              nb::arg("max_speed"), nb::arg("ratio_min"), nb::arg("ratio_max"),
              nb::arg("tolerance"), nb::arg("max_iterations"), nb::arg("history"),
+             nb::arg("clock") = nb::none(), nb::arg("progress") = nb::none(),
              "Advance q, qd in place by backward Euler (or BDF2); history: the solver holds "
-             "the step before q, qd. Returns (status, steps_done, index, value).");
+             "the step before q, qd. Returns (status, steps_done, index, value). " RUN_POLL_DOC);
     mod.def("apply_multigrid", &apply_multigrid, nb::arg("model"), nb::arg("multigrid"),
             nb::arg("r").noconvert(), "z (N, 3) = one V-cycle of the hierarchy for r (N, 3).");
 }

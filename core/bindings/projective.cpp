@@ -2,6 +2,7 @@
 // (core/solvers/projective.hpp), checked once.
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
+#include "bindings/poll.hpp"
 #include "threads.hpp"
 
 namespace softbody::bindings {
@@ -121,7 +122,8 @@ public:
                                                    nb::handle q, nb::handle qd,
                                                    nb::handle collider_q, nb::handle collider_rot,
                                                    nb::handle collider_impulse, double max_speed,
-                                                   double ratio_min, double ratio_max) {
+                                                   double ratio_min, double ratio_max,
+                                                   nb::handle clock, nb::handle progress) {
         const softbody::Model& m = model_.model();
         if (iterations < 1) fail("iterations must be >= 1");
         if (!factor_) fail("no projective factor set (set_factor)");
@@ -132,12 +134,14 @@ public:
                                      collider_impulse, max_speed, ratio_min, ratio_max);
         run.params.iterations = iterations;
         CoreControl c(m, control);
+        RunPoll poll(run.params, progress);
         softbody::RunResult r;
         {
             nb::gil_scoped_release release;
             r = softbody::kernels().simulate_projective(m, c.view, run.params, run.state,
                                                         factor_->factor(), w_);
         }
+        poll.finish(clock, run.params, r);
         return {r.status, r.steps_done, r.where, r.value};
     }
 
@@ -193,9 +197,11 @@ void bind_projective(nb::module_& mod) {
              nb::arg("dt"), nb::arg("iterations"), nb::arg("control"), nb::arg("q"),
              nb::arg("qd"), nb::arg("collider_q"), nb::arg("collider_rot"),
              nb::arg("collider_impulse"), nb::arg("max_speed"), nb::arg("ratio_min"),
-             nb::arg("ratio_max"),
+             nb::arg("ratio_max"), nb::arg("clock") = nb::none(),
+             nb::arg("progress") = nb::none(),
              "Advance q, qd in place by steps steps of dt (the factor's), iterations "
-             "local-global iterations each; returns (status, steps_done, index, value).");
+             "local-global iterations each; returns (status, steps_done, index, value). "
+             RUN_POLL_DOC);
     mod.def("solve_factor", &solve_factor, nb::arg("model"), nb::arg("factor"),
             nb::arg("b").noconvert(),
             "x (N, 3) = A^-1 b by a projective factor's two triangular solves.");

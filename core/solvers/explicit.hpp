@@ -181,6 +181,7 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
         for (int k = 0; k < 3; ++k) h3[3 * i + k] = h;
     }
     for (index step_index = 0; step_index < p.steps; ++step_index) {
+        if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
         forms::eval_forces<forms::Which::kBody>(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);
         RunResult r = loop::check_volumes(m, w.gas.volume, p.ratio_min, p.ratio_max);
@@ -216,6 +217,7 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
     loop::begin_run(m, c, p, s, w.contact);
     if (fused_symplectic(m, c, p.scheme)) return simulate_symplectic_fused(m, c, p, s, w);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
+        if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);

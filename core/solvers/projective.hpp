@@ -167,6 +167,7 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
     volumes_only.volume_gradient = nullptr;
     loop::begin_run(m, c, p, s, w.contact);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
+        if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);

@@ -8,14 +8,22 @@ import numpy as np
 
 from softbody import _core
 from softbody.core import core_model, terms
+from softbody.mesh import TriMesh
 from softbody.reference import gas as ref_gas
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
 from softbody.sim.state import State, kernel_input
 
 
-def _control(model: Model, control: Control | None):
-    return control_data(model) if control is None else control.write(model, control_data(model))
+def _control(model: Model, state: State, control: Control | None):
+    """The kernel arrays of ``control``; without one, neutral inputs but for the gas values
+    the state's last step applied (``state.body_gas_override``), so that a readback
+    reports what a :class:`Control` set, not the model's value. ``state`` is conformed."""
+    if control is not None:
+        return control.write(model, control_data(model))
+    data = control_data(model)
+    np.copyto(data.gas_override, state.body_gas_override)
+    return data
 
 
 def _gas(model: Model, state: State, control: Control | None = None):
@@ -23,15 +31,8 @@ def _gas(model: Model, state: State, control: Control | None = None):
     ``state``, each body's volume by its own method."""
     state.conform(model)
     return _core.eval_volumes(
-        core_model(model), _control(model, control), float(state.time), state.particle_q
+        core_model(model), _control(model, state, control), float(state.time), state.particle_q
     )
-
-
-def _gas_values(model: Model, time: float, control: Control | None) -> np.ndarray:
-    """Each body's driving gas value at ``time`` [s]: the control's override where
-    finite, else its piecewise-linear schedule (held before the first and after the last
-    point), else the model's value; shape (B,)."""
-    return ref_gas.driving_values(model, _control(model, control), time)
 
 
 def active_terms(model: Model, control: Control | None = None) -> list[str]:
@@ -40,7 +41,8 @@ def active_terms(model: Model, control: Control | None = None) -> list[str]:
     data and the control give it something to do (``"attachments"`` only with
     attachments, ``"grab"`` only with a grabbed particle, the air on faces only with air
     of density > 0 and a body's coefficient > 0)."""
-    return [str(name) for name in _core.active_terms(core_model(model), _control(model, control))]
+    data = control_data(model) if control is None else control.write(model, control_data(model))
+    return [str(name) for name in _core.active_terms(core_model(model), data)]
 
 
 def body_volume_by(model: Model, state: State, method: str) -> np.ndarray:
@@ -76,14 +78,42 @@ def body_volume(model: Model, state: State) -> np.ndarray:
 
 
 def body_pressure(model: Model, state: State, control: Control | None = None) -> np.ndarray:
-    """Absolute gas pressure of each body at ``state.time`` [Pa], shape (B,)."""
+    """Absolute gas pressure of each body at ``state.time`` [Pa], shape (B,).
+
+    The gas values are ``control``'s where it sets them; without a control, those the
+    state's last step applied (a :class:`Control`'s nRT or pressure, recorded in
+    ``state.body_gas_override``), else the model's value or schedule.
+    """
     return _gas(model, state, control)[1]
 
 
 def body_gas_value(model: Model, state: State, control: Control | None = None) -> np.ndarray:
     """Driving gas value of each body at ``state.time``: nRT [J], or P0 [Pa] for fixed
-    pressure, after schedules and control overrides, shape (B,)."""
-    return _gas_values(model, float(state.time), control)
+    pressure, shape (B,): the control's override where finite (without a control, the
+    one the state's last step applied), else the body's piecewise-linear schedule (held
+    before the first and after the last point), else the model's value."""
+    state.conform(model)
+    return ref_gas.driving_values(model, _control(model, state, control), float(state.time))
+
+
+def body_mesh(model: Model, state: State, body: int) -> TriMesh:
+    """Body ``body``'s surface at ``state``, deformed, as a :class:`~softbody.TriMesh`.
+
+    Its vertices (V, 3) [m] are the body's particles in order (vertex k is particle
+    ``model.body_particle_range[body][0] + k``: the mesh given to
+    :meth:`~softbody.ModelBuilder.add_soft_body` after validation, which may weld
+    duplicate vertices) and its faces (F, 3) the body's triangles, outward-wound, as
+    indices into them. ``mesh.to_trimesh()`` gives a :class:`trimesh.Trimesh`;
+    :func:`softbody.save_mesh` writes it to a file.
+    """
+    if isinstance(body, bool) or not isinstance(body, int | np.integer):
+        raise TypeError(f"body must be an integer body index, got {body!r}")
+    if not 0 <= body < model.body_count:
+        raise ValueError(f"body must lie in [0, {model.body_count - 1}], got {body}")
+    state.conform(model)
+    p0, p1 = (int(i) for i in model.body_particle_range[body])
+    t0, t1 = (int(i) for i in model.body_tri_range[body])
+    return TriMesh(state.particle_q[p0:p1], model.tri_indices[t0:t1] - p0)
 
 
 def body_area(model: Model, state: State) -> np.ndarray:
@@ -159,10 +189,12 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
     """Kinetic energy and every registered term's energy at ``state``.
 
     ``control`` supplies gas overrides and attachment anchors when they differ from the
-    model's. Each term's energy comes from its own file of the compiled core
-    (``core/terms/``; ``softbody.reference`` holds the same formulas in NumPy). Dissipative
-    and given forces (air on faces, the control's forces) have none; the grab spring's is
-    reported in ``terms`` but left out of the total (the user's hand does work).
+    model's; without one, the gas values are those the state's last step applied
+    (``state.body_gas_override``) and the anchors the model's. Each term's energy comes
+    from its own file of the compiled core (``core/terms/``; ``softbody.reference`` holds
+    the same formulas in NumPy). Dissipative and given forces (air on faces, the control's
+    forces) have none; the grab spring's is reported in ``terms`` but left out of the
+    total (the user's hand does work).
     """
     state.conform(model)
     q, qd = state.particle_q, state.particle_qd
@@ -173,7 +205,9 @@ def energies(model: Model, state: State, control: Control | None = None) -> Ener
     kin = 0.5 * m * np.einsum("ij,ij->i", qd, qd)
     # each body's gas energy at its volume by its own method; an open surface (cloth)
     # holds no gas: the work of its wind pressure is not counted
-    values = _core.eval_energies(core_model(model), _control(model, control), float(state.time), q)
+    values = _core.eval_energies(
+        core_model(model), _control(model, state, control), float(state.time), q
+    )
     internal = [t["name"] for t in terms() if t["energy"] and not t["external"]]
     elastic = [name for name in internal if name not in ("gravity", "gas")]
     return Energies(

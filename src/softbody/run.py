@@ -290,10 +290,11 @@ def _simulate_and_write(
         for frame in range(frame_count + 1):
             if frame:
                 t0 = time.perf_counter()
+                # the command line prints its own progress, a line per frame
                 if auto:
-                    sim.advance(state, frame_dt)
+                    sim.advance(state, frame_dt, progress=False)
                 else:
-                    sim.run(state, steps_per_frame)
+                    sim.run(state, steps_per_frame, progress=False)
                 sim_seconds += time.perf_counter() - t0
             times.append(state.time)
             vol.append(body_volume(model, state))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -20,6 +20,9 @@ from softbody.mesh.validate import validate_mesh
 from softbody.sim.model import Model
 from softbody.sim.state import kernel_input
 from softbody.volume import VolumeMethod
+
+if TYPE_CHECKING:
+    import trimesh
 
 
 def _number(name: str, value, *, minimum: float | None = 0.0, strict: bool = False) -> float:
@@ -220,7 +223,7 @@ class ModelBuilder:
     # -- soft bodies ---------------------------------------------------------------------
     def add_soft_body(
         self,
-        mesh: TriMesh,
+        mesh: TriMesh | trimesh.Trimesh,
         *,
         mass: float,
         stiffness: float,
@@ -241,9 +244,13 @@ class ModelBuilder:
 
         Parameters
         ----------
-        mesh : TriMesh
-            Closed surface. It is validated (welded, oriented; open or non-manifold meshes
-            raise :class:`MeshError`). Vertex k becomes particle ``body_particles(b)[k]``.
+        mesh : TriMesh or trimesh.Trimesh
+            Closed surface: a :class:`TriMesh`, or a :class:`trimesh.Trimesh` (its
+            ``vertices`` and ``faces`` are copied; anything else it carries, such as UVs or
+            materials, is not). It is validated (welded, oriented; open or non-manifold
+            meshes raise :class:`MeshError`). Vertex k becomes particle
+            ``body_particles(b)[k]``; :func:`softbody.body_mesh` gives the body's surface
+            at a state.
         mass : float
             Total mass [kg], > 0.
         stiffness, damping : float
@@ -299,7 +306,7 @@ class ModelBuilder:
 
     def add_cloth(
         self,
-        mesh: TriMesh,
+        mesh: TriMesh | trimesh.Trimesh,
         *,
         mass: float,
         stiffness: float,
@@ -370,7 +377,9 @@ class ModelBuilder:
         elif hasattr(mesh, "vertices") and hasattr(mesh, "faces"):
             source = TriMesh(np.asarray(mesh.vertices), np.asarray(mesh.faces))
         else:
-            raise TypeError(f"mesh must be a TriMesh, got {type(mesh).__name__}")
+            raise TypeError(
+                f"mesh must be a softbody.TriMesh or a trimesh.Trimesh, got {type(mesh).__name__}"
+            )
         body = len(self._bodies)
         # the whole model so far plus this body, before validating or copying anything
         particles = self._particle_count + source.vertex_count

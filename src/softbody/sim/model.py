@@ -90,6 +90,7 @@ class Model(CoreFields):
             self.particle_qd.copy(),
             collider_q=self.collider_center.copy(),
             collider_rotation=self.collider_rotation.copy(),
+            body_gas_override=np.full(self.body_count, np.nan),
         )
 
     def control(self):

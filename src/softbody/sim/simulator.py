@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import functools
 import operator
+import threading
 import warnings
-from typing import Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -13,6 +15,7 @@ from softbody.errors import SimulationError, StabilityWarning
 from softbody.integrators import Integrator
 from softbody.sim.control import Control, control_data
 from softbody.sim.model import Model
+from softbody.sim.progress import RunProgress
 from softbody.sim.state import State
 from softbody.solvers import RunLimits, Solver, Status, solver_class
 from softbody.solvers.explicit import check_force_precision
@@ -64,6 +67,27 @@ def step_count(steps) -> int:
     return n
 
 
+def _one_call_at_a_time(method):
+    """``method`` of :class:`Simulator` under its lock, taken without waiting: a
+    ``RuntimeError`` when another call holds it (the class's Threads)."""
+
+    @functools.wraps(method)
+    def call(self, *args, **kwargs):
+        if not self._busy.acquire(blocking=False):
+            raise RuntimeError(
+                f"Simulator.{method.__name__}: this Simulator is already running a call in "
+                "another thread, and its solver's buffers serve one call at a time: make "
+                "one Simulator per thread (Simulator(model, integrator=sim.integrator, "
+                "dt=..., **sim.options))"
+            )
+        try:
+            return method(self, *args, **kwargs)
+        finally:
+            self._busy.release()
+
+    return call
+
+
 class Simulator:
     """Steps a :class:`Model`'s states forward in time.
 
@@ -71,8 +95,10 @@ class Simulator:
     ----------
     model : Model
     integrator : str
-        ``"midpoint"`` (default, the paper's choice), ``"euler"``, ``"rk4"``,
-        ``"symplectic_euler"``, ``"velocity_verlet"``, or the implicit ``"implicit_euler"``
+        ``"velocity_verlet"`` (default: second order, and stable without growth on the
+        undamped pressure and spring vibrations below its stable step), ``"midpoint"``
+        (the paper's choice, which slowly amplifies undamped vibration at any dt),
+        ``"euler"``, ``"rk4"``, ``"symplectic_euler"``, or the implicit ``"implicit_euler"``
         (backward Euler) and ``"bdf2"`` (second order, far less numerical damping; it uses
         the previous step, so its first step on a state, after dt changes, after the
         state was changed outside :meth:`run`, or after contacts acted, is a backward
@@ -83,7 +109,7 @@ class Simulator:
         iterations the softer and more damped the slow motion).
     dt : float or "auto"
         Time step [s], > 0. A :class:`StabilityWarning` is issued when it exceeds
-        :attr:`stable_dt`. ``"auto"`` picks it from the stability estimate (and
+        :attr:`stable_dt`. ``"auto"`` (default) picks it from the stability estimate (and
         :meth:`advance` re-picks it from the current state).
     max_speed : float
         A particle faster than this [m/s] means the run blew up (runaway energy).
@@ -129,6 +155,21 @@ class Simulator:
     A step that blows up raises :class:`SimulationError` naming the body or particle, the
     step and the time; the state is left at the last good step.
 
+    **Interrupting.** Ctrl-C, a Jupyter interrupt, or any Python signal handler that
+    raises (the ``softbody`` command line turns SIGTERM into one) stops a long
+    :meth:`run` or :meth:`advance` within 50 ms and one step: the compiled loop runs
+    Python's signal handlers between steps every 50 ms, and the exception
+    (``KeyboardInterrupt``) is raised with the state at the last whole step: positions,
+    velocities, ``time`` and ``step_count`` all describe it (as after a blow-up).
+    Without a handler SIGTERM ends the process at once (Python's default). Signal handlers
+    run on the main thread only, so a run on another thread finishes its call.
+
+    **Threads.** A Simulator steps one state at a time: its solver's scratch buffers,
+    step and caches serve one call. A call while another thread's call on the same
+    Simulator is running raises ``RuntimeError``; make one Simulator per thread (each its
+    own state; ``Simulator(model, integrator=sim.integrator, dt=..., **sim.options)``).
+    Models, and states not shared, can be used from any number of threads at once.
+
     Every registered term (``softbody.core.terms()``) is stepped by every integrator. A term
     with no Jacobian product (the air on faces) enters ``implicit_euler`` and ``bdf2``
     explicitly, its force at the step's start (stable while dt < 2 m / (dF/dv): v_t / g
@@ -140,8 +181,8 @@ class Simulator:
         self,
         model: Model,
         *,
-        integrator: str | Integrator = "midpoint",
-        dt: float,
+        integrator: str | Integrator = "velocity_verlet",
+        dt: float | Literal["auto"] = "auto",
         max_speed: float = 1.0e4,
         volume_limits: tuple[float, float] = (1.0e-3, 1.0e3),
         implicit_tolerance: float = 1.0e-6,
@@ -154,6 +195,8 @@ class Simulator:
         if not isinstance(model, Model):
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
         self.model = model
+        # held by each run/advance/step call: a second thread's call is refused (see Threads)
+        self._busy = threading.Lock()
         self.integrator = Integrator.parse(integrator)
         self.auto_dt = isinstance(dt, str) and dt == "auto"
         self._auto_limit: float | None = None
@@ -213,6 +256,14 @@ class Simulator:
         elif dt > self.stable_dt:
             warnings.warn(self.stability_note(), StabilityWarning, stacklevel=2)
 
+    def __repr__(self) -> str:
+        dt = f"{self.dt:.4g}" + (" (auto)" if self.auto_dt else "")
+        return (
+            f"Simulator(integrator={self.integrator.name.lower()!r}, dt={dt}, "
+            f"stable_dt={self.stable_dt:.4g}, particle_count={self.model.particle_count}, "
+            f"body_count={self.model.body_count}, threads={self.threads})"
+        )
+
     @property
     def options(self) -> dict:
         """The keyword options this simulator was built with, other than the model,
@@ -260,6 +311,7 @@ class Simulator:
             text += "; reduce dt, stiffness or pressure, or add mass"
         return text
 
+    @_one_call_at_a_time
     def advance(
         self,
         state: State,
@@ -267,6 +319,7 @@ class Simulator:
         control: Control | None = None,
         *,
         record: FrameRecorder | None = None,
+        progress: bool | None = None,
     ) -> State:
         """Advance ``state`` by ``duration`` [s] in equal substeps.
 
@@ -283,12 +336,23 @@ class Simulator:
         the start included when it is the recording's first frame. The call advances from
         frame to frame (each stretch in equal substeps, as above) and ends exactly
         ``duration`` later; if a step blows up, the frames before it are kept.
+
+        ``progress``: a progress bar (tqdm; a widget in a notebook) on stderr. None
+        (default) shows one when the call, judged after 0.5 s, will take longer than 2 s,
+        and only where it can be seen (stderr is a terminal, or a Jupyter kernel); True
+        always, False never. The bar does not change the steps taken.
         """
         duration = float(duration)
         if not (np.isfinite(duration) and duration >= 0):
             raise ValueError(f"duration must be finite and >= 0 seconds, got {duration!r}")
         if record is not None:
-            return self._advance_recorded(state, duration, control, record)
+            return self._advance_recorded(state, duration, control, record, progress)
+        return self._advance(state, duration, control, progress)
+
+    def _advance(
+        self, state: State, duration: float, control: Control | None, progress: bool | None
+    ) -> State:
+        """:meth:`advance`'s steps, in the caller's hold of the lock."""
         if duration == 0:
             return state
         state.conform(self.model)
@@ -315,14 +379,19 @@ class Simulator:
         substeps = int(substeps)
         saved, self.dt = self.dt, duration / substeps
         try:
-            self.run(state, substeps, control)
+            self._run(state, substeps, control, progress)
         finally:
             if not self.auto_dt:
                 self.dt = saved
         return state
 
     def _advance_recorded(
-        self, state: State, duration: float, control: Control | None, record: FrameRecorder
+        self,
+        state: State,
+        duration: float,
+        control: Control | None,
+        record: FrameRecorder,
+        progress: bool | None,
     ) -> State:
         """:meth:`advance` in stretches between ``record``'s frame times, capturing at each."""
         for name in ("frame_offsets", "capture"):
@@ -345,22 +414,35 @@ class Simulator:
         done = 0.0
         for offset in offsets:
             if offset > done:
-                self.advance(state, offset - done, control)
+                self._advance(state, offset - done, control, progress)
                 done = float(offset)
             record.capture(state, control)
         if duration > done:
-            self.advance(state, duration - done, control)
+            self._advance(state, duration - done, control, progress)
         return state
 
+    @_one_call_at_a_time
     def step(self, state: State, control: Control | None = None) -> State:
         """Advance ``state`` by one step of ``dt`` in place; returns it."""
-        return self.run(state, 1, control)
+        return self._run(state, 1, control, False)
 
-    def run(self, state: State, steps: int, control: Control | None = None) -> State:
+    @_one_call_at_a_time
+    def run(
+        self,
+        state: State,
+        steps: int,
+        control: Control | None = None,
+        *,
+        progress: bool | None = None,
+    ) -> State:
         """Advance ``state`` in place by ``steps`` steps with the same ``control``.
 
         One compiled call does all the steps, so this is the fast path for long runs.
+        ``progress`` as in :meth:`advance`.
         """
+        return self._run(state, steps, control, progress)
+
+    def _run(self, state: State, steps, control: Control | None, progress) -> State:
         model = self.model
         steps = step_count(steps)
         state.conform(model)
@@ -368,16 +450,19 @@ class Simulator:
             return state
         data = self._neutral if control is None else control.write(model, self._control)
         limits = RunLimits(self.max_speed, *self.volume_limits)
+        bar = RunProgress.start(steps, state.time, self.dt, progress)
         state.collider_impulse[:] = 0.0
         solver = self.solver
+        first = state.step_count
         solver.begin_run()
         remaining = steps
         try:
             while remaining:
-                result = solver.simulate(state, remaining, self.dt, data, limits)
-                start_step = state.step_count
-                state.step_count = start_step + result.steps_done
-                state.time = float(state.time) + result.steps_done * self.dt
+                # the core advances state.time and state.step_count with the arrays
+                result = solver.simulate(
+                    state, remaining, self.dt, data, limits,
+                    None if bar is None else bar.callback(steps - remaining),
+                )  # fmt: skip
                 remaining -= result.steps_done
                 if result.status == Status.NEED_HASH:
                     # contacts touched more grid cells than the hash holds: grow it and go
@@ -389,6 +474,10 @@ class Simulator:
                                         result.where, result.value)  # fmt: skip
         finally:
             solver.end_run()
+            if state.step_count != first:  # what the last step applied, for the readbacks
+                np.copyto(state.body_gas_override, data.gas_override)
+            if bar is not None:
+                bar.close(state.step_count - first)
         return state
 
     def _blow_up(self, status, step, time, index, value) -> SimulationError:

@@ -60,6 +60,12 @@ class State:
     collider_impulse: np.ndarray | None = None
     """Impulse each collider received from particles during the last ``Simulator.run``
     call [N s], shape (C, 3)."""
+    body_gas_override: np.ndarray | None = None
+    """The gas value the last step's :class:`Control` set for each body (nRT [J], or P0
+    [Pa] for fixed pressure), shape (B,); NaN where the model's value or schedule applied
+    (and before any step). :func:`softbody.body_pressure`, :func:`softbody.body_gas_value`
+    and :func:`softbody.energies` read it when given no control, so they report what was
+    applied. None until the state meets its model (``model.state()`` fills it)."""
 
     def __post_init__(self):
         if self.collider_q is None:
@@ -73,6 +79,8 @@ class State:
         self.collider_impulse = kernel_array(self.collider_impulse)
         self.particle_q = kernel_array(self.particle_q)
         self.particle_qd = kernel_array(self.particle_qd)
+        if self.body_gas_override is not None:
+            self.body_gas_override = kernel_array(self.body_gas_override)
         if self.particle_q.ndim != 2 or self.particle_q.shape[1] != 3:
             raise ValueError(f"particle_q must have shape (N, 3), got {self.particle_q.shape}")
         if self.particle_qd.shape != self.particle_q.shape:
@@ -86,12 +94,15 @@ class State:
         float64, C-contiguous and writable (:func:`kernel_array`), replacing an attribute
         a user set to some other kind of array. Raises ``ValueError`` naming the array."""
         n, c = model.particle_count, model.collider_count
+        if self.body_gas_override is None:
+            self.body_gas_override = np.full(model.body_count, np.nan)
         for name, shape in (
             ("particle_q", (n, 3)),
             ("particle_qd", (n, 3)),
             ("collider_q", (c, 3)),
             ("collider_rotation", (c, 3, 3)),
             ("collider_impulse", (c, 3)),
+            ("body_gas_override", (model.body_count,)),
         ):
             value = getattr(self, name)
             if _kernel_ready(value, shape):
@@ -116,4 +127,11 @@ class State:
             self.collider_q.copy(),
             self.collider_rotation.copy(),
             self.collider_impulse.copy(),
+            None if self.body_gas_override is None else self.body_gas_override.copy(),
+        )
+
+    def __repr__(self) -> str:
+        return (
+            f"State(particle_count={len(self.particle_q)}, time={self.time:.6g}, "
+            f"step_count={self.step_count}, collider_count={len(self.collider_q)})"
         )

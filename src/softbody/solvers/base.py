@@ -27,6 +27,7 @@ class Status(IntEnum):
     SHRUNK = 4  # a body volume fell below the lower limit
     EXPLODED = 5  # a body volume grew past the upper limit
     NEED_HASH = 6  # the surface contacts' spatial hash needs more room (value: entries)
+    STOPPED = 7  # a signal handler or the progress callback raised (the core raises it)
 
 
 @dataclass(frozen=True)
@@ -108,9 +109,19 @@ class Solver:
     def _core_model(self):
         return core_model(self.model)
 
-    def simulate(self, state, steps: int, dt: float, control, limits: RunLimits) -> RunResult:
-        """Advance ``state`` (its arrays in place) by at most ``steps`` steps of ``dt`` [s]
-        with the control's data; stops at the first failed check."""
+    def simulate(
+        self, state, steps: int, dt: float, control, limits: RunLimits, progress=None
+    ) -> RunResult:
+        """Advance ``state`` by at most ``steps`` steps of ``dt`` [s] with the control's
+        data; stops at the first failed check.
+
+        The core writes the arrays in place and, before it returns or raises, ``state.time``
+        and ``state.step_count`` (by the steps done), so no interrupt can leave them behind
+        the positions. Between steps it runs Python's signal handlers (on the main thread)
+        and, every 50 ms or so, calls ``progress(steps_done)`` (when not None); an exception
+        from either (``KeyboardInterrupt`` on Ctrl-C) stops the run after its last whole
+        step and is raised here.
+        """
         raise NotImplementedError
 
     @staticmethod

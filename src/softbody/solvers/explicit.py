@@ -68,11 +68,12 @@ class ExplicitSolver(Solver):
             float32=self.force_precision == "float32",
         )  # fmt: skip
 
-    def simulate(self, state, steps, dt, control, limits: RunLimits) -> RunResult:
+    def simulate(self, state, steps, dt, control, limits: RunLimits, progress=None) -> RunResult:
         return self._result(
             self._core.simulate(
                 int(self.integrator), steps, float(state.time), dt, control, state.particle_q,
                 state.particle_qd, state.collider_q, state.collider_rotation,
                 state.collider_impulse, limits.max_speed, limits.ratio_min, limits.ratio_max,
+                clock=state, progress=progress,
             )
         )  # fmt: skip

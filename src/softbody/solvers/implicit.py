@@ -120,7 +120,7 @@ class ImplicitSolver(Solver):
             and np.array_equal(state.particle_qd, self._v_end)
         )
 
-    def simulate(self, state, steps, dt, control, limits: RunLimits) -> RunResult:
+    def simulate(self, state, steps, dt, control, limits: RunLimits, progress=None) -> RunResult:
         bdf2 = self.integrator == Integrator.BDF2
         # the system matrix's step: dt for backward Euler, 2/3 dt for BDF2
         h = dt * (2.0 / 3.0 if bdf2 else 1.0)
@@ -133,11 +133,11 @@ class ImplicitSolver(Solver):
                 bdf2, steps, float(state.time), dt, control, state.particle_q,
                 state.particle_qd, state.collider_q, state.collider_rotation,
                 state.collider_impulse, limits.max_speed, limits.ratio_min, limits.ratio_max,
-                self.tolerance, self.max_iterations, history,
+                self.tolerance, self.max_iterations, history, clock=state, progress=progress,
             )
         )  # fmt: skip
         if bdf2 and (result.steps_done > 0 or history):
-            self._history = (weakref.ref(state), state.step_count + result.steps_done, dt)
+            self._history = (weakref.ref(state), state.step_count, dt)
             self._q_end[:] = state.particle_q
             self._v_end[:] = state.particle_qd
         return result

@@ -76,7 +76,7 @@ class ProjectiveSolver(Solver):
             self._core_model(), hash_capacity=hash_capacity, threads=self.threads
         )
 
-    def simulate(self, state, steps, dt, control, limits: RunLimits) -> RunResult:
+    def simulate(self, state, steps, dt, control, limits: RunLimits, progress=None) -> RunResult:
         factor = self.factor(dt)
         if self._core.factor is not factor:  # checked once per factor (per dt)
             self._core.set_factor(factor)
@@ -85,5 +85,6 @@ class ProjectiveSolver(Solver):
                 steps, float(state.time), dt, self.iterations_per_step, control,
                 state.particle_q, state.particle_qd, state.collider_q, state.collider_rotation,
                 state.collider_impulse, limits.max_speed, limits.ratio_min, limits.ratio_max,
+                clock=state, progress=progress,
             )
         )  # fmt: skip

@@ -111,9 +111,9 @@ def run_one(
             try:
                 for _ in range(plan.frame_count):
                     if auto:
-                        sim.advance(state, plan.frame_dt)
+                        sim.advance(state, plan.frame_dt, progress=False)
                     else:
-                        sim.run(state, plan.steps_per_frame)
+                        sim.run(state, plan.steps_per_frame, progress=False)
                     sample()
             except SimulationError as exc:
                 blowup = exc.time

@@ -807,7 +807,7 @@ class Viewer:
             self.control.grab_stiffness = m * omega**2
             self.control.grab_damping = 2.0 * m * omega  # critically damped
         try:
-            self.sim.run(self.state, steps, self.control)
+            self.sim.run(self.state, steps, self.control, progress=False)
         except SimulationError as exc:
             self.needs_reset = True
             self._pause(f"paused: {exc}. Press Reset.")
