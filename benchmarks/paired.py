@@ -4,11 +4,13 @@ The engine benchmark's ball (``ball_drop.ball_drop``, 2,562 to 40,962 vertices) 
 symplectic Euler and midpoint at 1e-5 s (as ``engine.py``), implicit Euler at 1/60 s
 (multigrid, CG 1e-3) and projective dynamics with 2 iterations at 1/60 s; and the
 five-ball scene (each of ``five_balls.py``'s runs, its integrator, step and options).
-Both versions run in worker processes of their own (``versions.py``), called in
-alternation, each case ``ROUNDS`` times; each call is the best of ``REPEATS`` timed runs of at least
-``MIN_SECONDS``. Reported per case: each version's best rate and the median over rounds
-of this version's rate over the baseline's in the same round (ratios are what this
-shared machine measures reliably; >= 0.97 is "no slowdown" within its noise).
+Both versions run in worker processes of their own (``versions.py``), new ones every round
+(a process's memory layout alone moves a case's speed by several per cent), called in
+alternation, each case once a round for ``ROUNDS`` rounds; each call is the best of
+``REPEATS`` timed runs of at least ``MIN_SECONDS``. Reported per case: each version's best
+rate and the median over rounds of this version's rate over the baseline's in the same
+round (ratios are what this shared machine measures reliably; >= 0.97 is "no slowdown"
+within its noise).
 
 Writes results/paired.{json,png}. Usage, for the commit before a change:
 
@@ -114,32 +116,42 @@ def main() -> None:
         help="the src folder of the earlier version, its core built in place",
     )  # fmt: skip
     parser.add_argument("--max-subdivisions", type=int, default=6)
+    parser.add_argument("--rounds", type=int, default=ROUNDS, help="rounds per case")
+    parser.add_argument("--only", default="", help="only the cases whose name contains this")
+    parser.add_argument("--out", default="paired", help="results/OUT.{json,png}")
     args = parser.parse_args()
     import five_balls
 
     cases = [("ball", k, s) for s in range(4, args.max_subdivisions + 1)
              for k in range(len(BALL_CASES))]  # fmt: skip
     cases += [("five", k, 4) for k in range(len(five_balls.RUNS))]
+    cases = [c for c in cases if args.only in case_name(*c)]
     rows = []
-    this, baseline = versions(args.baseline)
-    for kind, case, subdivisions in cases:
-        ratios, best = [], {"this": 0.0, "baseline": 0.0}
-        for r in range(ROUNDS):
+    ratios = {c: [] for c in cases}
+    best = {c: {"this": 0.0, "baseline": 0.0} for c in cases}
+    for r in range(args.rounds):
+        # fresh worker processes every round: a process's memory layout alone moves a
+        # case's speed by several per cent, so each round samples new ones
+        this, baseline = versions(args.baseline)
+        for kind, case, subdivisions in cases:
             order = [this, baseline] if r % 2 == 0 else [baseline, this]
             rates = {v.name: v.call("paired:rate", kind=kind, case=case,
                                     subdivisions=subdivisions) for v in order}  # fmt: skip
-            ratios.append(rates["this"] / rates["baseline"])
-            for v in best:
-                best[v] = max(best[v], rates[v])
-        row = {"case": case_name(kind, case, subdivisions), **best,
-               "ratio": float(np.median(ratios)), "ratios": ratios}  # fmt: skip
+            ratios[(kind, case, subdivisions)].append(rates["this"] / rates["baseline"])
+            for v in ("this", "baseline"):
+                best[(kind, case, subdivisions)][v] = max(best[(kind, case, subdivisions)][v],
+                                                          rates[v])  # fmt: skip
+        for v in (this, baseline):
+            v.close()
+        print(f"round {r + 1} of {args.rounds} done", flush=True)
+    for c in cases:
+        row = {"case": case_name(*c), **best[c], "ratio": float(np.median(ratios[c])),
+               "ratios": ratios[c]}  # fmt: skip
         rows.append(row)
-        print(f"{row['case']:70s} {row['ratio']:.3f}  {np.round(ratios, 3)}", flush=True)
-    for v in (this, baseline):
-        v.close()
-    record = run_record("paired", baseline=str(args.baseline), rounds=ROUNDS, cases=rows)
-    write_json(RESULTS / "paired.json", record)
-    plot(rows, "speed of this version / the baseline's, median of rounds", RESULTS / "paired.png")
+        print(f"{row['case']:70s} {row['ratio']:.3f}  {np.round(ratios[c], 3)}", flush=True)
+    record = run_record("paired", baseline=str(args.baseline), rounds=args.rounds, cases=rows)
+    write_json(RESULTS / f"{args.out}.json", record)
+    plot(rows, "this version's speed / the baseline's", RESULTS / f"{args.out}.png")
 
 
 def plot(rows: list[dict], label: str, path: Path) -> None:
@@ -158,7 +170,7 @@ def plot(rows: list[dict], label: str, path: Path) -> None:
     ax.axvline(0.97, color="C3", linewidth=0.8, linestyle="--")
     ax.set_yticks(y, [r["case"] for r in rows], fontsize=7)
     ax.invert_yaxis()
-    ax.set_xlabel(label + " (dashed: 0.97)")
+    ax.set_xlabel(f"{label}: rounds (grey), their median (blue); dashed: 0.97")
     ax.set_title("This version against the baseline, case by case", fontsize=10)
     fig.tight_layout()
     save_figure(fig, path)

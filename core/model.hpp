@@ -102,6 +102,16 @@ struct BodyGas {
     double* hi = nullptr;               // (B, 3)
 };
 
+/// The surface contacts' hash entries (triangle indices): a buffer its owner grows when a
+/// step's triangles need more room than it holds (grow: false when it cannot, then the run
+/// stops with NEED_HASH), so a run never leaves the core to make room.
+struct HashEntries {
+    index capacity = 0;      // E, the entries the buffer holds
+    index* data = nullptr;   // (E,)
+    bool (*grow)(HashEntries& self, index needed) = nullptr;  // null: a fixed buffer
+    void* owner = nullptr;
+};
+
 /// Scratch for contacts, owned by a solver.
 struct ContactBuffers {
     double* body_lo = nullptr;        // (B, 3)
@@ -117,10 +127,9 @@ struct ContactBuffers {
     // Surface contacts' spatial hash of triangle boxes (soft_contact_mode 2): bucket h holds
     // hash_entries[hash_start[h] .. hash_start[h + 1]); H is a power of two >= 2 T.
     index hash_table = 0;         // H
-    index hash_capacity = 0;      // E, the entries the buffer holds
+    HashEntries* hash_entries = nullptr;  // the entries (triangle indices), grown as needed
     index* hash_start = nullptr;  // (H + 1,)
     index* hash_count = nullptr;  // (H,)
-    index* hash_entries = nullptr;  // (E,) triangle indices
 };
 
 /// Scratch of the vertex-major force pass.

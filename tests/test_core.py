@@ -55,17 +55,18 @@ def _surface_run(small_hash: bool) -> tuple[sb.State, sb.Simulator]:
         warnings.simplefilter("ignore", sb.StabilityWarning)
         sim = sb.Simulator(model, integrator="midpoint", dt=2e-4)
     if small_hash:
-        sim.solver.grow_hash(1)
+        sim.solver.start_hash(1)
+    core = sim.solver._core
     state = model.state()
     sim.run(state, STEPS)
+    assert sim.solver._core is core  # grown inside the core, never rebuilt
     return state, sim
 
 
 def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
-    """A solver whose spatial hash holds 1 entry stops at the first contact step with
-    NEED_HASH (the step undone), is rebuilt with twice the entries needed and goes on: the
-    run equals one with the default room (8 entries per triangle) to the last bit (no term
-    here depends on the restarted call's time origin)."""
+    """A solver whose spatial hash holds 1 entry grows it inside the core at the first
+    contact step (the same solver goes on, nothing undone): the run equals one with the
+    default room (8 entries per triangle) to the last bit."""
     (big, big_sim), (small, small_sim) = _surface_run(False), _surface_run(True)
     assert big_sim.solver._core.hash_capacity == 8 * big_sim.model.tri_count
     assert small_sim.solver._core.hash_capacity > 1
@@ -74,24 +75,56 @@ def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
     np.testing.assert_array_equal(small.particle_qd, big.particle_qd)
 
 
-def test_a_solver_reports_the_hash_room_it_needs():
-    """One step of the balls already touching with a 1-entry hash: NEED_HASH (6), no step
-    done, the needed entry count as the value, and the state as it was."""
+def _touching_balls():
     model = surface_model(cloth=False)
     state = model.state()
     shift = np.zeros_like(state.particle_q)
     shift[slice(*model.body_particle_range[0]), 0] = 0.03  # 1 cm into the other ball
     state.particle_q += shift
-    before = state.particle_q.copy(), state.particle_qd.copy()
-    solver = _core.ExplicitSolver(core_model(model), hash_capacity=1)
-    status, done, where, needed = solver.simulate(
-        1, 5, 0.0, 2e-4, control_data(model), state.particle_q, state.particle_qd,
-        state.collider_q, state.collider_rotation, state.collider_impulse, 1e4, 1e-3, 1e3,
+    return model, state
+
+
+def _simulate(solver, model, state, steps, ratio_max=1e3):
+    return solver.simulate(
+        1, steps, 0.0, 2e-4, control_data(model), state.particle_q, state.particle_qd,
+        state.collider_q, state.collider_rotation, state.collider_impulse, 1e4, 1e-3,
+        ratio_max,
     )  # fmt: skip
+
+
+def test_a_solver_grows_its_hash_to_the_room_it_needs():
+    """Five steps of the balls already touching from a 1-entry hash: all done (OK), the
+    hash grown to hold the entries the triangles need (at least one per triangle, at most
+    8), with the same state as a solver with the default room."""
+    model, state = _touching_balls()
+    other = state.copy()
+    small = _core.ExplicitSolver(core_model(model), hash_capacity=1)
+    assert _simulate(small, model, state, 5)[:2] == (0, 5)
+    assert model.tri_count <= small.hash_capacity <= 2 * 8 * model.tri_count
+    big = _core.ExplicitSolver(core_model(model))
+    assert _simulate(big, model, other, 5)[:2] == (0, 5)
+    np.testing.assert_array_equal(state.particle_q, other.particle_q)
+    np.testing.assert_array_equal(state.particle_qd, other.particle_qd)
+
+
+def test_a_hash_past_its_most_room_stops_the_run():
+    """A body stretched 40 times over another (its triangles spanning thousands of grid
+    cells, past 512 per triangle): NEED_HASH (6) with the entries needed, no step done, the
+    state as it was; the Simulator says so in one line (a blow-up)."""
+    model, state = _touching_balls()
+    body = slice(*model.body_particle_range[0])
+    centre = state.particle_q[body].mean(axis=0)
+    state.particle_q[body] = centre + 40.0 * (state.particle_q[body] - centre)
+    before = state.particle_q.copy(), state.particle_qd.copy()
+    solver = _core.ExplicitSolver(core_model(model))
+    status, done, where, needed = _simulate(solver, model, state, 5, ratio_max=1e9)
     assert (status, done, where) == (6, 0, -1)
-    assert model.tri_count <= needed <= 8 * model.tri_count
+    assert needed > 512 * model.tri_count
     np.testing.assert_array_equal(state.particle_q, before[0])
     np.testing.assert_array_equal(state.particle_qd, before[1])
+    sim = sb.Simulator(model, integrator="midpoint", dt=2e-4, volume_limits=(1e-3, 1e9))
+    with pytest.raises(sb.SimulationError, match="surface contacts blew up at step 0"):
+        sim.run(state, 5)
 
 
 @pytest.mark.parametrize("contacts", ["bounding", "surface"])

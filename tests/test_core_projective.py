@@ -84,15 +84,15 @@ def test_every_instruction_set_gives_the_same_run():
 
 
 def test_a_too_small_contact_hash_grows_and_gives_the_same_run():
-    """Surface contacts with a 1-entry hash: the core stops with NEED_HASH (the step
-    undone), the Simulator rebuilds it with twice the room and re-points the factor, and
-    the run equals one with the default room to the last bit."""
+    """Surface contacts with a 1-entry hash: the core grows it inside the run (the same
+    solver and factor go on), and the run equals one with the default room to the last
+    bit."""
     model = surface_model(cloth=False)
     runs = []
     for small in (False, True):
         sim = _sim(model, 5e-4)
         if small:
-            sim.solver.grow_hash(1)
+            sim.solver.start_hash(1)
         state = model.state()
         sim.run(state, 100)
         runs.append((state, sim))

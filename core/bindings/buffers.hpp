@@ -13,6 +13,10 @@ inline Index hash_table_size(Index tris) {
     return table;
 }
 
+/// The most entries per triangle the surface contacts' hash grows to: 512 grid cells (a
+/// triangle 8 cells across; cells are as large as the longest edge at rest).
+constexpr Index kMostEntriesPerTriangle = 512;
+
 /// A solver's scratch, allocated once: (N, 3) rows, per-body and per-collider arrays, and
 /// for surface soft contacts (soft_contact_mode 2) the spatial hash with room for
 /// `hash_capacity` entries.
@@ -53,12 +57,22 @@ public:
             hash_count_.assign(static_cast<size_t>(table), 0);
             hash_entries_.assign(static_cast<size_t>(hash_capacity), 0);
             contact.hash_table = table;
-            contact.hash_capacity = hash_capacity;
             contact.hash_start = hash_start_.data();
             contact.hash_count = hash_count_.data();
-            contact.hash_entries = hash_entries_.data();
         }
+        entries_.capacity = static_cast<Index>(hash_entries_.size());
+        entries_.data = hash_entries_.data();
+        entries_.owner = this;
+        most_entries_ = kMostEntriesPerTriangle * std::max<Index>(m.triangles.count, 1);
+        contact.hash_entries = &entries_;
     }
+    Buffers(const Buffers&) = delete;  // the contacts' entries point back at this object
+    Buffers& operator=(const Buffers&) = delete;
+
+    /// Let the surface contacts grow their hash inside a run (the solvers'; a one-off
+    /// contact pass keeps the capacity it was given).
+    void allow_growth() { entries_.grow = &Buffers::grow_entries; }
+    Index hash_capacity() const { return entries_.capacity; }
     double* row(int k) { return rows_[static_cast<size_t>(k)].data(); }
     softbody::LaneBuffers lanes_view;
     softbody::BodyGas gas;
@@ -68,10 +82,29 @@ private:
     std::vector<std::vector<double>> rows_, per_body_, per_collider_;
     std::vector<double> gradient_, rows_buffer_, lane_pnet_;
     std::vector<Index> hash_start_, hash_count_, hash_entries_;
+    softbody::HashEntries entries_;
+    Index most_entries_ = 0;
+
+    /// Room for `needed` entries (twice the capacity when that is more, up to the most), or
+    /// false beyond kMostEntriesPerTriangle per triangle: a triangle spanning that many grid
+    /// cells has stretched far past its rest size (a blow-up), and the run stops.
+    static bool grow_entries(softbody::HashEntries& h, Index needed) {
+        Buffers& self = *static_cast<Buffers*>(h.owner);
+        if (needed > self.most_entries_) return false;
+        const Index size = std::min(self.most_entries_, std::max(needed, 2 * h.capacity));
+        try {
+            self.hash_entries_.resize(static_cast<size_t>(size));
+        } catch (const std::bad_alloc&) {
+            return false;
+        }
+        h.data = self.hash_entries_.data();
+        h.capacity = size;
+        return true;
+    }
 };
 
-/// Entries of the surface contacts' hash: as asked, by default 8 per triangle (room for
-/// triangles up to a cell across); 0 without surface contacts.
+/// Entries of the surface contacts' hash at first: as asked, by default 8 per triangle (room
+/// for triangles up to a cell across); 0 without surface contacts. Solvers grow it as needed.
 inline Index checked_capacity(const softbody::Model& m, std::optional<Index> asked) {
     if (asked && *asked < 0) fail("hash_capacity must be >= 0, got " + std::to_string(*asked));
     if (m.soft_contacts.mode != SoftContactMode::SURFACE) return 0;

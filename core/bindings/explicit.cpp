@@ -17,6 +17,7 @@ public:
           buffers_(model_.model(), 7, checked_capacity(model_.model(), hash_capacity)),
           threads_(threads, model_.model().bodies.count) {
         threads_.attach(buffers_.lanes_view);
+        buffers_.allow_growth();  // the surface contacts grow their hash inside a run
         w_.f = buffers_.row(0);
         w_.q0 = buffers_.row(1);
         w_.v0 = buffers_.row(2);
@@ -53,7 +54,7 @@ public:
         return {r.status, r.steps_done, r.where, r.value};
     }
 
-    Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+    Index hash_capacity() const { return buffers_.hash_capacity(); }
     bool float32() const { return w_.lanes.rows_f != nullptr; }
     int threads() const { return threads_.count(); }
 
@@ -94,8 +95,9 @@ void bind_explicit(nb::module_& mod) {
         .def(nb::init<nb::object, std::optional<Index>, int, bool>(), nb::arg("model"),
              nb::arg("hash_capacity") = nb::none(), nb::arg("threads") = 1,
              nb::arg("float32") = false,
-             "hash_capacity: entries of the surface contacts' spatial hash (default 8 per "
-             "triangle); a run that needs more returns NEED_HASH with the count needed. "
+             "hash_capacity: entries of the surface contacts' spatial hash at first (default 8 "
+             "per triangle); a run that needs more grows it, and returns NEED_HASH with the "
+             "count needed only beyond 512 per triangle (a blow-up). "
              "threads: > 1 runs the force pass on that many threads, deterministically. "
              "float32: the ring's springs and faces in float32 (positions, velocities and "
              "the integration stay float64).")

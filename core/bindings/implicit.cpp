@@ -132,6 +132,7 @@ public:
           threads_(threads, model_.model().bodies.count) {
         const softbody::Model& m = model_.model();
         threads_.attach(buffers_.lanes_view);
+        buffers_.allow_growth();  // the surface contacts grow their hash inside a run
         if (!multigrid.is_none()) multigrid_.emplace(m, multigrid);
         mg_handle_ = multigrid;
         double** rows[] = {&w_.f, &w_.q0, &w_.v0, &w_.qs, &w_.vs, &w_.ky, &w_.cg_r,
@@ -208,7 +209,7 @@ public:
     /// (steps, CG iterations in all, most in one step) since the last clear_stats.
     std::tuple<Index, Index, Index> cg_stats() const { return {flags_[1], flags_[2], flags_[3]}; }
     void clear_stats() { flags_[1] = flags_[2] = flags_[3] = 0; }
-    Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+    Index hash_capacity() const { return buffers_.hash_capacity(); }
     bool uses_multigrid() const { return multigrid_.has_value(); }
     int threads() const { return threads_.count(); }
 

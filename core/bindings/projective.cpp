@@ -97,6 +97,7 @@ public:
           buffers_(model_.model(), 6, checked_capacity(model_.model(), hash_capacity)),
           threads_(threads, model_.model().bodies.count) {
         threads_.attach(buffers_.lanes_view);
+        buffers_.allow_growth();  // the surface contacts grow their hash inside a run
         w_.lanes = buffers_.lanes_view;
         w_.f = buffers_.row(0);
         w_.q0 = buffers_.row(1);
@@ -145,7 +146,7 @@ public:
         return {r.status, r.steps_done, r.where, r.value};
     }
 
-    Index hash_capacity() const { return buffers_.contact.hash_capacity; }
+    Index hash_capacity() const { return buffers_.hash_capacity(); }
     int threads() const { return threads_.count(); }
 
 private:

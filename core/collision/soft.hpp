@@ -229,7 +229,7 @@ inline void cell_range(double a, double b, double c, double margin, double inv, 
 
 /// Spatial hash of the triangles' boxes (grown by the contact margin) on the contact grid
 /// into w.hash_*. Counts the entries first; returns that count, and stores nothing when it
-/// exceeds w.hash_capacity (the caller grows the buffer). Every bucket index is reduced
+/// exceeds the entries' capacity (the caller grows the buffer). Every bucket index is reduced
 /// modulo w.hash_table and every entry index is below the count, so nothing is written
 /// outside the buffers.
 inline index build_triangle_hash(const Model& m, const double* q, const ContactBuffers& w) {
@@ -239,7 +239,7 @@ inline index build_triangle_hash(const Model& m, const double* q, const ContactB
     index total = 0;
     for (int pass = 0; pass < 2; ++pass) {
         if (pass == 1) {
-            if (total > w.hash_capacity) return total;
+            if (total > w.hash_entries->capacity) return total;
             w.hash_start[0] = 0;
             for (index h = 0; h < table; ++h) {
                 w.hash_start[h + 1] = w.hash_start[h] + w.hash_count[h];
@@ -261,7 +261,7 @@ inline index build_triangle_hash(const Model& m, const double* q, const ContactB
                             ++w.hash_count[h];
                             ++total;
                         } else {
-                            w.hash_entries[w.hash_start[h] + w.hash_count[h]] = t;
+                            w.hash_entries->data[w.hash_start[h] + w.hash_count[h]] = t;
                             ++w.hash_count[h];
                         }
                     }
@@ -295,7 +295,7 @@ inline index nearest_triangle(const Model& m, const double* q, const ContactBuff
     double best = margin * margin;
     index best_t = -1;
     for (index e = w.hash_start[h]; e < w.hash_start[h + 1]; ++e) {
-        const index t = w.hash_entries[e];
+        const index t = w.hash_entries->data[e];
         const index b = m.triangles.body[t];
         if (b == body) continue;
         const double* lo = w.body_lo + 3 * b;
@@ -318,13 +318,19 @@ inline index nearest_triangle(const Model& m, const double* q, const ContactBuff
     return best_t;
 }
 
-/// The surface contacts of the whole model; q, qd (N, 3) change in place. Returns 0, or the
-/// hash entries needed when w.hash_capacity is too small (then nothing was resolved).
+/// The surface contacts of the whole model; q, qd (N, 3) change in place. A hash that needs
+/// more entries than its buffer holds grows the buffer (HashEntries::grow) and is built
+/// again. Returns 0, or the entries needed when the buffer could not grow to them (then
+/// nothing was resolved).
 inline index contacts_surface(const Model& m, double* q, double* qd, const ContactBuffers& w) {
     body_motion(m, q, qd, w);
     if (!any_bodies_near(m, w)) return 0;
-    const index needed = build_triangle_hash(m, q, w);
-    if (needed > w.hash_capacity) return needed;
+    index needed = build_triangle_hash(m, q, w);
+    if (needed > w.hash_entries->capacity) {
+        HashEntries& entries = *w.hash_entries;
+        if (entries.grow == nullptr || !entries.grow(entries, needed)) return needed;
+        needed = build_triangle_hash(m, q, w);
+    }
     const double inv = 1.0 / m.soft_contacts.cell_size;
     const double keep = 1.0 - m.soft_contacts.friction;
     for (index a = 0; a < m.bodies.count; ++a)

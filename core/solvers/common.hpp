@@ -103,7 +103,7 @@ inline void begin_run(const Model& m, const Control& c, const RunParams& p, cons
 
 /// Contacts at the end of step `step` (of p.steps, ending at time t [s]); q_start (N, 3) is
 /// the step's start positions (continuous collider detection). Returns 0, or the spatial-hash
-/// entries surface soft contacts need when w.hash_capacity is too small: then the colliders
+/// entries surface soft contacts need when their buffer could not grow to them: then the colliders
 /// have moved but no contact was resolved, and the caller undoes the step.
 inline index contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
                       const StateView& s, const double* q_start, const ContactBuffers& w,

@@ -464,11 +464,6 @@ class Simulator:
                     None if bar is None else bar.callback(steps - remaining),
                 )  # fmt: skip
                 remaining -= result.steps_done
-                if result.status == Status.NEED_HASH:
-                    # contacts touched more grid cells than the hash holds: grow it and go
-                    # on (pin and collider targets are re-aimed over the remaining steps)
-                    solver.grow_hash(2 * int(result.value))
-                    continue
                 if result.status != Status.OK:
                     raise self._blow_up(result.status, state.step_count, state.time,
                                         result.where, result.value)  # fmt: skip
@@ -494,6 +489,14 @@ class Simulator:
             )
             msg = f"{who} blew up {where}: particle {index} {what}"
             particle = int(index)
+        elif status == Status.NEED_HASH:
+            # the core grows the contacts' hash itself up to 512 entries per triangle
+            body, particle = -1, -1
+            msg = (
+                f"surface contacts blew up {where}: the triangles span {value:.3g} grid cells, "
+                f"over 512 per triangle ({model.tri_count} triangles); a triangle has "
+                "stretched far past its rest size"
+            )
         else:
             body, particle = int(index), -1
             lo, hi = self.volume_limits

@@ -92,9 +92,10 @@ class Solver:
         """This solver's largest stable step [s] for the modes bounded by ``mode``."""
         return self.step_limit(self.integrator, mode)
 
-    def grow_hash(self, entries: int) -> None:
-        """Give the surface contacts' spatial hash room for ``entries`` entries (a run
-        returned NEED_HASH); the solver's history does not survive the undone step."""
+    def start_hash(self, entries: int) -> None:
+        """Rebuild the core with room for ``entries`` entries of the surface contacts'
+        spatial hash at first (a run grows it inside the core as it needs; the tests start
+        small); the solver's history starts over."""
         self._core = self._make_core(hash_capacity=int(entries))
 
     def begin_run(self) -> None:

@@ -90,10 +90,10 @@ class ImplicitSolver(Solver):
             threads=self.threads,
         )  # fmt: skip
 
-    def grow_hash(self, entries: int) -> None:
+    def start_hash(self, entries: int) -> None:
         self._collect_stats()
-        super().grow_hash(entries)
-        self._history = None  # the undone step overwrote BDF2's previous step
+        super().start_hash(entries)
+        self._history = None  # a new core holds no previous step
 
     def begin_run(self) -> None:
         self._stats = [0, 0, 0]
