@@ -170,7 +170,7 @@ def plot(rows: list[dict], label: str, path: Path) -> None:
     ax.axvline(0.97, color="C3", linewidth=0.8, linestyle="--")
     ax.set_yticks(y, [r["case"] for r in rows], fontsize=7)
     ax.invert_yaxis()
-    ax.set_xlabel(f"{label}: rounds (grey), their median (blue); dashed: 0.97")
+    ax.set_xlabel(f"{label}\nrounds (grey), their median (blue); dashed: 0.97")
     ax.set_title("This version against the baseline, case by case", fontsize=10)
     fig.tight_layout()
     save_figure(fig, path)

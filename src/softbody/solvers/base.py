@@ -26,7 +26,7 @@ class Status(IntEnum):
     BAD_VOLUME = 3  # a body volume became NaN, zero or negative
     SHRUNK = 4  # a body volume fell below the lower limit
     EXPLODED = 5  # a body volume grew past the upper limit
-    NEED_HASH = 6  # the surface contacts' spatial hash needs more room (value: entries)
+    NEED_HASH = 6  # the contacts' hash would need > 512 entries a triangle (value: entries)
     STOPPED = 7  # a signal handler or the progress callback raised (the core raises it)
 
 
