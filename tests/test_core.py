@@ -15,6 +15,7 @@ import dataclasses
 import subprocess
 import sys
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from conftest import ball_model
 from softbody import _core, core
 from softbody.core import core_model
 from softbody.sim.control import control_data
+from softbody.solvers.base import RunLimits
 from trajectory_cases import every_term_model, surface_model
 
 EXPLICIT = ["euler", "midpoint", "rk4", "symplectic_euler", "velocity_verlet"]
@@ -85,11 +87,8 @@ def _touching_balls():
 
 
 def _simulate(solver, model, state, steps, ratio_max=1e3):
-    return solver.simulate(
-        1, steps, 0.0, 2e-4, control_data(model), state.particle_q, state.particle_qd,
-        state.collider_q, state.collider_rotation, state.collider_impulse, 1e4, 1e-3,
-        ratio_max,
-    )  # fmt: skip
+    return solver.simulate(1, steps, 2e-4, control_data(model), state,
+                           RunLimits(1e4, 1e-3, ratio_max))  # fmt: skip
 
 
 def test_a_solver_grows_its_hash_to_the_room_it_needs():
@@ -181,10 +180,10 @@ def test_the_core_refuses_inconsistent_model_arrays():
         _core.Model(bad)
     solver = _core.ExplicitSolver(core_model(model))
     state = model.state()
+    bad = SimpleNamespace(**vars(state))  # a State would refuse the shape itself
+    bad.particle_q = state.particle_q[:, :2]
     with pytest.raises(ValueError, match="q must be a writable"):
-        solver.simulate(3, 1, 0.0, 1e-4, control_data(model), state.particle_q[:, :2],
-                        state.particle_qd, state.collider_q, state.collider_rotation,
-                        state.collider_impulse, 1e4, 1e-3, 1e3)  # fmt: skip
+        solver.simulate(3, 1, 1e-4, control_data(model), bad, RunLimits(1e4, 1e-3, 1e3))
 
 
 #: Refuses to import a JIT compiler: the engine must run without one.

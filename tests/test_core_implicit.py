@@ -29,6 +29,7 @@ from conftest import ball_model
 from softbody import _core
 from softbody.core import core_model
 from softbody.sim.control import control_data
+from softbody.solvers.base import RunLimits
 from softbody.solvers.multigrid import build_multigrid, set_multigrid_step
 
 IMPLICIT = ["implicit_euler", "bdf2"]
@@ -185,13 +186,13 @@ def test_the_core_refuses_an_inconsistent_multigrid_hierarchy():
         _core.apply_multigrid(core, cases["vertex_neighbor"], np.zeros((model.particle_count, 3)))
     solver = _core.ImplicitSolver(core, multigrid=mg)
     state = model.state()
-    args = (control_data(model), state.particle_q, state.particle_qd, state.collider_q,
-            state.collider_rotation, state.collider_impulse, 1e4, 1e-3, 1e3)  # fmt: skip
+    args = (control_data(model), state, RunLimits(1e4, 1e-3, 1e3))
     with pytest.raises(ValueError, match="tolerance must lie in"):
-        solver.simulate(False, 1, 0.0, 1 / 60, *args, 0.0, 10, False)
+        solver.simulate(False, 1, 1 / 60, *args, 0.0, 10, False)
     with pytest.raises(ValueError, match="max_iterations must be >= 1"):
-        solver.simulate(False, 1, 0.0, 1 / 60, *args, 1e-6, 0, False)
-    assert solver.simulate(False, 2, 0.0, 1 / 60, *args, 1e-6, 50, False)[:2] == (0, 2)
+        solver.simulate(False, 1, 1 / 60, *args, 1e-6, 0, False)
+    assert solver.simulate(False, 2, 1 / 60, *args, 1e-6, 50, False)[:2] == (0, 2)
+    assert state.step_count == 2 and state.time == pytest.approx(2 / 60)
     steps, total, most = solver.cg_stats
     assert steps == 2 and 0 < most <= total <= 100
     solver.clear_stats()

@@ -7,6 +7,7 @@ closed forms.
 from __future__ import annotations
 
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from conftest import ball_model
 from softbody import _core, core
 from softbody.core import core_model
 from softbody.sim.control import control_data
+from softbody.solvers.base import RunLimits
 from softbody.solvers.factor import build_projective
 from trajectory_cases import surface_model
 
@@ -136,18 +138,17 @@ def test_the_core_refuses_a_bad_factor_or_call():
     good = build_projective(model, dt)
     solver = _core.ProjectiveSolver(core_model(model))
     state = model.state()
-    args = (control_data(model), state.particle_q, state.particle_qd, state.collider_q,
-            state.collider_rotation, state.collider_impulse, 1e4, 1e-3, 1e3)  # fmt: skip
+    args = (control_data(model), state, RunLimits(1e4, 1e-3, 1e3))
     with pytest.raises(ValueError, match="no projective factor set"):
-        solver.simulate(1, 0.0, dt, 2, *args)
+        solver.simulate(1, dt, 2, *args)
     with pytest.raises(ValueError, match="has size 162 for a model of 42 particles"):
         solver.set_factor(build_projective(ball_model(subdivisions=2), dt))
     solver.set_factor(good)
     assert solver.factor is good
     with pytest.raises(ValueError, match="built for dt = 0.01"):
-        solver.simulate(1, 0.0, 2e-2, 2, *args)
+        solver.simulate(1, 2e-2, 2, *args)
     with pytest.raises(ValueError, match="iterations must be >= 1"):
-        solver.simulate(1, 0.0, dt, 0, *args)
+        solver.simulate(1, dt, 0, *args)
     perm = good.perm.copy()
     perm[0] = perm[1]
     with pytest.raises(ValueError, match="perm is not a permutation"):
@@ -174,5 +175,6 @@ def test_the_core_refuses_a_bad_factor_or_call():
         solver.set_factor(good._replace(inv_diag=good.inv_diag.astype(np.float32)))
     assert solver.factor is good  # a refused factor leaves the last good one
     with pytest.raises(ValueError, match="q must be a writable"):
-        solver.simulate(1, 0.0, dt, 2, control_data(model), state.particle_q[:, :2],
-                        *args[2:])  # fmt: skip
+        bad = SimpleNamespace(**vars(state))  # a State would refuse the shape itself
+        bad.particle_q = state.particle_q[:, :2]
+        solver.simulate(1, dt, 2, args[0], bad, args[2])

@@ -118,26 +118,29 @@ struct CheckedRun {
     softbody::RunParams params;
 };
 
-inline CheckedRun checked_run(const softbody::Model& m, Index steps, double t0, double dt,
-                       nb::handle q, nb::handle qd, nb::handle collider_q,
-                       nb::handle collider_rot, nb::handle collider_impulse, double max_speed,
-                       double ratio_min, double ratio_max) {
+/// A run's views of a softbody.State (its particle_q, particle_qd, collider_q,
+/// collider_rotation and collider_impulse arrays, written in place; its time the run's
+/// start) and of a RunLimits (max_speed, ratio_min, ratio_max), checked against the model.
+inline CheckedRun checked_run(const softbody::Model& m, Index steps, double dt, nb::handle state,
+                              nb::handle limits) {
     if (steps < 0) fail("steps must be >= 0");
     if (!(std::isfinite(dt) && dt > 0.0)) fail("dt must be finite and > 0");
     CheckedRun run;
-    run.q = writable(q, "q", {m.particles.count, 3});
-    run.qd = writable(qd, "qd", {m.particles.count, 3});
-    run.collider_q = writable(collider_q, "collider_q", {m.colliders.count, 3});
-    run.collider_rot = writable(collider_rot, "collider_rot", {m.colliders.count, 3, 3});
-    run.collider_impulse = writable(collider_impulse, "collider_impulse", {m.colliders.count, 3});
+    run.q = writable(state.attr("particle_q"), "q", {m.particles.count, 3});
+    run.qd = writable(state.attr("particle_qd"), "qd", {m.particles.count, 3});
+    run.collider_q = writable(state.attr("collider_q"), "collider_q", {m.colliders.count, 3});
+    run.collider_rot =
+        writable(state.attr("collider_rotation"), "collider_rot", {m.colliders.count, 3, 3});
+    run.collider_impulse =
+        writable(state.attr("collider_impulse"), "collider_impulse", {m.colliders.count, 3});
     run.state = {run.q.data(), run.qd.data(), run.collider_q.data(), run.collider_rot.data(),
                  run.collider_impulse.data()};
     run.params.steps = steps;
-    run.params.t0 = t0;
+    run.params.t0 = nb::cast<double>(state.attr("time"));
     run.params.dt = dt;
-    run.params.max_speed = max_speed;
-    run.params.ratio_min = ratio_min;
-    run.params.ratio_max = ratio_max;
+    run.params.max_speed = nb::cast<double>(limits.attr("max_speed"));
+    run.params.ratio_min = nb::cast<double>(limits.attr("ratio_min"));
+    run.params.ratio_max = nb::cast<double>(limits.attr("ratio_max"));
     return run;
 }
 

@@ -31,17 +31,12 @@ public:
         if (float32) use_float32();
     }
 
-    std::tuple<int, Index, Index, double> simulate(int scheme, Index steps, double t0, double dt,
-                                                   nb::handle control, nb::handle q,
-                                                   nb::handle qd, nb::handle collider_q,
-                                                   nb::handle collider_rot,
-                                                   nb::handle collider_impulse, double max_speed,
-                                                   double ratio_min, double ratio_max,
-                                                   nb::handle clock, nb::handle progress) {
+    std::tuple<int, Index, Index, double> simulate(int scheme, Index steps, double dt,
+                                                   nb::handle control, nb::handle state,
+                                                   nb::handle limits, nb::handle progress) {
         const softbody::Model& m = model_.model();
         if (scheme < Integrator::EULER || scheme > Integrator::VELOCITY_VERLET) fail("scheme must be an explicit Integrator (0-4)");
-        CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
-                                     collider_impulse, max_speed, ratio_min, ratio_max);
+        CheckedRun run = checked_run(m, steps, dt, state, limits);
         run.params.scheme = scheme;
         CoreControl c(m, control);
         RunPoll poll(run.params, progress);
@@ -50,7 +45,7 @@ public:
             nb::gil_scoped_release release;
             r = softbody::kernels().simulate_explicit(m, c.view, run.params, run.state, w_);
         }
-        poll.finish(clock, run.params, r);
+        poll.finish(state, run.params, r);
         return {r.status, r.steps_done, r.where, r.value};
     }
 
@@ -107,11 +102,10 @@ void bind_explicit(nb::module_& mod) {
         .def_prop_ro("hash_capacity", &ExplicitSolver::hash_capacity,
                      "Entries the surface contacts' spatial hash holds (0 without them).")
         .def("simulate", &ExplicitSolver::simulate, nb::arg("scheme"), nb::arg("steps"),
-             nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
-             nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
-             nb::arg("max_speed"), nb::arg("ratio_min"), nb::arg("ratio_max"),
-             nb::arg("clock") = nb::none(), nb::arg("progress") = nb::none(),
-             "Advance q, qd in place; returns (status, steps_done, index, value). " RUN_POLL_DOC);
+             nb::arg("dt"), nb::arg("control"), nb::arg("state"), nb::arg("limits"),
+             nb::arg("progress") = nb::none(),
+             "Advance a softbody.State in place from its time (limits: a RunLimits); returns "
+             "(status, steps_done, index, value). " RUN_POLL_DOC);
 }
 
 }  // namespace softbody::bindings

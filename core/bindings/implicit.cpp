@@ -156,16 +156,14 @@ public:
     }
 
     std::tuple<int, Index, Index, double> simulate(
-        bool bdf2, Index steps, double t0, double dt, nb::handle control, nb::handle q,
-        nb::handle qd, nb::handle collider_q, nb::handle collider_rot, nb::handle collider_impulse,
-        double max_speed, double ratio_min, double ratio_max, double tolerance,
-        Index max_iterations, bool history, nb::handle clock, nb::handle progress) {
+        bool bdf2, Index steps, double dt, nb::handle control, nb::handle state,
+        nb::handle limits, double tolerance, Index max_iterations, bool history,
+        nb::handle progress) {
         const softbody::Model& m = model_.model();
         if (!(std::isfinite(tolerance) && tolerance > 0.0 && tolerance < 1.0))
             fail("tolerance must lie in (0, 1)");
         if (max_iterations < 1) fail("max_iterations must be >= 1");
-        CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
-                                     collider_impulse, max_speed, ratio_min, ratio_max);
+        CheckedRun run = checked_run(m, steps, dt, state, limits);
         CoreControl c(m, control);
         softbody::ImplicitParams ip;
         ip.bdf2 = bdf2;
@@ -180,7 +178,7 @@ public:
             r = softbody::kernels().simulate_implicit(m, c.view, run.params, ip, run.state, w_,
                                                       mg);
         }
-        poll.finish(clock, run.params, r);
+        poll.finish(state, run.params, r);
         return {r.status, r.steps_done, r.where, r.value};
     }
 
@@ -268,13 +266,12 @@ void bind_implicit(nb::module_& mod) {
              "z (N, 3) = P^-1 r, the solve's preconditioner for step h with its blocks at q "
              "(N, 3); its hierarchy's values must be set for h.")
         .def("simulate", &ImplicitSolver::simulate, nb::arg("bdf2"), nb::arg("steps"),
-             nb::arg("t0"), nb::arg("dt"), nb::arg("control"), nb::arg("q"), nb::arg("qd"),
-             nb::arg("collider_q"), nb::arg("collider_rot"), nb::arg("collider_impulse"),
-             nb::arg("max_speed"), nb::arg("ratio_min"), nb::arg("ratio_max"),
+             nb::arg("dt"), nb::arg("control"), nb::arg("state"), nb::arg("limits"),
              nb::arg("tolerance"), nb::arg("max_iterations"), nb::arg("history"),
-             nb::arg("clock") = nb::none(), nb::arg("progress") = nb::none(),
-             "Advance q, qd in place by backward Euler (or BDF2); history: the solver holds "
-             "the step before q, qd. Returns (status, steps_done, index, value). " RUN_POLL_DOC);
+             nb::arg("progress") = nb::none(),
+             "Advance a softbody.State in place by backward Euler (or BDF2) from its time "
+             "(limits: a RunLimits); history: the solver holds the step before the state's. "
+             "Returns (status, steps_done, index, value). " RUN_POLL_DOC);
     mod.def("apply_multigrid", &apply_multigrid, nb::arg("model"), nb::arg("multigrid"),
             nb::arg("r").noconvert(), "z (N, 3) = one V-cycle of the hierarchy for r (N, 3).");
 }

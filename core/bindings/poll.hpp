@@ -103,7 +103,7 @@ private:
 
 /// The docstring of the solvers' simulate() arguments clock and progress.
 #define RUN_POLL_DOC                                                                          \
-    "clock: an object whose time [s] and step_count the call advances by the steps done "   \
-    "before it returns or raises. progress: called with the steps done every 50 ms or so. " \
+    "The state's time [s] and step_count advance by the steps done before the call "        \
+    "returns or raises. progress: called with the steps done every 50 ms or so. "          \
     "Python's signal handlers run between steps (on the main thread): an exception from "    \
     "one (KeyboardInterrupt) or from progress stops the run and is raised."

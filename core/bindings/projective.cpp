@@ -118,21 +118,16 @@ public:
 
     nb::object factor() const { return factor_ ? factor_->handle() : nb::none(); }
 
-    std::tuple<int, Index, Index, double> simulate(Index steps, double t0, double dt,
-                                                   Index iterations, nb::handle control,
-                                                   nb::handle q, nb::handle qd,
-                                                   nb::handle collider_q, nb::handle collider_rot,
-                                                   nb::handle collider_impulse, double max_speed,
-                                                   double ratio_min, double ratio_max,
-                                                   nb::handle clock, nb::handle progress) {
+    std::tuple<int, Index, Index, double> simulate(Index steps, double dt, Index iterations,
+                                                   nb::handle control, nb::handle state,
+                                                   nb::handle limits, nb::handle progress) {
         const softbody::Model& m = model_.model();
         if (iterations < 1) fail("iterations must be >= 1");
         if (!factor_) fail("no projective factor set (set_factor)");
         if (factor_->factor().dt != dt)
             fail("the projective factor was built for dt = " + std::to_string(factor_->factor().dt) +
                  " s, not " + std::to_string(dt) + " s");
-        CheckedRun run = checked_run(m, steps, t0, dt, q, qd, collider_q, collider_rot,
-                                     collider_impulse, max_speed, ratio_min, ratio_max);
+        CheckedRun run = checked_run(m, steps, dt, state, limits);
         run.params.iterations = iterations;
         CoreControl c(m, control);
         RunPoll poll(run.params, progress);
@@ -142,7 +137,7 @@ public:
             r = softbody::kernels().simulate_projective(m, c.view, run.params, run.state,
                                                         factor_->factor(), w_);
         }
-        poll.finish(clock, run.params, r);
+        poll.finish(state, run.params, r);
         return {r.status, r.steps_done, r.where, r.value};
     }
 
@@ -194,15 +189,12 @@ void bind_projective(nb::module_& mod) {
         .def_prop_ro("factor", &ProjectiveSolver::factor, "The factor set, or None.")
         .def_prop_ro("hash_capacity", &ProjectiveSolver::hash_capacity,
                      "Entries the surface contacts' spatial hash holds (0 without them).")
-        .def("simulate", &ProjectiveSolver::simulate, nb::arg("steps"), nb::arg("t0"),
-             nb::arg("dt"), nb::arg("iterations"), nb::arg("control"), nb::arg("q"),
-             nb::arg("qd"), nb::arg("collider_q"), nb::arg("collider_rot"),
-             nb::arg("collider_impulse"), nb::arg("max_speed"), nb::arg("ratio_min"),
-             nb::arg("ratio_max"), nb::arg("clock") = nb::none(),
+        .def("simulate", &ProjectiveSolver::simulate, nb::arg("steps"), nb::arg("dt"),
+             nb::arg("iterations"), nb::arg("control"), nb::arg("state"), nb::arg("limits"),
              nb::arg("progress") = nb::none(),
-             "Advance q, qd in place by steps steps of dt (the factor's), iterations "
-             "local-global iterations each; returns (status, steps_done, index, value). "
-             RUN_POLL_DOC);
+             "Advance a softbody.State in place from its time by steps steps of dt (the "
+             "factor's), iterations local-global iterations each (limits: a RunLimits); "
+             "returns (status, steps_done, index, value). " RUN_POLL_DOC);
     mod.def("solve_factor", &solve_factor, nb::arg("model"), nb::arg("factor"),
             nb::arg("b").noconvert(),
             "x (N, 3) = A^-1 b by a projective factor's two triangular solves.");

@@ -70,10 +70,5 @@ class ExplicitSolver(Solver):
 
     def simulate(self, state, steps, dt, control, limits: RunLimits, progress=None) -> RunResult:
         return self._result(
-            self._core.simulate(
-                int(self.integrator), steps, float(state.time), dt, control, state.particle_q,
-                state.particle_qd, state.collider_q, state.collider_rotation,
-                state.collider_impulse, limits.max_speed, limits.ratio_min, limits.ratio_max,
-                clock=state, progress=progress,
-            )
-        )  # fmt: skip
+            self._core.simulate(int(self.integrator), steps, dt, control, state, limits, progress)
+        )

@@ -130,10 +130,8 @@ class ImplicitSolver(Solver):
         history = self._has_history(state, dt)
         result = self._result(
             self._core.simulate(
-                bdf2, steps, float(state.time), dt, control, state.particle_q,
-                state.particle_qd, state.collider_q, state.collider_rotation,
-                state.collider_impulse, limits.max_speed, limits.ratio_min, limits.ratio_max,
-                self.tolerance, self.max_iterations, history, clock=state, progress=progress,
+                bdf2, steps, dt, control, state, limits, self.tolerance, self.max_iterations,
+                history, progress,
             )
         )  # fmt: skip
         if bdf2 and (result.steps_done > 0 or history):

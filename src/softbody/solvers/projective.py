@@ -82,9 +82,6 @@ class ProjectiveSolver(Solver):
             self._core.set_factor(factor)
         return self._result(
             self._core.simulate(
-                steps, float(state.time), dt, self.iterations_per_step, control,
-                state.particle_q, state.particle_qd, state.collider_q, state.collider_rotation,
-                state.collider_impulse, limits.max_speed, limits.ratio_min, limits.ratio_max,
-                clock=state, progress=progress,
+                steps, dt, self.iterations_per_step, control, state, limits, progress
             )
-        )  # fmt: skip
+        )
