@@ -23,112 +23,132 @@
     X(P, pins, count, pin_particle)               \
     X(C, colliders, count, collider_kind)
 
-#define SOFTBODY_FIELDS_PARTICLES(F)                                                        \
-    F(particles, mass, particle_mass, f64, (N), none, "kg", "particle masses")             \
-    F(particles, inv_mass, particle_inv_mass, f64, (N), none, "1/kg",                      \
-      "inverse masses; 0 for pinned particles")                                            \
-    F(particles, body, particle_body, i64, (N), index(-1, B), "",                          \
+#define SOFTBODY_FIELDS_PARTICLES(F)                                                              \
+    F(particles, mass, particle_mass, f64, (N), none, "kg",                                       \
+      "particle masses")                                                                          \
+    F(particles, inv_mass, particle_inv_mass, f64, (N), none, "1/kg",                             \
+      "inverse masses; 0 for pinned particles")                                                   \
+    F(particles, body, particle_body, i64, (N), index(-1, B), "",                                 \
       "body of each particle; -1 for a free particle")
 
-#define SOFTBODY_FIELDS_GRAVITY(F) \
-    F(gravity, acceleration, gravity, vec3, (3), finite, "m/s^2", "gravitational acceleration")
+#define SOFTBODY_FIELDS_GRAVITY(F)                                                                \
+    F(gravity, acceleration, gravity, vec3, (3), finite, "m/s^2",                                 \
+      "gravitational acceleration")
 
-#define SOFTBODY_FIELDS_SPRINGS(F)                                                          \
-    F(springs, indices, spring_indices, i64, (S, 2), index(0, N), "", "particle pair of each spring")    \
-    F(springs, rest_length, spring_rest_length, f64, (S), none, "m", "spring rest lengths")       \
-    F(springs, stiffness, spring_stiffness, f64, (S), none, "N/m", "spring stiffnesses")          \
-    F(springs, damping, spring_damping, f64, (S), none, "N s/m", "spring damping coefficients")   \
-    F(springs, body, spring_body, i64, (S), index(-1, B), "",                              \
+#define SOFTBODY_FIELDS_SPRINGS(F)                                                                \
+    F(springs, indices, spring_indices, i64, (S, 2), index(0, N), "",                             \
+      "particle pair of each spring")                                                             \
+    F(springs, rest_length, spring_rest_length, f64, (S), none, "m",                              \
+      "spring rest lengths")                                                                      \
+    F(springs, stiffness, spring_stiffness, f64, (S), none, "N/m",                                \
+      "spring stiffnesses")                                                                       \
+    F(springs, damping, spring_damping, f64, (S), none, "N s/m",                                  \
+      "spring damping coefficients")                                                              \
+    F(springs, body, spring_body, i64, (S), index(-1, B), "",                                     \
       "body of each spring; -1 for a user's spring")
 
-#define SOFTBODY_FIELDS_ATTACHMENTS(F)                                                      \
-    F(attachments, particle, attachment_particle, i64, (A), index(0, N), "",               \
-      "particle tied by each attachment spring")                                                     \
-    F(attachments, rest_length, attachment_rest_length, f64, (A), none, "m", "attachment rest lengths") \
-    F(attachments, stiffness, attachment_stiffness, f64, (A), none, "N/m", "attachment stiffnesses")  \
-    F(attachments, damping, attachment_damping, f64, (A), none, "N s/m",                   \
+#define SOFTBODY_FIELDS_ATTACHMENTS(F)                                                            \
+    F(attachments, particle, attachment_particle, i64, (A), index(0, N), "",                      \
+      "particle tied by each attachment spring")                                                  \
+    F(attachments, rest_length, attachment_rest_length, f64, (A), none, "m",                      \
+      "attachment rest lengths")                                                                  \
+    F(attachments, stiffness, attachment_stiffness, f64, (A), none, "N/m",                        \
+      "attachment stiffnesses")                                                                   \
+    F(attachments, damping, attachment_damping, f64, (A), none, "N s/m",                          \
       "attachment damping coefficients")
 
-#define SOFTBODY_FIELDS_TRIANGLES(F)                                                        \
-    F(triangles, indices, tri_indices, i64, (T, 3), index(0, N), "",                       \
-      "particle indices of each surface triangle, outward-wound")                                   \
-    F(triangles, body, tri_body, i64, (T), index(0, B), "", "body of each triangle")
+#define SOFTBODY_FIELDS_TRIANGLES(F)                                                              \
+    F(triangles, indices, tri_indices, i64, (T, 3), index(0, N), "",                              \
+      "particle indices of each surface triangle, outward-wound")                                 \
+    F(triangles, body, tri_body, i64, (T), index(0, B), "",                                       \
+      "body of each triangle")
 
-#define SOFTBODY_FIELDS_BODIES(F)                                                           \
-    F(bodies, particle_range, body_particle_range, i64, (B, 2), range(N), "",              \
-      "[begin, end) particles of each body")                                               \
-    F(bodies, tri_range, body_tri_range, i64, (B, 2), range(T), "",                        \
-      "[begin, end) triangles of each body")                                               \
-    F(bodies, rest_volume, body_rest_volume, f64, (B), none, "m^3",                        \
-      "volume at the initial positions by the body's own method")                          \
-    F(bodies, closed, body_closed, i64, (B), index(0, 2), "",                              \
-      "1 for a closed body holding gas; 0 for an open surface (cloth)")                            \
-    F(bodies, contact_shape, body_contact_shape, i64, (B),                                 \
-      index(0, VolumeMethod::MONTE_CARLO), "",                                             \
-      "bounding object of each body for bounding soft contacts; 1 box, 2 sphere, 3 ellipsoid (VolumeMethod numbering)")
+#define SOFTBODY_FIELDS_BODIES(F)                                                                 \
+    F(bodies, particle_range, body_particle_range, i64, (B, 2), range(N), "",                     \
+      "[begin, end) particles of each body")                                                      \
+    F(bodies, tri_range, body_tri_range, i64, (B, 2), range(T), "",                               \
+      "[begin, end) triangles of each body")                                                      \
+    F(bodies, rest_volume, body_rest_volume, f64, (B), none, "m^3",                               \
+      "volume at the initial positions by the body's own method")                                 \
+    F(bodies, closed, body_closed, i64, (B), index(0, 2), "",                                     \
+      "1 for a closed body holding gas; 0 for an open surface (cloth)")                           \
+    F(bodies, contact_shape, body_contact_shape, i64, (B), index(0, VolumeMethod::MONTE_CARLO),   \
+      "",                                                                                         \
+      "bounding object of each body for bounding soft contacts; 1 box, 2 sphere, 3 ellipsoid "    \
+      "(VolumeMethod numbering)")
 
-#define SOFTBODY_FIELDS_VOLUMES(F)                                                          \
-    F(volumes, method, body_volume_method, i64, (B), index(0, VolumeMethod::kCount), "",   \
-      "VolumeMethod of each body")                                                         \
-    F(volumes, mc_range, body_mc_range, i64, (B, 2), range(M), "",                         \
-      "[begin, end) rows of mc_samples of each Monte Carlo body")                          \
-    F(volumes, mc_samples, mc_samples, f64, (M, 2), none, "", "seeded sample points in [0, 1)^2 for Monte Carlo volumes")
+#define SOFTBODY_FIELDS_VOLUMES(F)                                                                \
+    F(volumes, method, body_volume_method, i64, (B), index(0, VolumeMethod::kCount), "",          \
+      "VolumeMethod of each body")                                                                \
+    F(volumes, mc_range, body_mc_range, i64, (B, 2), range(M), "",                                \
+      "[begin, end) rows of mc_samples of each Monte Carlo body")                                 \
+    F(volumes, mc_samples, mc_samples, f64, (M, 2), none, "",                                     \
+      "seeded sample points in [0, 1)^2 for Monte Carlo volumes")
 
-#define SOFTBODY_FIELDS_GASES(F)                                                            \
-    F(gases, law, body_gas_law, i64, (B), index(0, GasLaw::kCount), "",                    \
-      "GasLaw of each body")                                                               \
-    F(gases, value, body_gas_value, f64, (B), none, "J or Pa",                             \
-      "driving gas value of each body; nRT [J] (isothermal, adiabatic) or P0 [Pa] (fixed)")                 \
-    F(gases, gamma, body_gas_gamma, f64, (B), none, "", "adiabatic exponent of each body's gas")              \
-    F(gases, reference_volume, body_gas_reference_volume, f64, (B), none, "m^3",           \
-      "volume at which an adiabatic gas has P = nRT / V")                                  \
-    F(gases, ambient_pressure, body_ambient_pressure, f64, (B), none, "Pa",                \
-      "pressure outside each body")                                                        \
-    F(gases, schedule_range, body_schedule_range, i64, (B, 2), range(K), "",               \
-      "[begin, end) rows of the gas schedule of each body; empty for none")                                     \
-    F(gases, schedule_time, schedule_time, f64, (K), none, "s", "gas schedule times")      \
-    F(gases, schedule_value, schedule_value, f64, (K), none, "J or Pa",                    \
+#define SOFTBODY_FIELDS_GASES(F)                                                                  \
+    F(gases, law, body_gas_law, i64, (B), index(0, GasLaw::kCount), "",                           \
+      "GasLaw of each body")                                                                      \
+    F(gases, value, body_gas_value, f64, (B), none, "J or Pa",                                    \
+      "driving gas value of each body; nRT [J] (isothermal, adiabatic) or P0 [Pa] (fixed)")       \
+    F(gases, gamma, body_gas_gamma, f64, (B), none, "",                                           \
+      "adiabatic exponent of each body's gas")                                                    \
+    F(gases, reference_volume, body_gas_reference_volume, f64, (B), none, "m^3",                  \
+      "volume at which an adiabatic gas has P = nRT / V")                                         \
+    F(gases, ambient_pressure, body_ambient_pressure, f64, (B), none, "Pa",                       \
+      "pressure outside each body")                                                               \
+    F(gases, schedule_range, body_schedule_range, i64, (B, 2), range(K), "",                      \
+      "[begin, end) rows of the gas schedule of each body; empty for none")                       \
+    F(gases, schedule_time, schedule_time, f64, (K), none, "s",                                   \
+      "gas schedule times")                                                                       \
+    F(gases, schedule_value, schedule_value, f64, (K), none, "J or Pa",                           \
       "gas schedule values (nRT [J] or P0 [Pa])")
 
-#define SOFTBODY_FIELDS_PINS(F) \
-    F(pins, particle, pin_particle, i64, (P), index(0, N), "", "pinned (kinematic) particles; Control.pin_target moves them")
+#define SOFTBODY_FIELDS_PINS(F)                                                                   \
+    F(pins, particle, pin_particle, i64, (P), index(0, N), "",                                    \
+      "pinned (kinematic) particles; Control.pin_target moves them")
 
-#define SOFTBODY_FIELDS_DRAG(F)                                                             \
-    F(drag, coefficient, body_drag_coefficient, f64, (B), finite_nonneg, "",               \
-      "aerodynamic drag coefficient C_d of each body's faces, >= 0; 0 leaves the body out of the drag term (core/terms/drag.hpp)")                             \
-    F(drag, air_density, air_density, f64_value, (), finite_nonneg, "kg/m^3",             \
-      "density rho of the air the bodies move through, >= 0")                                                                \
-    F(drag, wind, wind, vec3, (3), finite, "m/s", "velocity of the air; Control.wind overrides it per call")
+#define SOFTBODY_FIELDS_DRAG(F)                                                                   \
+    F(drag, coefficient, body_drag_coefficient, f64, (B), finite_nonneg, "",                      \
+      "aerodynamic drag coefficient C_d of each body's faces, >= 0; 0 leaves the body out of "    \
+      "the drag term (core/terms/drag.hpp)")                                                      \
+    F(drag, air_density, air_density, f64_value, (), finite_nonneg, "kg/m^3",                     \
+      "density rho of the air the bodies move through, >= 0")                                     \
+    F(drag, wind, wind, vec3, (3), finite, "m/s",                                                 \
+      "velocity of the air; Control.wind overrides it per call")
 
-#define SOFTBODY_FIELDS_SOFT_CONTACTS(F)                                                    \
-    F(soft_contacts, mode, soft_contact_mode, i64_value, (),                               \
-      index(0, SoftContactMode::kCount), "", "soft-soft contacts: a SoftContactMode; 0 none, 1 bounding objects, 2 surfaces")                            \
-    F(soft_contacts, restitution, soft_contact_restitution, f64_value, (), none, "",       \
-      "restitution of soft-soft contacts, in [0, 1]")                                                 \
-    F(soft_contacts, friction, soft_contact_friction, f64_value, (), none, "",             \
-      "fraction of tangential relative speed a soft-soft contact removes, in [0, 1]")                 \
-    F(soft_contacts, margin, contact_margin, f64_value, (), none, "m",                     \
-      "distance within which surface contacts look for the nearest triangle")              \
-    F(soft_contacts, cell_size, contact_cell_size, f64_value, (), none, "m",               \
+#define SOFTBODY_FIELDS_SOFT_CONTACTS(F)                                                          \
+    F(soft_contacts, mode, soft_contact_mode, i64_value, (), index(0, SoftContactMode::kCount),   \
+      "",                                                                                         \
+      "soft-soft contacts: a SoftContactMode; 0 none, 1 bounding objects, 2 surfaces")            \
+    F(soft_contacts, restitution, soft_contact_restitution, f64_value, (), none, "",              \
+      "restitution of soft-soft contacts, in [0, 1]")                                             \
+    F(soft_contacts, friction, soft_contact_friction, f64_value, (), none, "",                    \
+      "fraction of tangential relative speed a soft-soft contact removes, in [0, 1]")             \
+    F(soft_contacts, margin, contact_margin, f64_value, (), none, "m",                            \
+      "distance within which surface contacts look for the nearest triangle")                     \
+    F(soft_contacts, cell_size, contact_cell_size, f64_value, (), none, "m",                      \
       "grid cell of the surface contacts' spatial hash")
 
-#define SOFTBODY_FIELDS_COLLIDERS(F)                                                        \
-    F(colliders, kind, collider_kind, i64, (C), index(0, ColliderKind::kCount), "",        \
-      "ColliderKind of each rigid collider")                                                     \
-    F(colliders, center, collider_center, f64, (C, 3), none, "m", "collider centres at t = 0; a plane: a point on it")      \
-    F(colliders, rotation, collider_rotation, f64, (C, 3, 3), none, "",                    \
-      "collider orientations at t = 0; a plane's normal is column 1")                                                             \
-    F(colliders, size, collider_size, f64, (C, 3), none, "m", "box half-extents or sphere radius (repeated)")    \
-    F(colliders, restitution, collider_restitution, f64, (C), none, "", "restitution of each collider")     \
-    F(colliders, friction, collider_friction, f64, (C), none, "",                          \
-      "fraction of tangential speed each collider removes at contact")                                   \
-    F(colliders, motion, collider_motion, i64, (C), index(0, MotionKind::kCount), "",      \
-      "MotionKind of each collider")                                                       \
-    F(colliders, motion_vector, collider_motion_vector, f64, (C, 3), none, "",             \
-      "angular velocity [rad/s], velocity [m/s] or amplitude [m] of the motion")           \
-    F(colliders, motion_pivot, collider_motion_pivot, f64, (C, 3), none, "m",              \
-      "pivot of rotating colliders")                                                       \
-    F(colliders, motion_frequency, collider_motion_frequency, f64, (C), none, "Hz",        \
+#define SOFTBODY_FIELDS_COLLIDERS(F)                                                              \
+    F(colliders, kind, collider_kind, i64, (C), index(0, ColliderKind::kCount), "",               \
+      "ColliderKind of each rigid collider")                                                      \
+    F(colliders, center, collider_center, f64, (C, 3), none, "m",                                 \
+      "collider centres at t = 0; a plane: a point on it")                                        \
+    F(colliders, rotation, collider_rotation, f64, (C, 3, 3), none, "",                           \
+      "collider orientations at t = 0; a plane's normal is column 1")                             \
+    F(colliders, size, collider_size, f64, (C, 3), none, "m",                                     \
+      "box half-extents or sphere radius (repeated)")                                             \
+    F(colliders, restitution, collider_restitution, f64, (C), none, "",                           \
+      "restitution of each collider")                                                             \
+    F(colliders, friction, collider_friction, f64, (C), none, "",                                 \
+      "fraction of tangential speed each collider removes at contact")                            \
+    F(colliders, motion, collider_motion, i64, (C), index(0, MotionKind::kCount), "",             \
+      "MotionKind of each collider")                                                              \
+    F(colliders, motion_vector, collider_motion_vector, f64, (C, 3), none, "",                    \
+      "angular velocity [rad/s], velocity [m/s] or amplitude [m] of the motion")                  \
+    F(colliders, motion_pivot, collider_motion_pivot, f64, (C, 3), none, "m",                     \
+      "pivot of rotating colliders")                                                              \
+    F(colliders, motion_frequency, collider_motion_frequency, f64, (C), none, "Hz",               \
       "frequency of oscillating colliders")
 
 // The parts: P(struct, member of Model, its fields, members it holds besides them).

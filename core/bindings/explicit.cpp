@@ -35,7 +35,8 @@ public:
                                                    nb::handle control, nb::handle state,
                                                    nb::handle limits, nb::handle progress) {
         const softbody::Model& m = model_.model();
-        if (scheme < Integrator::EULER || scheme > Integrator::VELOCITY_VERLET) fail("scheme must be an explicit Integrator (0-4)");
+        if (scheme < Integrator::EULER || scheme > Integrator::VELOCITY_VERLET)
+            fail("scheme must be an explicit Integrator (0-4)");
         CheckedRun run = checked_run(m, steps, dt, state, limits);
         run.params.scheme = scheme;
         CoreControl c(m, control);
