@@ -53,9 +53,11 @@ def vertex_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     (outward for an outward-wound body); zero at a vertex no triangle with area uses."""
     a, b, c = (points[faces[:, k]] for k in range(3))
     face = np.cross(b - a, c - a)  # twice the area times the unit normal
-    normal = np.zeros_like(points, dtype=np.float64)
-    for k in range(3):
-        np.add.at(normal, faces[:, k], face)
+    corner = faces.reshape(-1)
+    normal = np.stack(
+        [np.bincount(corner, np.repeat(face[:, d], 3), minlength=len(points)) for d in range(3)],
+        axis=1,
+    )
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     return np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
 

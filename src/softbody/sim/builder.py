@@ -251,9 +251,11 @@ class ModelBuilder:
             Closed surface: a :class:`TriMesh`, or a :class:`trimesh.Trimesh` (its
             ``vertices`` and ``faces`` are copied; anything else it carries, such as UVs or
             materials, is not). It is validated (welded, oriented; open or non-manifold
-            meshes raise :class:`MeshError`). Vertex k becomes particle
-            ``body_particles(b)[k]``; :func:`softbody.body_mesh` gives the body's surface
-            at a state.
+            meshes raise :class:`MeshError`). Vertex k of the validated mesh becomes
+            particle ``body_particles(b)[k]``; ``Model.particle_source_vertex`` and
+            ``Model.tri_source_vertex`` map particles and triangle corners back to this
+            mesh's vertices (to put its UVs back, see the USD export);
+            :func:`softbody.body_mesh` gives the body's surface at a state.
         mass : float
             Total mass [kg], > 0.
         stiffness, damping : float
@@ -401,7 +403,8 @@ class ModelBuilder:
                 limits.BYTES_PER_MC_SAMPLE * float(samples_n),
                 f"{samples_n:,} Monte Carlo sample lines",
             )
-        report = validate_mesh_report(source, name=f"body {body} mesh", closed=closed)
+        # warnings point at the user's add_soft_body / add_cloth call
+        report = validate_mesh_report(source, name=f"body {body} mesh", closed=closed, stacklevel=4)
         mesh = report.mesh
         if mesh.vertex_count != source.vertex_count and pinned is not None:
             warnings.warn(
