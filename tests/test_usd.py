@@ -250,17 +250,18 @@ def test_bad_start_frame_is_refused_and_writes_nothing(bad, tmp_path):
 
 
 def test_scene_run_writes_colliders_and_start_frame(tmp_path):
-    """``softbody run --usd`` with ``render.usd_start_frame = 1001`` starts the cache at
-    1001 and writes the scene's colliders, the oscillating ball at its centre per frame
-    (the summary's final collider centre at the last code)."""
+    """``softbody run --usd-start-frame 1001`` (the scene key ``render.usd_start_frame``;
+    the flag implies ``--usd``) starts the cache at 1001 and writes the scene's colliders,
+    the oscillating ball at its centre per frame (the summary's final collider centre at
+    the last code)."""
     import json
 
     from softbody.cli import main
 
     out = tmp_path / "out"
     code = main(
-        ["run", "hand-punch", "--out", str(out), "--duration", "0.1", "--usd", "--no-video",
-         "--no-gif", "--set", "render.usd_start_frame=1001"]
+        ["run", "hand-punch", "--out", str(out), "--duration", "0.1", "--no-video",
+         "--no-gif", "--usd-start-frame", "1001"]
     )  # fmt: skip
     assert code == 0
     stage = Usd.Stage.Open(str(next(out.rglob("hand-punch.usdc"))))
@@ -275,3 +276,20 @@ def test_scene_run_writes_colliders_and_start_frame(tmp_path):
     np.testing.assert_allclose(translate.Get(last), summary["colliders"][1]["center_m"])
     hand = UsdGeom.Mesh(stage.GetPrimAtPath("/softbody/hand"))
     assert hand.GetVelocitiesAttr().GetTimeSamples()[0] == 1001
+
+
+@pytest.mark.parametrize(
+    "args", [["--usd-start-frame", "nan"], ["--usd", "--set", "render.usd_start_frame=1e300"]]
+)
+def test_scene_run_refuses_a_bad_start_frame(args, tmp_path, capsys):
+    """A start frame that is not finite, or past 1e15, is a one-line error naming the key
+    and a non-zero exit before anything runs; no file is written."""
+    from softbody.cli import main
+
+    out = tmp_path / "out"
+    code = main(["run", "hand-punch", "--out", str(out), "--duration", "0.1", "--no-video",
+                 "--no-gif", *args])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code != 0
+    assert "usd_start_frame" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists() or not any(out.rglob("*"))
