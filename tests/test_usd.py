@@ -17,7 +17,6 @@ import pytest
 
 import softbody as sb
 from softbody.collision.colliders import rotation_about
-from softbody.io.usd import vertex_normals
 
 pxr = pytest.importorskip("pxr")
 from pxr import Gf, Usd, UsdGeom  # noqa: E402
@@ -229,6 +228,8 @@ def test_model_keeps_the_weld_map():
 def test_vertex_normals_of_an_icosahedron():
     """Each vertex of a regular icosahedron meets five equal triangles, so its area-weighted
     normal is its own direction from the centre, by symmetry: unit and radial."""
+    from softbody.io.usd import vertex_normals
+
     ico = sb.icosphere(0, radius=2.0, center=(1.0, -1.0, 0.5))
     n = vertex_normals(ico.vertices, ico.faces)
     radial = ico.vertices - np.array([1.0, -1.0, 0.5])
@@ -279,9 +280,13 @@ def test_scene_run_writes_colliders_and_start_frame(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "args", [["--usd-start-frame", "nan"], ["--usd", "--set", "render.usd_start_frame=1e300"]]
+    "args, reason",
+    [
+        (["--usd-start-frame", "nan"], "must be finite"),
+        (["--usd", "--set", "render.usd_start_frame=1e300"], "must be <= 1e+15"),
+    ],
 )
-def test_scene_run_refuses_a_bad_start_frame(args, tmp_path, capsys):
+def test_scene_run_refuses_a_bad_start_frame(args, reason, tmp_path, capsys):
     """A start frame that is not finite, or past 1e15, is a one-line error naming the key
     and a non-zero exit before anything runs; no file is written."""
     from softbody.cli import main
@@ -291,5 +296,13 @@ def test_scene_run_refuses_a_bad_start_frame(args, tmp_path, capsys):
                  "--no-gif", *args])  # fmt: skip
     err = capsys.readouterr().err
     assert code != 0
-    assert "usd_start_frame" in err and len(err.strip().splitlines()) == 1
+    assert f"render.usd_start_frame: {reason}" in err and len(err.strip().splitlines()) == 1
     assert not out.exists() or not any(out.rglob("*"))
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan")])
+def test_recorder_refuses_a_bad_ground_size(bad):
+    """The ground square's side must be finite and > 0: a ValueError naming ground_size."""
+    model = build(sb.icosphere(1, radius=0.3, center=(0.0, 0.5, 0.0)))
+    with pytest.raises(ValueError, match="ground_size"):
+        sb.Recorder(model, ground_size=bad)
