@@ -65,7 +65,7 @@ class Outputs:
     meshes: str | None = None
     """``"obj"`` or ``"ply"``: one mesh file per frame in ``NAME-meshes/``."""
     usd: bool = False
-    """A USD point cache (needs usd-core)."""
+    """A USD cache of the bodies and colliders (needs usd-core, see :mod:`softbody.io.usd`)."""
 
 
 class Progress:
