@@ -306,3 +306,15 @@ def test_recorder_refuses_a_bad_ground_size(bad):
     model = build(sb.icosphere(1, radius=0.3, center=(0.0, 0.5, 0.0)))
     with pytest.raises(ValueError, match="ground_size"):
         sb.Recorder(model, ground_size=bad)
+
+
+def test_a_body_named_colliders_keeps_the_colliders_scope(tmp_path):
+    """A body called "colliders" is written as /softbody/colliders_1, so the colliders'
+    scope /softbody/colliders stays the colliders' (prim names are unique)."""
+    model = build(sb.icosphere(1, radius=0.3, center=(0.0, 0.5, 0.0)))
+    with sb.Recorder(model, fps=FPS, body_names=["colliders"]) as rec:
+        rec.capture(model.state())
+        stage = Usd.Stage.Open(str(rec.save(tmp_path / "x.usda")))
+    assert stage.GetPrimAtPath("/softbody/colliders_1").IsA(UsdGeom.Mesh)
+    assert stage.GetPrimAtPath("/softbody/colliders").GetTypeName() == "Scope"
+    assert stage.GetPrimAtPath("/softbody/colliders/ground_0").IsA(UsdGeom.Mesh)
