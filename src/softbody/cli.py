@@ -2,7 +2,8 @@
 
     softbody scenes [--show NAME | --copy NAME DEST]
     softbody run SCENE_OR_FILE [--duration S] [--dt S] [--integrator NAME] [--out DIR]
-                               [--set KEY=VALUE ...] [--meshes obj|ply] [--usd] ...
+                               [--set KEY=VALUE ...] [--meshes obj|ply] [--usd]
+                               [--usd-start-frame FRAME] ...
     softbody sweep SWEEP_OR_SCENE [--vary KEY=VALUES ...] [--set KEY=VALUE ...] --out DIR
                                   [--workers N | --address tcp://HOST:PORT] [--samples N]
     softbody info MESH
@@ -81,9 +82,14 @@ def _run(args) -> int:
         overrides.append("render.velocity_vectors=true")
     if args.style:
         overrides.append(f'render.style="{args.style}"')
+    if args.usd_start_frame is not None:
+        overrides.append(f"render.usd_start_frame={args.usd_start_frame!r}")
     scene = load_scene(args.scene, overrides)
     outputs = Outputs(
-        video=not args.no_video, gif=not args.no_gif, meshes=args.meshes, usd=args.usd
+        video=not args.no_video,
+        gif=not args.no_gif,
+        meshes=args.meshes,
+        usd=args.usd or args.usd_start_frame is not None,
     )
     print(
         f"{scene.name}: {scene.model.particle_count} particles, "
@@ -328,7 +334,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--velocity-vectors", action="store_true", help="draw vertex velocities (paper, Figure 7)"
     )
     run.add_argument("--meshes", choices=["obj", "ply"], help="also write a mesh per frame")
-    run.add_argument("--usd", action="store_true", help="also write a USD point cache")
+    run.add_argument(
+        "--usd",
+        action="store_true",
+        help="also write a USD cache (bodies, colliders; points, normals, velocities per frame)",
+    )
+    run.add_argument(
+        "--usd-start-frame",
+        type=float,
+        metavar="FRAME",
+        help="time code of the USD cache's first frame, e.g. 1001 (implies --usd; the scene's "
+        "render.usd_start_frame, default 0)",
+    )
     run.add_argument(
         "--threads",
         type=int,

@@ -65,7 +65,7 @@ class Outputs:
     meshes: str | None = None
     """``"obj"`` or ``"ply"``: one mesh file per frame in ``NAME-meshes/``."""
     usd: bool = False
-    """A USD point cache (needs usd-core)."""
+    """A USD cache of the bodies and colliders (needs usd-core, see :mod:`softbody.io.usd`)."""
 
 
 class Progress:
@@ -110,7 +110,8 @@ def file_stem(name: str) -> str:
 
 def _check_frame_memory(plan: FramePlan, scene: Scene, outputs: Outputs) -> None:
     """Refuse a run whose kept frames (GIF: every other frame at half size; USD: every
-    frame's float32 positions) would not fit in memory."""
+    frame's float32 positions and velocities, float64 collider poses) would not fit in
+    memory."""
     frames = plan.frame_count + 1
     if outputs.gif:
         settings = scene.render
@@ -118,7 +119,7 @@ def _check_frame_memory(plan: FramePlan, scene: Scene, outputs: Outputs) -> None
         count = (frames + 1) // 2
         check_memory("gif", count * size, f"keeping {count:,} GIF frames (--no-gif skips it)")
     if outputs.usd:
-        size = 12 * scene.model.particle_count
+        size = 24 * scene.model.particle_count + 96 * scene.model.collider_count
         check_memory("usd", frames * size, f"keeping {frames:,} frames for the USD cache")
 
 
@@ -285,6 +286,7 @@ def _simulate_and_write(
         times, vol, pres, kin, total = [], [], [], [], []
         bounding = {m: [] for m in BOUNDING_METHODS} if settings.bounding_objects else None
         usd_frames = [] if outputs.usd else None
+        usd_velocities, usd_collider_q, usd_collider_rotation = [], [], []
         sim_seconds = render_seconds = 0.0
         progress = Progress(frame_count, progress_stream)
         for frame in range(frame_count + 1):
@@ -307,6 +309,9 @@ def _simulate_and_write(
                     bounding[m].append(body_volume_by(model, state, m)[0])
             if usd_frames is not None:
                 usd_frames.append(state.particle_q.astype(np.float32))
+                usd_velocities.append(state.particle_qd.astype(np.float32))
+                usd_collider_q.append(state.collider_q.copy())
+                usd_collider_rotation.append(state.collider_rotation.copy())
             if outputs.meshes:
                 from softbody.io.sequence import write_mesh_frame
 
@@ -361,7 +366,20 @@ def _simulate_and_write(
     if usd_frames is not None:
         from softbody.io.usd import write_usd
 
-        write_usd(tmp / f"{stem}.usdc", model, np.array(usd_frames), fps, scene.body_names)
+        write_usd(
+            tmp / f"{stem}.usdc",
+            model,
+            np.array(usd_frames),
+            fps,
+            scene.body_names,
+            velocities=np.array(usd_velocities),
+            collider_q=np.array(usd_collider_q).reshape(-1, model.collider_count, 3),
+            collider_rotation=np.array(usd_collider_rotation).reshape(
+                -1, model.collider_count, 3, 3
+            ),
+            start_frame=settings.usd_start_frame,
+            ground_size=settings.ground_size,
+        )
 
     area = body_area(model, state)
     com = body_center_of_mass(model, state)

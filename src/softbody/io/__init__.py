@@ -1,4 +1,4 @@
-"""Exports: per-frame mesh sequences (OBJ, PLY) and USD point caches."""
+"""Exports: per-frame mesh sequences (OBJ, PLY) and USD caches of bodies and colliders."""
 
 from softbody.io.sequence import write_mesh_frame
 from softbody.io.usd import write_usd

@@ -71,6 +71,13 @@ class MeshReport:
     any flip; made only for self-intersecting closed meshes, whose signed volume can lie."""
     flipped: bool = False
     """Whether :attr:`mesh` had its winding reversed to face outward."""
+    vertex_source: np.ndarray | None = field(default=None, repr=False)
+    """For each vertex of :attr:`mesh`, the input vertex it keeps the position of (the
+    first of the input vertices welded into it), shape (V,) int64."""
+    corner_source: np.ndarray | None = field(default=None, repr=False)
+    """For each corner of each triangle of :attr:`mesh`, the input vertex at that corner,
+    shape (F, 3) int64: input seam duplicates stay apart here, so per-vertex data of the
+    input (UVs) maps onto :attr:`mesh`'s corners as ``data[corner_source]``."""
 
     @property
     def self_intersection_count(self) -> int | None:
@@ -150,9 +157,10 @@ class MeshReport:
 
 
 def _weld(vertices: np.ndarray, faces: np.ndarray, tolerance: float):
-    """Merge vertices within ``tolerance`` [m] (grid snapping), keeping first-seen order."""
+    """Merge vertices within ``tolerance`` [m] (grid snapping), keeping first-seen order:
+    (vertices, faces, merged count, index of each kept vertex in the input)."""
     if len(vertices) == 0 or not tolerance > 0:
-        return vertices, faces, 0
+        return vertices, faces, 0, np.arange(len(vertices), dtype=np.int64)
     lo = vertices.min(axis=0)
     keys = np.round((vertices - lo) / tolerance).astype(np.int64)
     _, first, inverse = unique_rows(keys, return_index=True, return_inverse=True)
@@ -160,7 +168,7 @@ def _weld(vertices: np.ndarray, faces: np.ndarray, tolerance: float):
     rank = np.empty(len(first), dtype=np.int64)
     rank[np.argsort(first, kind="stable")] = np.arange(len(first))
     keep = np.sort(first)
-    return vertices[keep], rank[inverse][faces], len(vertices) - len(keep)
+    return vertices[keep], rank[inverse][faces], len(vertices) - len(keep), keep
 
 
 def _nonmanifold_vertex_count(faces: np.ndarray, vertex_count: int) -> int:
@@ -211,13 +219,14 @@ def inspect_mesh(
     """
     v_in, f_in = mesh.vertices, mesh.faces
     diag = float(np.linalg.norm(np.ptp(v_in, axis=0))) if len(v_in) else 0.0
-    v, f, welded = _weld(v_in, f_in, max(diag, 1e-300) * weld_tolerance)
+    v, f, welded, kept = _weld(v_in, f_in, max(diag, 1e-300) * weld_tolerance)
     collapsed = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])
     f = f[~collapsed]
+    corners = f_in[~collapsed]
     used = np.zeros(len(v), dtype=bool)
     used[f.reshape(-1)] = True
     remap = np.cumsum(used) - 1
-    v, f = v[used], remap[f]
+    v, f, kept = v[used], remap[f], kept[used]
     vertex_count = len(v)
 
     if len(f):
@@ -283,6 +292,7 @@ def inspect_mesh(
     inward = rays < 0 if rays else volume < 0
     if closed and inward:
         f = f[:, ::-1]
+        corners = corners[:, ::-1]
     return MeshReport(
         input_vertex_count=len(v_in),
         input_face_count=len(f_in),
@@ -300,6 +310,8 @@ def inspect_mesh(
         intersecting_pairs=crossing,
         outward_by_rays=rays,
         flipped=bool(closed and inward),
+        vertex_source=np.ascontiguousarray(kept, dtype=np.int64),
+        corner_source=np.ascontiguousarray(corners, dtype=np.int64),
     )
 
 
@@ -318,6 +330,22 @@ def validate_mesh(
     with every problem and its count in the message. With ``closed=False`` (cloth) a
     boundary is allowed and the winding is kept as given.
     """
+    return validate_mesh_report(
+        mesh, name=name, weld_tolerance=weld_tolerance, closed=closed, stacklevel=3
+    ).mesh
+
+
+def validate_mesh_report(
+    mesh: TriMesh,
+    *,
+    name: str = "mesh",
+    weld_tolerance: float = WELD_TOLERANCE,
+    closed: bool = True,
+    stacklevel: int = 2,
+) -> MeshReport:
+    """:func:`validate_mesh`, returning the whole :class:`MeshReport`: the repaired mesh
+    (``.mesh``) with its map back to the input's vertices (``.vertex_source``,
+    ``.corner_source``). Warnings point ``stacklevel`` frames up (2: this call's caller)."""
     report = inspect_mesh(mesh, weld_tolerance=weld_tolerance)
     if not closed:
         problems = [
@@ -326,12 +354,14 @@ def validate_mesh(
         if problems:
             raise MeshError(f"{name} is not a usable surface: " + "; ".join(problems))
         if report.welded_vertex_count or report.collapsed_face_count:
-            warnings.warn(f"{name}: " + "; ".join(report.repairs[:2]), MeshWarning, stacklevel=2)
-        return report.mesh
+            warnings.warn(
+                f"{name}: " + "; ".join(report.repairs[:2]), MeshWarning, stacklevel=stacklevel
+            )
+        return report
     if report.problems:
         raise MeshError(f"{name} cannot hold gas: " + "; ".join(report.problems))
     if report.repairs:
-        warnings.warn(f"{name}: " + "; ".join(report.repairs), MeshWarning, stacklevel=2)
+        warnings.warn(f"{name}: " + "; ".join(report.repairs), MeshWarning, stacklevel=stacklevel)
     for line in report.warnings:
-        warnings.warn(f"{name}: {line}", MeshWarning, stacklevel=2)
-    return report.mesh
+        warnings.warn(f"{name}: {line}", MeshWarning, stacklevel=stacklevel)
+    return report

@@ -61,6 +61,8 @@ class RenderSettings:
     supersample: int = 2
     ground_size: float = 8.0
     """Side of the drawn part of each ground plane [m]."""
+    usd_start_frame: float = 0.0
+    """Time code of the first frame in a USD export (frame k at ``usd_start_frame + k``)."""
 
     def __post_init__(self):
         if self.style not in ("solid", "wireframe", "both"):
@@ -73,6 +75,14 @@ class RenderSettings:
                 raise ValueError(f"render {name} must be an integer in [16, 4096], got {v!r}")
         if not (np.isfinite(self.fps) and self.fps > 0):
             raise ValueError(f"render fps must be > 0, got {self.fps!r}")
+        if not (np.isfinite(self.ground_size) and self.ground_size > 0):
+            raise ValueError(
+                f"render ground_size must be finite and > 0 [m], got {self.ground_size!r}"
+            )
+        if not (np.isfinite(self.usd_start_frame) and abs(self.usd_start_frame) <= 1e15):
+            raise ValueError(
+                f"render usd_start_frame must be a finite time code, got {self.usd_start_frame!r}"
+            )
         for c in self.body_colors:
             hex_rgb(c)
 

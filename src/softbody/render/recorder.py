@@ -139,11 +139,13 @@ class Recorder:
     max_frames : int
         Most frames this recorder holds; a capture or a recorded ``advance`` call that
         would exceed it raises ValueError (before simulating, for ``advance``).
+    ground_size : float
+        Side of the square drawn (and exported to USD) for each ground plane [m], > 0.
 
     Notes
     -----
-    Each capture appends the positions (and collider poses) to a temporary file in the
-    system's temporary folder, 8 (3 N + 12 C) bytes a frame for N particles and C
+    Each capture appends the positions, velocities and collider poses to a temporary file
+    in the system's temporary folder, 8 (6 N + 12 C) bytes a frame for N particles and C
     colliders, and computes the frame's per-body diagnostics; nothing is rendered until
     :meth:`save`. :meth:`close` (or the end of a ``with`` block, or the recorder being
     garbage collected) deletes the temporary file.
@@ -161,6 +163,7 @@ class Recorder:
         body_names: Sequence[str] | None = None,
         body_colors: Sequence[str] | None = None,
         max_frames: int = MAX_FRAMES,
+        ground_size: float = 8.0,
     ):
         if not isinstance(model, Model):
             raise TypeError(f"model must be a softbody.Model, got {type(model).__name__}")
@@ -188,11 +191,13 @@ class Recorder:
             raise ValueError("body_colors must hold at least one '#rrggbb' colour")
         # checks width, height, style and the colours (ValueError naming the setting)
         self.settings = RenderSettings(
-            width=width, height=height, fps=self.fps, style=style, body_colors=colors
-        )
+            width=width, height=height, fps=self.fps, style=style, body_colors=colors,
+            ground_size=ground_size,
+        )  # fmt: skip
         self.max_frames = int(max_frames)
         n, c = model.particle_count, model.collider_count
-        self._row = 3 * n + 12 * c  # float64 per frame: positions, collider centres, rotations
+        # float64 per frame: positions, velocities, collider centres, collider rotations
+        self._row = 6 * n + 12 * c
         self._table_row = 1 + len(_BODY_COLUMNS) * bodies  # time, then the body columns
         self._dir = Path(tempfile.mkdtemp(prefix="softbody-recorder-"))
         self._frames = open(self._dir / "frames.f64", "wb")  # closed by close()
@@ -250,6 +255,7 @@ class Recorder:
         frame = np.concatenate(
             [
                 state.particle_q.reshape(-1),
+                state.particle_qd.reshape(-1),
                 state.collider_q.reshape(-1),
                 state.collider_rotation.reshape(-1),
             ]
@@ -321,22 +327,36 @@ class Recorder:
         n = self.model.particle_count
         return self._read("frames.f64", self._row)[:, : 3 * n].reshape(-1, n, 3)
 
+    @property
+    def velocities(self) -> np.ndarray:
+        """Particle velocities of each frame [m/s], shape (F, N, 3), read-only, read from
+        the recorder's file on demand."""
+        n = self.model.particle_count
+        return self._read("frames.f64", self._row)[:, 3 * n : 6 * n].reshape(-1, n, 3)
+
+    @property
+    def collider_poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """The colliders' centres [m], shape (F, C, 3), and rotations, shape (F, C, 3, 3),
+        of each frame."""
+        n, c = self.model.particle_count, self.model.collider_count
+        rows = np.array(self._read("frames.f64", self._row)[:, 6 * n :])
+        return rows[:, : 3 * c].reshape(-1, c, 3), rows[:, 3 * c :].reshape(-1, c, 3, 3)
+
     def state(self, frame: int) -> State:
-        """Frame ``frame`` as a :class:`State` (positions and collider poses; velocities
-        are not recorded and are zero)."""
+        """Frame ``frame`` as a :class:`State`: positions, velocities and collider poses
+        (the gas applied and the step count are not recorded)."""
         k = int(frame)
         if not -self._count <= k < self._count:
             raise IndexError(f"frame {frame} out of range for {self._count} frames")
         k %= self._count
         row = self._read("frames.f64", self._row)[k]
         n, c = self.model.particle_count, self.model.collider_count
-        q = np.array(row[: 3 * n]).reshape(n, 3)
         return State(
-            q,
-            np.zeros_like(q),
+            np.array(row[: 3 * n]).reshape(n, 3),
+            np.array(row[3 * n : 6 * n]).reshape(n, 3),
             time=float(self._read("table.f64", self._table_row)[k, 0]),
-            collider_q=np.array(row[3 * n : 3 * n + 3 * c]).reshape(c, 3),
-            collider_rotation=np.array(row[3 * n + 3 * c :]).reshape(c, 3, 3),
+            collider_q=np.array(row[6 * n : 6 * n + 3 * c]).reshape(c, 3),
+            collider_rotation=np.array(row[6 * n + 3 * c :]).reshape(c, 3, 3),
         )
 
     def dataframe(self):
@@ -400,6 +420,7 @@ class Recorder:
             camera=self._view(),
             style=self.settings.style,
             body_colors=self.settings.body_colors,
+            ground_size=self.settings.ground_size,
         )
         return FrameRenderer(self.model, settings, open_bodies=self.model.body_closed == 0)
 
@@ -450,13 +471,15 @@ class Recorder:
 
     # -- saving --------------------------------------------------------------------------
     def save(self, path: str | os.PathLike, *, overwrite: bool = False,
-             mesh_format: str = "obj") -> Path:  # fmt: skip
+             mesh_format: str = "obj", start_frame: float = 0) -> Path:  # fmt: skip
         """Write the captured frames to ``path``; returns it.
 
         The suffix picks the format: ``.mp4`` (H.264 at exactly ``fps``), ``.gif``
         (looping; GIF delays are whole hundredths of a second, so they alternate to keep
-        ``fps`` on average), ``.usd``, ``.usda`` or ``.usdc`` (a point cache: one mesh
-        per body, time code k = frame k, ``fps`` time codes per second; needs
+        ``fps`` on average), ``.usd``, ``.usda`` or ``.usdc`` (one mesh per body with
+        points, normals, velocities and extent per frame, the colliders as shapes placed
+        per frame, and a map to the input mesh's vertices, see :mod:`softbody.io.usd`;
+        frame k at time code ``start_frame + k``, ``fps`` time codes per second; needs
         usd-core), or no suffix for a folder of one mesh file per frame,
         ``frame_00000.obj``... (``mesh_format`` ``"obj"`` or ``"ply"``, vertex order =
         particle order).
@@ -484,6 +507,10 @@ class Recorder:
             )
         if self._count == 0:
             raise ValueError("nothing to save: no frame was captured")
+        if kind == "usd":
+            from softbody.io.usd import check_start_frame
+
+            check_start_frame(start_frame)
         parent = target.parent
         if not parent.is_dir():
             raise FileNotFoundError(f"cannot save {target}: folder {parent} does not exist")
@@ -499,7 +526,19 @@ class Recorder:
             elif kind == "usd":
                 from softbody.io.usd import write_usd
 
-                write_usd(written, self.model, self.positions, self.fps, self.body_names)
+                collider_q, collider_rotation = self.collider_poses
+                write_usd(
+                    written,
+                    self.model,
+                    self.positions,
+                    self.fps,
+                    self.body_names,
+                    velocities=self.velocities,
+                    collider_q=collider_q,
+                    collider_rotation=collider_rotation,
+                    start_frame=start_frame,
+                    ground_size=self.settings.ground_size,
+                )
             else:
                 written.mkdir()
                 self._save_meshes(written, kind)

@@ -369,6 +369,7 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
         velocity_scale=r.velocity_scale,
         bounding_objects=r.bounding_objects,
         ground_size=r.ground_size,
+        usd_start_frame=r.usd_start_frame,
         body_colors=tuple(colors),
     )
     return Scene(

@@ -319,6 +319,12 @@ class Render(Table):
     )
     bounding_objects: Flag = Field(False, description="draw bounding objects (Figure 5)")
     ground_size: Real = Field(8.0, gt=0, le=1e6, description="side of the drawn ground [m]")
+    usd_start_frame: Real = Field(
+        0.0,
+        ge=-1e15,
+        le=1e15,
+        description="time code of the first frame of the USD export (--usd), e.g. 1001",
+    )
 
 
 # meshes: one variant per generator, plus a file or a built-in mesh

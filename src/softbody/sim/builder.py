@@ -16,7 +16,7 @@ from softbody.errors import MeshError
 from softbody.gas import Gas, GasLaw
 from softbody.mesh.topology import bending_pairs, unique_edges, vertex_areas
 from softbody.mesh.tri_mesh import TriMesh
-from softbody.mesh.validate import validate_mesh
+from softbody.mesh.validate import validate_mesh_report
 from softbody.sim.model import Model
 from softbody.sim.state import kernel_input
 from softbody.volume import VolumeMethod
@@ -72,6 +72,7 @@ class _Body:
     contact_shape: VolumeMethod
     closed: bool
     drag_coefficient: float = 0.0
+    corner_source: np.ndarray | None = None  # (F, 3) input-mesh vertex of each corner
 
 
 class ModelBuilder:
@@ -101,6 +102,7 @@ class ModelBuilder:
         self._mass: list[np.ndarray] = []
         self._pinned: list[np.ndarray] = []
         self._particle_body: list[np.ndarray] = []
+        self._source: list[np.ndarray] = []
         self._particle_count = 0
         self._springs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._attachments: list[tuple[int, np.ndarray, float, float, float]] = []
@@ -127,8 +129,9 @@ class ModelBuilder:
         return range(b.particle_begin, b.particle_end)
 
     # -- particles and springs -----------------------------------------------------------
-    def _append_particles(self, q, qd, mass, pinned, body):
+    def _append_particles(self, q, qd, mass, pinned, body, source=None):
         n = len(q)
+        self._source.append(np.full(n, -1, dtype=np.int64) if source is None else source)
         self._q.append(q)
         self._qd.append(qd)
         self._mass.append(mass)
@@ -248,9 +251,11 @@ class ModelBuilder:
             Closed surface: a :class:`TriMesh`, or a :class:`trimesh.Trimesh` (its
             ``vertices`` and ``faces`` are copied; anything else it carries, such as UVs or
             materials, is not). It is validated (welded, oriented; open or non-manifold
-            meshes raise :class:`MeshError`). Vertex k becomes particle
-            ``body_particles(b)[k]``; :func:`softbody.body_mesh` gives the body's surface
-            at a state.
+            meshes raise :class:`MeshError`). Vertex k of the validated mesh becomes
+            particle ``body_particles(b)[k]``; ``Model.particle_source_vertex`` and
+            ``Model.tri_source_vertex`` map particles and triangle corners back to this
+            mesh's vertices (to put its UVs back, see the USD export);
+            :func:`softbody.body_mesh` gives the body's surface at a state.
         mass : float
             Total mass [kg], > 0.
         stiffness, damping : float
@@ -398,7 +403,9 @@ class ModelBuilder:
                 limits.BYTES_PER_MC_SAMPLE * float(samples_n),
                 f"{samples_n:,} Monte Carlo sample lines",
             )
-        mesh = validate_mesh(source, name=f"body {body} mesh", closed=closed)
+        # warnings point at the user's add_soft_body / add_cloth call
+        report = validate_mesh_report(source, name=f"body {body} mesh", closed=closed, stacklevel=4)
+        mesh = report.mesh
         if mesh.vertex_count != source.vertex_count and pinned is not None:
             warnings.warn(
                 f"body {body}: welding renumbered the mesh vertices; pinned indices refer "
@@ -447,7 +454,9 @@ class ModelBuilder:
             else np.zeros((0, 2))
         )
 
-        begin = self._append_particles(mesh.vertices.copy(), vel, m, pin_mask, body)
+        begin = self._append_particles(
+            mesh.vertices.copy(), vel, m, pin_mask, body, report.vertex_source
+        )
         edges = unique_edges(mesh.faces) + begin
         self._springs.append(
             (
@@ -481,6 +490,7 @@ class ModelBuilder:
                 shape,
                 closed,
                 cd,
+                report.corner_source,
             )
         )
         return body
@@ -540,6 +550,7 @@ class ModelBuilder:
         pinned = np.concatenate(self._pinned)
         inv_mass = np.where(pinned, 0.0, 1.0 / mass)
         particle_body = np.concatenate(self._particle_body)
+        source_vertex = np.concatenate(self._source)
 
         if self._springs:
             idx = np.vstack([s[0] for s in self._springs]).astype(np.int64)
@@ -565,6 +576,11 @@ class ModelBuilder:
         bcount = len(bodies)
         tri = (
             np.vstack([b.faces for b in bodies]).astype(np.int64)
+            if bodies
+            else np.zeros((0, 3), dtype=np.int64)
+        )
+        corner_source = (
+            np.vstack([b.corner_source for b in bodies]).astype(np.int64)
             if bodies
             else np.zeros((0, 3), dtype=np.int64)
         )
@@ -625,6 +641,8 @@ class ModelBuilder:
             particle_mass=mass,
             particle_inv_mass=inv_mass,
             particle_body=particle_body,
+            particle_source_vertex=source_vertex,
+            tri_source_vertex=corner_source,
             spring_indices=idx,
             spring_rest_length=rest,
             spring_stiffness=k,

@@ -29,6 +29,17 @@ class Model(CoreFields):
     """Default anchor points [m], shape (A, 3); ``Control.attachment_anchor`` moves them."""
     body_mass: np.ndarray
     """Total mass of each body [kg], shape (B,)."""
+    particle_source_vertex: np.ndarray
+    """For each particle, the index of the vertex of the mesh given to
+    ``add_soft_body``/``add_cloth`` whose position it starts at (the first of the input
+    vertices welded into it), shape (N,) int64; -1 for a particle added by itself. Welding
+    merges duplicate seam vertices, so a body can have fewer particles than its input mesh
+    had vertices; this maps each particle back."""
+    tri_source_vertex: np.ndarray
+    """For each corner of each triangle, the input mesh's vertex at that corner, shape
+    (T, 3) int64 (same corner order as ``tri_indices``; a flipped input has its corners
+    reversed with its triangles). Seam duplicates stay apart here: per-vertex data of the
+    input mesh, such as UVs, maps onto the triangles' corners as ``data[tri_source_vertex]``."""
 
     def __post_init__(self):
         for name in self.__dataclass_fields__:
