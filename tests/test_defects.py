@@ -260,3 +260,67 @@ def test_mesh_and_info_path_that_is_a_directory_or_fifo_says_so(tmp_path, capsys
     )
     with pytest.raises(ValueError, match=f": {re.escape(str(path))}: {what}$"):
         load_scene(scene)
+
+
+# -- 4: an empty --out ----------------------------------------------------------------------
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_empty_out_is_refused(tmp_path, monkeypatch, capsys, command):
+    """``--out ""`` (an unset shell variable) wrote into the current folder silently. It
+    is refused with one line, and nothing is written in the current folder."""
+    monkeypatch.chdir(tmp_path)
+    scene = tmp_path / "small.toml"
+    scene.write_text(SMALL)
+    extra = ["--vary", "bodies.0.mass=1,2", "--workers", "0"] if command == "sweep" else []
+    code, _, err = _cli([command, str(scene), "--out", "", *extra], capsys)
+    assert code == 2
+    assert _one_error_line(err) == (
+        "softbody: error: --out '' names no folder; give one (--out . for the current folder)"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["small.toml"]
+
+
+# -- 7, 8, 9: keys that passed the schema and then failed or did nothing --------------------
+@pytest.mark.parametrize(
+    "override,expected",
+    [
+        ("render.width=8000", "render.width: must be <= 4096, got 8000"),
+        ("render.height=4097", "render.height: must be <= 4096, got 4097"),
+        (
+            "render.camera=[2.0, 0.8, 0.0]",
+            "render.camera: must differ from render.target (the camera looks from camera to "
+            "target; at the target it sees no direction and draws blank frames)",
+        ),
+        (
+            "bodies.0.rotation=[0, 0, 0, 45]",
+            "bodies.0.rotation: the axis (its first 3 numbers) must not be zero, got [0, 0, 0, 45]",
+        ),
+    ],
+)
+def test_render_size_camera_and_rotation_axis_are_checked(override, expected):
+    """``render.width = 8000`` passed the schema (<= 16384) and then failed in the
+    renderer (<= 4096) without naming the key; a camera at its target (hanging-ball's is
+    [2, 0.8, 0]) rendered blank frames; a rotation about a zero axis was ignored. Each is
+    now refused by the schema naming the key."""
+    with pytest.raises(SceneError) as info:
+        load_scene("hanging-ball", [override])
+    assert str(info.value) == expected
+
+
+def test_rotation_with_zero_angle_and_collider_rotation():
+    """A zero axis with a zero angle turns nothing and is accepted; a box collider's
+    rotation is checked the same way."""
+    assert load_scene("hanging-ball", ["bodies.0.rotation=[0, 0, 0, 0]"])
+    with pytest.raises(SceneError, match=r"^colliders\.0\.rotation: the axis"):
+        load_scene(
+            "hanging-ball",
+            ['colliders.0={type="box", half_extents=[1, 1, 1], rotation=[0, 0, 0, 10]}'],
+        )
+
+
+def test_camera_at_its_target_is_an_error_for_the_library():
+    """Reference: a look-at basis needs eye != target. ``Camera.basis`` raises instead of
+    returning NaN (the blank frames)."""
+    from softbody.render.raster import Camera
+
+    with pytest.raises(ValueError, match=r"eye and target are both at \(1.0, 2.0, 3.0\)"):
+        Camera(eye=(1.0, 2.0, 3.0), target=(1.0, 2.0, 3.0)).basis()

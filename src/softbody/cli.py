@@ -72,10 +72,21 @@ def _scenes(args) -> int:
     return 0
 
 
+def _out_folder(text: str) -> Path:
+    """``--out``: a folder's name; an empty one (``--out ""``, an unset shell variable)
+    is refused rather than read as the current folder."""
+    if not text.strip():
+        raise ValueError(
+            f"--out {text!r} names no folder; give one (--out . for the current folder)"
+        )
+    return Path(text)
+
+
 def _run(args) -> int:
     from softbody.run import Outputs, run_scene
     from softbody.scenes import load_scene
 
+    out = _out_folder(args.out)
     overrides = list(args.set or [])
     if args.velocity_vectors:
         overrides.append("render.velocity_vectors=true")
@@ -92,7 +103,7 @@ def _run(args) -> int:
     )
     summary = run_scene(
         scene,
-        Path(args.out),
+        out,
         integrator=args.integrator,
         dt=args.dt,
         duration=args.duration,
@@ -134,6 +145,7 @@ def _sweep(args) -> int:
     import softbody.sweep as sweeps
     from softbody.scenes.loader import parse_override
 
+    out = _out_folder(args.out)
     fixed = {}
     for text in args.set or []:
         path, value = parse_override(text)
@@ -166,7 +178,7 @@ def _sweep(args) -> int:
     sweeps._check_dependencies()
     result = sweeps.run_sweep(
         spec,
-        Path(args.out),
+        out,
         workers=args.workers,
         address=args.address,
         figure=not args.no_figure,
