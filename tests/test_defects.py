@@ -324,3 +324,88 @@ def test_camera_at_its_target_is_an_error_for_the_library():
 
     with pytest.raises(ValueError, match=r"eye and target are both at \(1.0, 2.0, 3.0\)"):
         Camera(eye=(1.0, 2.0, 3.0), target=(1.0, 2.0, 3.0)).basis()
+
+
+# -- 3 and 13: the viewer's port and exit status -------------------------------------------
+def test_view_on_a_taken_last_port_is_one_line(capsys):
+    """``softbody view --port 65535`` with that port taken printed viser's 25-line
+    traceback (it moves on to the next port, 65536, and its server thread dies). Now:
+    one line naming the port, status 2."""
+    import socket
+
+    pytest.importorskip("viser")
+    holder = socket.socket()
+    try:
+        try:
+            holder.bind(("127.0.0.1", 65535))
+            holder.listen()
+        except OSError:
+            pass  # taken already, by another program: the case under test all the same
+        code, _, err = _cli(["view", "hanging-ball", "--port", "65535"], capsys)
+    finally:
+        holder.close()
+    assert code == 2
+    assert _one_error_line(err) == (
+        "softbody: error: viewer port 65535 is taken on 127.0.0.1; choose another with "
+        "--port (0: any free one)"
+    )
+
+
+def test_taken_port_moves_to_the_next_free_one():
+    """A taken port that is not the last still moves on to the next free one, as
+    viser does (``--port``'s help promises it)."""
+    import socket
+
+    from softbody.viewer.app import _free_port
+
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen()
+        taken = holder.getsockname()[1]
+        if taken == 65535:
+            pytest.skip("the system gave the last port")
+        assert _free_port("127.0.0.1", taken) > taken
+    assert _free_port("127.0.0.1", 0) == 0
+
+
+@pytest.mark.parametrize("signum,code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_view_exits_with_the_signal_status(tmp_path, signum, code):
+    """The CLI promises 128 + the signal's number on Ctrl-C and SIGTERM; ``softbody
+    view`` exited 0 (its wait took the signal as the end). It is stopped a second after
+    it has printed its URL."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from conftest import free_port
+
+    pytest.importorskip("viser")
+    number = getattr(signal, signum)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "softbody.cli", "view", "hanging-ball", "--port",
+         str(free_port())],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 300
+        started = False
+        while time.monotonic() < deadline and not started:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            started = "in a browser" in line
+        assert started, "the viewer did not start"
+        time.sleep(1.0)  # into its wait for the signal (not between the print and it)
+        proc.send_signal(number)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == code, err
+    assert err.splitlines()[-1] == f"softbody: interrupted ({signum})"
+    assert "Traceback" not in err
