@@ -409,3 +409,30 @@ def test_view_exits_with_the_signal_status(tmp_path, signum, code):
     assert proc.returncode == code, err
     assert err.splitlines()[-1] == f"softbody: interrupted ({signum})"
     assert "Traceback" not in err
+
+
+# -- 10: numbers in messages -----------------------------------------------------------------
+@pytest.mark.parametrize(
+    "argv,expected",
+    [
+        (
+            ["--duration", "1e300"],
+            "softbody: error: the run would render 3e+301 frames (1e+300 s at 30 frames per "
+            "second), over the limit of 100,000: shorten the duration or lower render.fps (or "
+            "raise the limit with --max-frames)",
+        ),
+        (
+            ["--dt", "1e-300", "--max-frames", "9e18"],
+            "softbody: error: the run would take 5e+300 steps (150 frames of 3.33e+298 steps "
+            "of dt = 1e-300 s), over the limit of 100,000,000: raise dt or render.fps, or "
+            "shorten the duration (or raise the limit with --max-steps)",
+        ),
+    ],
+)
+def test_absurd_counts_print_compactly(tmp_path, capsys, argv, expected):
+    """``--duration 1e300`` printed a 300-digit frame count. Counts past 10^15 are now
+    written as 3 significant digits (smaller ones in full, with separators), so the line
+    stays readable; hanging-ball is 5 s at 30 fps."""
+    code, _, err = _cli(["run", "hanging-ball", "--out", str(tmp_path / "o"), *argv], capsys)
+    assert code == 2
+    assert _one_error_line(err) == expected
