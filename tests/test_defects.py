@@ -436,3 +436,50 @@ def test_absurd_counts_print_compactly(tmp_path, capsys, argv, expected):
     code, _, err = _cli(["run", "hanging-ball", "--out", str(tmp_path / "o"), *argv], capsys)
     assert code == 2
     assert _one_error_line(err) == expected
+
+
+# -- 14: malformed websocket frames from a client holding the token ------------------------
+def test_malformed_websocket_frames_are_one_line_each(capfd):
+    """An authorised client (token, own Origin) sending frames viser cannot read (not
+    msgpack, a text frame, an unknown message type, missing fields, not a table) made
+    the websockets library print a traceback for each. Now each closes that client's
+    connection with one line on stderr; the simulation and the server go on (a new
+    client still connects)."""
+    import time
+
+    import msgspec
+
+    pytest.importorskip("viser")
+    from conftest import start_viewer
+    from test_viewer_input import Client
+
+    viewer = start_viewer()
+    try:
+        capfd.readouterr()
+        frames = [
+            b"\x00\x01garbage",
+            "hello",
+            msgspec.msgpack.encode({"type": "NoSuchMessage", "x": 1}),
+            msgspec.msgpack.encode({"type": "ViewerCameraMessage", "wxyz": "x"}),
+            msgspec.msgpack.encode([1, 2, 3]),
+        ]
+        for frame in frames:
+            client = Client(viewer)
+            client.conn.send(frame)
+            deadline = time.monotonic() + 10
+            while viewer.guard.malformed < frames.index(frame) + 1:
+                assert time.monotonic() < deadline, "the bad frame was not noticed"
+                time.sleep(0.05)
+            client.close()
+        time.sleep(0.3)
+        err = capfd.readouterr().err
+        assert viewer._thread.is_alive()
+        Client(viewer).close()  # the server still takes clients
+    finally:
+        viewer.stop()
+    lines = err.splitlines()
+    assert "Traceback" not in err and len(lines) == len(frames), err
+    assert all(
+        line.startswith("softbody view: closed a connection that sent a malformed message (")
+        for line in lines
+    ), err
