@@ -210,31 +210,28 @@ def _view(args) -> int:
     scene = load_scene(args.scene, list(args.set or []))
     print(f"{scene.name}: preparing", flush=True)
 
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error", StabilityWarning)
-            sim = Simulator(
-                scene.model,
-                integrator=args.integrator or scene.integrator,
-                dt=args.dt or scene.dt,
-                implicit_tolerance=scene.implicit_tolerance,
-            )
-        cam = scene.render.camera
-        viewer = show(
+    # Ctrl-C or SIGTERM while it starts: main() says so and exits 130 or 143
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", StabilityWarning)
+        sim = Simulator(
             scene.model,
-            scene.model.state(),
-            sim,
-            host=args.host,
-            port=args.port,
-            block=False,
-            body_names=scene.body_names,
-            body_colors=scene.render.body_colors,
-            camera=(cam.eye, cam.target),
-            quiet=True,  # the lines below say it, with the scene's name
+            integrator=args.integrator or scene.integrator,
+            dt=args.dt or scene.dt,
+            implicit_tolerance=scene.implicit_tolerance,
         )
-    except KeyboardInterrupt:
-        print("softbody: interrupted", file=sys.stderr)
-        return 130
+    cam = scene.render.camera
+    viewer = show(
+        scene.model,
+        scene.model.state(),
+        sim,
+        host=args.host,
+        port=args.port,
+        block=False,
+        body_names=scene.body_names,
+        body_colors=scene.render.body_colors,
+        camera=(cam.eye, cam.target),
+        quiet=True,  # the lines below say it, with the scene's name
+    )
     if viewer.exposed:
         print(
             f"softbody: warning: the viewer listens on {args.host}, so it is reachable from "
