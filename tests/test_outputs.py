@@ -218,10 +218,13 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
-@pytest.mark.parametrize("signum,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+@pytest.mark.parametrize(
+    "signum,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130), (signal.SIGHUP, 129)]
+)
 def test_signal_removes_temporary_files_and_ffmpeg(tmp_path, signum, code):
     """Issue 19 item 6: SIGTERM left a hidden ``.softbody-run-*`` folder and an orphaned
-    ffmpeg. A signal during a run (sent once the temporary folder and ffmpeg exist) now
+    ffmpeg; issue 29 item 17: so did SIGHUP (a closed terminal), which now stops a run
+    as SIGTERM does. A signal during a run (sent once the temporary folder and ffmpeg exist) now
     ends it with one line and 128 + the signal number, no temporary folder, no ffmpeg
     left running and nothing written."""
     out = tmp_path / "out"

@@ -12,10 +12,11 @@ User mistakes (unknown scene or key, invalid mesh, unstable settings, a run that
 up, a run too long or too large for this machine, an output folder already holding a
 file of a run's names without ``--overwrite``) print one line ``softbody: error: ...``
 to stderr and exit with status 2; nothing is written unless the run succeeds. Running
-out of memory is one line too (status 2). Ctrl-C and SIGTERM stop a command with one
-line, remove its temporary files and child processes, and exit with 130 and 143 (128 +
-the signal number). An unexpected exception is a bug: one line naming it, status 1; set
-the environment variable ``SOFTBODY_DEBUG=1`` to see the traceback as well.
+out of memory is one line too (status 2). Ctrl-C, SIGTERM and SIGHUP (the terminal
+closed) stop a command with one line, remove its temporary files and child processes,
+and exit with 130, 143 and 129 (128 + the signal number); ``softbody view`` too. An
+unexpected exception is a bug: one line naming it, status 1; set the environment
+variable ``SOFTBODY_DEBUG=1`` to see the traceback as well.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import argparse
 import os
 import signal
 import sys
+import time
 from pathlib import Path
 
 from softbody.run import MAX_FRAMES, MAX_STEPS
@@ -73,10 +75,21 @@ def _scenes(args) -> int:
     return 0
 
 
+def _out_folder(text: str) -> Path:
+    """``--out``: a folder's name; an empty one (``--out ""``, an unset shell variable)
+    is refused rather than read as the current folder."""
+    if not text.strip():
+        raise ValueError(
+            f"--out {text!r} names no folder; give one (--out . for the current folder)"
+        )
+    return Path(text)
+
+
 def _run(args) -> int:
     from softbody.run import Outputs, run_scene
     from softbody.scenes import load_scene
 
+    out = _out_folder(args.out)
     overrides = list(args.set or [])
     if args.velocity_vectors:
         overrides.append("render.velocity_vectors=true")
@@ -98,7 +111,7 @@ def _run(args) -> int:
     )
     summary = run_scene(
         scene,
-        Path(args.out),
+        out,
         integrator=args.integrator,
         dt=args.dt,
         duration=args.duration,
@@ -140,6 +153,7 @@ def _sweep(args) -> int:
     import softbody.sweep as sweeps
     from softbody.scenes.loader import parse_override
 
+    out = _out_folder(args.out)
     fixed = {}
     for text in args.set or []:
         path, value = parse_override(text)
@@ -172,7 +186,7 @@ def _sweep(args) -> int:
     sweeps._check_dependencies()
     result = sweeps.run_sweep(
         spec,
-        Path(args.out),
+        out,
         workers=args.workers,
         address=args.address,
         figure=not args.no_figure,
@@ -202,31 +216,28 @@ def _view(args) -> int:
     scene = load_scene(args.scene, list(args.set or []))
     print(f"{scene.name}: preparing", flush=True)
 
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("error", StabilityWarning)
-            sim = Simulator(
-                scene.model,
-                integrator=args.integrator or scene.integrator,
-                dt=args.dt or scene.dt,
-                implicit_tolerance=scene.implicit_tolerance,
-            )
-        cam = scene.render.camera
-        viewer = show(
+    # Ctrl-C or SIGTERM while it starts: main() says so and exits 130 or 143
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", StabilityWarning)
+        sim = Simulator(
             scene.model,
-            scene.model.state(),
-            sim,
-            host=args.host,
-            port=args.port,
-            block=False,
-            body_names=scene.body_names,
-            body_colors=scene.render.body_colors,
-            camera=(cam.eye, cam.target),
-            quiet=True,  # the lines below say it, with the scene's name
+            integrator=args.integrator or scene.integrator,
+            dt=args.dt or scene.dt,
+            implicit_tolerance=scene.implicit_tolerance,
         )
-    except KeyboardInterrupt:
-        print("softbody: interrupted", file=sys.stderr)
-        return 130
+    cam = scene.render.camera
+    viewer = show(
+        scene.model,
+        scene.model.state(),
+        sim,
+        host=args.host,
+        port=args.port,
+        block=False,
+        body_names=scene.body_names,
+        body_colors=scene.render.body_colors,
+        camera=(cam.eye, cam.target),
+        quiet=True,  # the lines below say it, with the scene's name
+    )
     if viewer.exposed:
         print(
             f"softbody: warning: the viewer listens on {args.host}, so it is reachable from "
@@ -236,7 +247,13 @@ def _view(args) -> int:
         )
     # the token in the URL is the key to the viewer: the page sets it as a cookie
     print(f"{scene.name}: open {viewer.url} in a browser (Ctrl-C to stop)", flush=True)
-    viewer.wait()
+    try:
+        # not viewer.wait(), which ends quietly on Ctrl-C: the signal reaches main(),
+        # which exits with 128 + its number as every command does
+        while not viewer.closed:
+            time.sleep(0.2)
+    finally:
+        viewer.stop()
     return 0
 
 
@@ -434,14 +451,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class _Terminated(KeyboardInterrupt):
-    """SIGTERM, raised in the main thread so that ``finally`` blocks clean up (a
-    KeyboardInterrupt, so that no ``except Exception`` swallows it)."""
+    """SIGTERM or SIGHUP (the terminal closed), raised in the main thread so that
+    ``finally`` blocks clean up (a KeyboardInterrupt, so that no ``except Exception``
+    swallows it)."""
 
-    signum = signal.SIGTERM
+    def __init__(self, signum: int = signal.SIGTERM):
+        super().__init__()
+        self.signum = signum
 
 
-def _on_sigterm(signum, frame) -> None:
-    raise _Terminated()
+#: Signals that stop a command as Ctrl-C does: temporary files and child processes are
+#: removed and the exit status is 128 + the signal's number.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+def _on_stop_signal(signum, frame) -> None:
+    raise _Terminated(signum)
 
 
 def _warning_printer():
@@ -480,7 +505,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     debug = os.environ.get("SOFTBODY_DEBUG", "").strip() not in ("", "0")
     in_main = _in_main_thread()
-    previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main else None
+    previous = {sig: signal.signal(sig, _on_stop_signal) for sig in STOP_SIGNALS if in_main}
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # other libraries' chatter
@@ -520,8 +545,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 1
     finally:
-        if in_main:
-            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
 
 
 def _in_main_thread() -> bool:

@@ -433,8 +433,22 @@ def _simulate_and_write(
             {"center_m": state.collider_q[c].tolist()} for c in range(model.collider_count)
         ],
     }
-    (tmp / f"{stem}-summary.json").write_text(json.dumps(summary, indent=2))
+    # standard JSON only: a value that is not finite (a body that blew up) is null
+    text = json.dumps(_finite_or_null(summary), indent=2, allow_nan=False)
+    (tmp / f"{stem}-summary.json").write_text(text)
     return summary
+
+
+def _finite_or_null(value):
+    """``value`` (nested dicts, lists, numbers) with every NaN or infinity as None, so
+    that the summary is standard JSON (which has no ``Infinity``)."""
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_null(v) for v in value]
+    if isinstance(value, float | np.floating) and not np.isfinite(value):
+        return None
+    return value
 
 
 def _num(x) -> float | None:

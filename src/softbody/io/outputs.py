@@ -275,13 +275,13 @@ def folder_lock(out: Path) -> Iterator[None]:
 
 @contextlib.contextmanager
 def signals_held() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM back for the duration (main thread only), then deliver
+    """Hold SIGINT, SIGTERM and SIGHUP back for the duration (main thread only), then deliver
     the first that came, to its previous handler."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     caught: list[int] = []
-    names = (signal.SIGINT, signal.SIGTERM)
+    names = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
     previous = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in names}
     try:
         yield

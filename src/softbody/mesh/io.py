@@ -17,6 +17,32 @@ from softbody.mesh.validate import validate_mesh
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 
 
+def file_problem(path: str | os.PathLike) -> str | None:
+    """Why ``path`` cannot be read as a file: ``"no such file"``, ``"is a directory, not
+    a file"``, ``"not a regular file (a FIFO)"`` (or a socket, a device); None for a
+    regular file (a link is followed). Nothing is opened, so a FIFO never blocks."""
+    import stat
+
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "no such file"
+    except OSError as exc:
+        return f"cannot read it ({exc.strerror or exc})"
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "is a directory, not a file"
+    kinds = {
+        stat.S_ISFIFO: "a FIFO",
+        stat.S_ISSOCK: "a socket",
+        stat.S_ISCHR: "a character device",
+        stat.S_ISBLK: "a block device",
+    }
+    kind = next((name for test, name in kinds.items() if test(mode)), "not a file")
+    return f"not a regular file ({kind})"
+
+
 def read_mesh(path: str | os.PathLike) -> TriMesh:
     """Read a triangle mesh file as stored, without validation or repair.
 
@@ -33,8 +59,9 @@ def read_mesh(path: str | os.PathLike) -> TriMesh:
     import trimesh
 
     p = Path(path)
-    if not p.is_file():
-        raise MeshError(f"{p}: no such file")
+    problem = file_problem(p)
+    if problem is not None:
+        raise MeshError(f"{p}: {problem}")
     if p.suffix.lower() not in MESH_SUFFIXES:
         raise MeshError(
             f"{p}: unsupported mesh format {p.suffix!r}; use one of {', '.join(MESH_SUFFIXES)}"

@@ -41,6 +41,10 @@ def hex_rgb(color: str) -> np.ndarray:
     return np.array([int(c[k : k + 2], 16) for k in (0, 2, 4)], float) / 255.0
 
 
+#: Widest and tallest image the renderer draws [px] (``render.width``, ``render.height``).
+MAX_IMAGE_SIDE = 4096
+
+
 @dataclass(frozen=True)
 class RenderSettings:
     """How frames look. Sizes in pixels, ``fps`` frames per simulated second."""
@@ -71,8 +75,10 @@ class RenderSettings:
             )
         for name in ("width", "height"):
             v = getattr(self, name)
-            if int(v) != v or not 16 <= v <= 4096:
-                raise ValueError(f"render {name} must be an integer in [16, 4096], got {v!r}")
+            if int(v) != v or not 16 <= v <= MAX_IMAGE_SIDE:
+                raise ValueError(
+                    f"render {name} must be an integer in [16, {MAX_IMAGE_SIDE}], got {v!r}"
+                )
         if not (np.isfinite(self.fps) and self.fps > 0):
             raise ValueError(f"render fps must be > 0, got {self.fps!r}")
         if not (np.isfinite(self.ground_size) and self.ground_size > 0):

@@ -27,14 +27,14 @@ def plot_time_series(
         ("kinetic", "kinetic energy [J]"),
     ]
     for ax, (key, label) in zip(axes.flat, panels, strict=False):
-        data = series[key]
+        data = _finite(series[key])
         for b in range(data.shape[1]):
             if np.all(np.isnan(data[:, b])):
                 continue
             ax.plot(time, data[:, b], color=f"C{b}", label=names[b])
         ax.set_ylabel(label)
     ax = axes.flat[3]
-    ax.plot(time, series["total"], color="k")
+    ax.plot(time, _finite(series["total"]), color="k")
     ax.set_ylabel("total energy [J]")
     for ax in axes.flat:
         ax.set_xlabel("time [s]")
@@ -47,6 +47,16 @@ def plot_time_series(
     plt.close(fig)
 
 
+def _finite(data) -> np.ndarray:
+    """``data`` as floats with infinities and values beyond 1e300 as NaN (a gap in the
+    line): matplotlib cannot scale an axis to an infinite value or one whose span
+    overflows."""
+    data = np.array(data, dtype=float)
+    with np.errstate(invalid="ignore"):
+        data[~(np.abs(data) <= 1e300)] = np.nan
+    return data
+
+
 def plot_bounding_volumes(path: Path, time: np.ndarray, volumes: dict, name: str) -> None:
     """Each volume method's volume of one body against the exact one (paper, Figure 5)."""
     import matplotlib
@@ -55,6 +65,7 @@ def plot_bounding_volumes(path: Path, time: np.ndarray, volumes: dict, name: str
     import matplotlib.pyplot as plt
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4), dpi=100)
+    volumes = {method: _finite(v) for method, v in volumes.items()}
     exact = volumes["exact"]
     for k, (method, v) in enumerate(volumes.items()):
         ax.plot(
@@ -65,7 +76,9 @@ def plot_bounding_volumes(path: Path, time: np.ndarray, volumes: dict, name: str
             lw=2.2 if method == "exact" else 1.4,
         )
         if method != "exact":
-            ax2.plot(time, v / exact, color=f"C{k}", label=method.replace("_", " "))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = _finite(v / exact)
+            ax2.plot(time, ratio, color=f"C{k}", label=method.replace("_", " "))
     ax.set_ylabel("volume [m^3]")
     ax2.set_ylabel("volume / exact volume")
     for a in (ax, ax2):

@@ -28,6 +28,11 @@ class Camera:
     def basis(self) -> np.ndarray:
         """Rows: right, up, forward unit vectors (3, 3)."""
         f = np.asarray(self.target, float) - np.asarray(self.eye, float)
+        if not np.linalg.norm(f) > 0:
+            raise ValueError(
+                f"the camera's eye and target are both at {tuple(self.eye)}: it sees no "
+                "direction (move the eye or the target)"
+            )
         f /= np.linalg.norm(f)
         r = np.cross(f, self.up)
         if np.linalg.norm(r) < 1e-9:

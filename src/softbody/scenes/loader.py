@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import copy
 import os
+import re
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
+from itertools import islice
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +36,7 @@ from softbody.collision.colliders import (
 from softbody.errors import SizeLimitError
 from softbody.gas import Gas
 from softbody.mesh import generators
-from softbody.mesh.io import load_mesh
+from softbody.mesh.io import file_problem, load_mesh
 from softbody.mesh.topology import half_edges
 from softbody.mesh.tri_mesh import TriMesh
 from softbody.render.frame import PALETTE, RenderSettings
@@ -46,6 +48,74 @@ from softbody.sim.model import Model
 
 class SceneError(ValueError):
     """A scene file or override is wrong; the message says where and why."""
+
+
+#: Range of a built model's derived quantities (particle masses [kg], initial energies
+#: [J]) in which their squares and reciprocals are normal float64 numbers (about 1e-308 to
+#: 1e308): outside it a run overflows to infinity, or LAPACK's stability estimate fails
+#: on a denormal mass.
+SAFE_MAGNITUDE = (1e-150, 1e150)
+
+
+#: Deepest nesting a scene or sweep file may have: key components in one dotted key
+#: (``a.b.c`` is 3) and arrays or inline tables inside each other; a scene needs a few.
+#: Python's TOML parser takes memory quadratic in a dotted key's length (a 50,000-part
+#: key in a 100 KB file took over 8 GB) and recurses into nested arrays.
+MAX_TOML_NESTING = 64
+
+# strings and comments, whose dots and brackets are text, not structure
+_TOML_TEXT = re.compile(
+    r'"""[\s\S]*?"""|\'\'\'[\s\S]*?\'\'\'|"(?:[^"\\\n]|\\.)*"|\'[^\'\n]*\'|#[^\n]*'
+)
+# MAX_TOML_NESTING + 1 key parts joined by dots (a float's "1.5" is two)
+_TOML_DEEP_KEY = re.compile(
+    r"(?<![\w-])(?:[\w-]++|\"\")(?:[ \t]*\.[ \t]*(?:[\w-]++|\"\"))"
+    + f"{{{MAX_TOML_NESTING}}}"
+)
+
+
+def parse_toml(text: str, label: str) -> dict:
+    """``text`` parsed as TOML; ``label`` (the file) names it in errors. A UTF-8 byte
+    order mark at the start is dropped (editors on Windows write one), and nesting deeper
+    than :data:`MAX_TOML_NESTING` is refused before the parser sees it.
+
+    Raises :class:`SceneError` with one line naming ``label``.
+    """
+    text = text.removeprefix("\ufeff")
+    check_toml_nesting(text, label)
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{label}: not valid TOML ({exc})") from None
+
+
+def check_toml_nesting(text: str, label: str) -> None:
+    """Refuse TOML ``text`` whose dotted keys have more than :data:`MAX_TOML_NESTING`
+    parts or whose arrays and inline tables nest deeper (:class:`SceneError` naming
+    ``label`` and the line), in time linear in its length."""
+
+    def blank(match: re.Match) -> str:
+        # a string keeps its place as a quoted key part, and its lines
+        found = match.group()
+        return ("" if found[0] == "#" else '""') + "\n" * found.count("\n")
+
+    bare = _TOML_TEXT.sub(blank, text)
+    deep = _TOML_DEEP_KEY.search(bare)
+    where = None
+    if deep is not None:
+        where = deep.start()
+        what = f"a dotted key of more than {MAX_TOML_NESTING} parts"
+    else:
+        brackets = re.sub(r"[^\[\]{}]+", "", bare)  # short: a scene has a few hundred
+        codes = np.frombuffer(brackets.encode("ascii"), dtype=np.uint8)
+        depth = np.cumsum(np.isin(codes, (91, 123)).astype(np.int64) - np.isin(codes, (93, 125)))
+        if depth.size and depth.max() > MAX_TOML_NESTING:
+            k = int(np.argmax(depth > MAX_TOML_NESTING))
+            where = next(islice(re.finditer(r"[\[\]{}]", bare), k, None)).start()
+            what = f"arrays or tables nested more than {MAX_TOML_NESTING} deep"
+    if where is not None:
+        line = bare.count("\n", 0, where) + 1
+        raise SceneError(f"{label}: line {line}: {what} (a scene needs a few)")
 
 
 # -- built-in scenes ---------------------------------------------------------------------
@@ -98,8 +168,10 @@ def scene_text(name_or_path: str | Path) -> tuple[str, str, Path | None]:
     """(name, TOML text, folder relative meshes are read from) of a built-in scene or a file."""
     p = Path(name_or_path)
     if p.suffix == ".toml" or p.exists():
-        if not p.is_file():
-            raise SceneError(f"{p}: no such scene file")
+        problem = file_problem(p)
+        if problem is not None:
+            what = "no such scene file" if problem == "no such file" else problem
+            raise SceneError(f"{p}: {what}")
         return p.stem, _read_scene_file(p), p.parent
     if str(name_or_path) not in list_scenes():
         names = ", ".join(list_scenes())
@@ -120,6 +192,7 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     path = [k for k in key.strip().split(".") if k]
     if not path:
         raise SceneError(f"override {text[:200]!r} has an empty key")
+    check_toml_nesting(value, f"override {key.strip()[:200]!r}")
     try:
         parsed = tomllib.loads(f"v = {value.strip()}")["v"]
     except tomllib.TOMLDecodeError:
@@ -270,6 +343,40 @@ class Scene:
     """``implicit_euler`` and ``bdf2``: the CG solve's relative residual (``Simulator``)."""
 
 
+def _check_magnitudes(spec: schema.SceneSpec, model: Model) -> None:
+    """Refuse a scene whose particle masses or initial energies lie outside
+    :data:`SAFE_MAGNITUDE` (``mass = 1e308`` gives infinite energies, ``mass = 1e-308``
+    denormal particle masses), naming the key, before anything runs."""
+    from softbody.diagnostics import energies
+
+    low, high = SAFE_MAGNITUDE
+    for b, body in enumerate(spec.bodies):
+        start, end = model.body_particle_range[b]
+        m = model.particle_mass[start:end]
+        if m.size and not (np.all(np.isfinite(m)) and m.min() >= low and m.max() <= high):
+            each = m.max() if not m.max() <= high else m.min()
+            raise SceneError(
+                f"bodies.{b}.mass: {body.mass:.3g} kg over {m.size:,} particles gives "
+                f"{each:.3g} kg a particle, outside the {low:g} to {high:g} kg that float64 "
+                "arithmetic handles"
+            )
+    with np.errstate(all="ignore"):
+        e = energies(model, model.state())
+    causes = {
+        "kinetic": ("body_kinetic", "mass or velocity"),
+        "gravitational": ("body_gravitational", "mass or position, or simulation.gravity"),
+        "spring": ("body_spring", "stiffness or bend_stiffness"),
+        "gas": ("body_gas", "gas"),
+    }
+    for kind, (field, keys) in causes.items():
+        for b, value in enumerate(getattr(e, field)):
+            if not (np.isfinite(value) and abs(value) <= high):
+                raise SceneError(
+                    f"bodies.{b}: the initial {kind} energy ({value:.3g} J) is beyond the "
+                    f"{high:g} J float64 arithmetic handles: lower bodies.{b}.{keys}"
+                )
+
+
 def validate(data: Any) -> schema.SceneSpec:
     """``data`` (a parsed scene table) checked against :mod:`softbody.scenes.schema` and its
     size guards; raises :class:`SceneError` (one line naming the key) or
@@ -357,7 +464,9 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
         except ValueError as exc:
             raise SceneError(f"colliders.{c}: {exc}") from None
 
-    model = builder.finalize()
+    with np.errstate(divide="ignore", over="ignore"):  # a denormal mass: refused below
+        model = builder.finalize()
+    _check_magnitudes(spec, model)
     r = spec.render
     render = RenderSettings(
         width=r.width,
@@ -395,10 +504,7 @@ def load_scene(name_or_path: str | Path, overrides: list[str] | tuple[str, ...] 
     """
     name, text, base = scene_text(name_or_path)
     label = name if base is None else str(name_or_path)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{label}: not valid TOML ({exc})") from None
+    data = parse_toml(text, label)
     data = apply_overrides(data, list(overrides))
     try:
         return build_scene(name, data, base)

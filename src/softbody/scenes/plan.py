@@ -39,6 +39,12 @@ class FramePlan:
         return self.frame_count * self.steps_per_frame
 
 
+def _count(value: float) -> str:
+    """A count for a message: ``12,345`` in full up to 10^15, ``1e+300`` beyond (an
+    absurd request should not print 300 digits)."""
+    return f"{value:,.0f}" if value < 1e15 else f"{value:.3g}"
+
+
 def plan_frames(
     duration: float,
     fps: float,
@@ -71,15 +77,15 @@ def plan_frames(
     what = f"dt = {dt:.3g} s" + (" (auto, from the initial stability estimate)" if auto else "")
     if frames > max_frames:
         raise ValueError(
-            f"the run would render {frames:,.0f} frames ({duration:g} s at {fps:.3g} "
-            f"frames per second), over the limit of {max_frames:,}: shorten the duration or "
-            "lower render.fps (or raise the limit with --max-frames)"
+            f"the run would render {_count(frames)} frames ({duration:.6g} s at {fps:.3g} "
+            f"frames per second), over the limit of {_count(max_frames)}: shorten the duration "
+            "or lower render.fps (or raise the limit with --max-frames)"
         )
     if frames * per_frame > max_steps:
         raise ValueError(
-            f"the run would take {frames * per_frame:,.0f} steps ({frames:,.0f} "
-            f"frame{'s' if frames != 1 else ''} of {per_frame:,.0f} steps of {what}), over the "
-            f"limit of {max_steps:,}: raise dt or render.fps, or shorten the duration (or raise "
-            "the limit with --max-steps)"
+            f"the run would take {_count(frames * per_frame)} steps ({_count(frames)} "
+            f"frame{'s' if frames != 1 else ''} of {_count(per_frame)} steps of {what}), over "
+            f"the limit of {_count(max_steps)}: raise dt or render.fps, or shorten the duration "
+            "(or raise the limit with --max-steps)"
         )
     return FramePlan(int(frames), float(frame_dt), int(per_frame), float(step))

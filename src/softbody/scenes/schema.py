@@ -20,6 +20,7 @@ from itertools import pairwise
 from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import (
+    AfterValidator,
     AllowInfNan,
     BaseModel,
     BeforeValidator,
@@ -36,6 +37,7 @@ from pydantic_core import PydanticCustomError
 
 from softbody import limits
 from softbody.integrators import Integrator
+from softbody.render.frame import MAX_IMAGE_SIDE
 from softbody.volume import VolumeMethod
 
 #: Shortest time step [s]: a nanosecond is far below any soft body's stable step; a
@@ -106,11 +108,22 @@ def _label(value: Any) -> Any:
 
 #: A name or description: text, or a number taken as its text.
 Label = Annotated[str, BeforeValidator(_label), Strict()]
+
+
+def _rotation(value: Any) -> Any:
+    """A rotation's axis must not be zero unless its angle is (a zero axis turns nothing,
+    so a non-zero angle about it is a mistake)."""
+    if value[3] != 0 and not any(value[:3]):
+        raise _error("rotation", "the axis (its first 3 numbers) must not be zero")
+    return value
+
+
 #: ``[axis_x, axis_y, axis_z, angle_degrees]``: a rotation by the angle about the axis.
 Rotation = Annotated[
     tuple[Real, Real, Real, Real],
     _vector(4),
-    Field(description="[axis x, axis y, axis z, angle in degrees]; a zero axis turns nothing"),
+    AfterValidator(_rotation),
+    Field(description="[axis x, axis y, axis z, angle in degrees]; the axis not zero"),
 ]
 
 
@@ -306,8 +319,8 @@ class Air(Table):
 class Render(Table):
     """``[render]``: the video and images."""
 
-    width: Count = Field(640, ge=16, le=16384, description="image width [px]")
-    height: Count = Field(480, ge=16, le=16384, description="image height [px]")
+    width: Count = Field(640, ge=16, le=MAX_IMAGE_SIDE, description="image width [px]")
+    height: Count = Field(480, ge=16, le=MAX_IMAGE_SIDE, description="image height [px]")
     fps: Real = Field(30.0, ge=0.01, le=1000, description="frames per simulated second [1/s]")
     camera: Vec3 = Field((0.0, 1.5, 6.0), description="camera position [m]")
     target: Vec3 = Field((0.0, 0.5, 0.0), description="point the camera looks at [m]")
@@ -325,6 +338,17 @@ class Render(Table):
         le=1e15,
         description="time code of the first frame of the USD export (--usd), e.g. 1001",
     )
+
+    @model_validator(mode="after")
+    def _camera(self) -> Render:
+        if self.camera == self.target:
+            raise _error(
+                "field",
+                "must differ from render.target (the camera looks from camera to target; "
+                "at the target it sees no direction and draws blank frames)",
+                field="camera",
+            )
+        return self
 
 
 # meshes: one variant per generator, plus a file or a built-in mesh

@@ -43,7 +43,6 @@ import hashlib
 import json
 import math
 import os
-import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from itertools import product
@@ -315,9 +314,7 @@ def _scene_data(scene: str, folder: Path | None) -> tuple[str, str, dict, Path |
         scene = str(candidate)
     try:
         name, text, base = loader.scene_text(scene)
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SweepError(f"{scene}: not valid TOML ({exc})") from None
+        data = loader.parse_toml(text, scene)
     except loader.SceneError as exc:
         raise SweepError(str(exc)) from None
     if isinstance(data.get("name"), str) and data["name"]:
@@ -491,9 +488,9 @@ def load_sweep_file(path: str | Path, *, extra_set: dict | None = None) -> Sweep
     except UnicodeDecodeError:
         raise SweepError(f"{p}: not a sweep file (TOML is UTF-8 text)") from None
     try:
-        table = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SweepError(f"{p}: not valid TOML ({exc})") from None
+        table = loader.parse_toml(text, str(p))
+    except loader.SceneError as exc:
+        raise SweepError(str(exc)) from None
     unknown = set(table) - SWEEP_KEYS
     if unknown:
         raise SweepError(f"{p}: unknown key {sorted(unknown)[0]!r}; valid keys: "
@@ -559,7 +556,7 @@ def is_sweep_file(path: str | Path) -> bool:
     if p.suffix != ".toml" or not p.is_file():
         return False
     try:
-        table = tomllib.loads(_read_text(p))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, SizeLimitError):
+        table = loader.parse_toml(_read_text(p), str(p))
+    except (OSError, UnicodeDecodeError, loader.SceneError, SizeLimitError):
         return False  # a scene file then, or none: its reader says why
     return isinstance(table.get("scene"), str) and "bodies" not in table

@@ -60,6 +60,35 @@ def _check_address(host: str, port: int) -> None:
         raise ValueError(f"viewer host {host!r} is not an address to bind: {exc}") from None
 
 
+#: Ports viser tries from the one asked for, the next when one is taken.
+PORT_ATTEMPTS = 1000
+
+
+def _free_port(host: str, port: int) -> int:
+    """The first port from ``port`` on (at most :data:`PORT_ATTEMPTS`, none past 65535)
+    that every address of ``host`` can bind, as viser would pick it; ``port`` 0 stays 0
+    (the system picks). ValueError when all are taken: viser would go on past 65535 and
+    its server thread would die with a traceback."""
+    if port == 0:
+        return 0
+    infos = socket.getaddrinfo(host.strip("[]"), port, type=socket.SOCK_STREAM)
+    last = min(port + PORT_ATTEMPTS - 1, 65535)
+    for candidate in range(port, last + 1):
+        try:
+            for family, kind, proto, _, address in infos:
+                with socket.socket(family, kind, proto) as sock:
+                    # as asyncio's server does: a port in TIME_WAIT is free
+                    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                    sock.bind((address[0], candidate, *address[2:]))
+        except OSError:
+            continue
+        return candidate
+    span = f"port {port} is" if last == port else f"ports {port} to {last} are"
+    raise ValueError(
+        f"viewer {span} taken on {host}; choose another with --port (0: any free one)"
+    )
+
+
 def _start_server(host: str, port: int, guard: Guard):
     """A viser server on ``host``:``port`` behind ``guard``, without viser's own banner
     (its URL lacks the token) and without its share-URL tunnel (a client could ask it to
@@ -162,6 +191,7 @@ class Viewer:
         camera: tuple | None = None,
     ):
         _check_address(host, port)
+        port = _free_port(host, port)
         model, state, self.ball = _with_user_ball(model, state)
         self.model = model
         self.initial_model = model

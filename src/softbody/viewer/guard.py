@@ -28,7 +28,9 @@ import http.cookies
 import ipaddress
 import secrets
 import socket
+import sys
 import threading
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
@@ -93,6 +95,33 @@ class Guard:
     abandoned: bool = False
     """Set when :func:`start_guarded` gave up: a late start is refused."""
     refused: int = 0
+    malformed: int = 0
+    """Connections closed because their client sent a message viser could not read."""
+
+    def handle_messages(self, inner: Any) -> Any:
+        """viser's websocket handler ``inner``, wrapped: a message it cannot read (not
+        msgpack, a text frame, an unknown type, missing fields) ends that client's
+        connection with one line on stderr instead of the websockets library's traceback;
+        the server and the other clients go on."""
+
+        async def handler(connection: Any) -> None:
+            try:
+                await inner(connection)
+            except Exception as exc:  # what viser raised reading the client's message
+                self.malformed += 1
+                text = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+                reason = " ".join(text.split())
+                reason = reason if len(reason) <= 200 else reason[:197] + "..."
+                print(
+                    f"softbody view: closed a connection that sent a malformed message "
+                    f"({reason})",
+                    file=sys.stderr,
+                    flush=True,
+                )
+                with contextlib.suppress(Exception):
+                    await connection.close(1007, "malformed message")
+
+        return handler
 
     def cookie_name(self, port: int) -> str:
         return f"softbody-viewer-token-{port}"
@@ -189,6 +218,9 @@ def _websockets_proxy(real: Any, guard: Guard) -> _Namespace:
         if "process_request" not in kwargs:
             raise RuntimeError("viser's serve call changed: process_request is not passed")
         kwargs["process_request"] = guard.process_request(kwargs["process_request"])
+        if not args or not callable(args[0]):
+            raise RuntimeError("viser's serve call changed: the handler is not passed first")
+        args = (guard.handle_messages(args[0]), *args[1:])
         guard.hooked = True
         guard.server_thread = threading.current_thread()
         return real_serve(*args, **kwargs)
@@ -224,6 +256,11 @@ def start_guarded(factory: Any, guard: Guard, timeout: float = START_TIMEOUT) ->
     installed on the server's request path.
     """
     infra = check_viser()
+    # viser warns, with a source line, of each client value that does not match its
+    # message's types; the viewer checks every value it uses and says so in one line
+    warnings.filterwarnings(
+        "ignore", message=r"\[viser\] .* does not match annotation", category=UserWarning
+    )
     result: dict[str, Any] = {}
     done = threading.Event()
 
