@@ -169,13 +169,18 @@ def test_killed_worker_run_is_retried(scene, tmp_path):
     assert all(int(r["worker"].rsplit(":", 1)[1]) != killed for r in rows.values())
 
 
+RUNS = 240
+
+
 def test_interrupt_leaves_a_consistent_table(scene, tmp_path):
     """Invariant: Ctrl-C (SIGINT) mid-sweep exits with 130 and leaves a whole table whose
-    every run has its series on disk; the rerun executes only the runs not in it."""
+    every run has its series on disk; the rerun executes only the runs not in it. The
+    sweep is long enough (240 runs of 2 s) that its first table flush, after 2 s of runs,
+    comes well before its end: 60 runs of 1 s could all finish before that flush."""
     out = tmp_path / "out"
     argv = [sys.executable, "-m", "softbody.cli", "sweep", str(scene), "--out", str(out),
-            "--workers", "2", "--no-figure", "--vary", "bodies.0.gas.nrt=5:40:60",
-            "--set", "simulation.duration=1.0"]  # fmt: skip
+            "--workers", "2", "--no-figure", "--vary", f"bodies.0.gas.nrt=5:40:{RUNS}",
+            "--set", "simulation.duration=2.0"]  # fmt: skip
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 120
     while not (out / "runs.parquet").exists() and time.monotonic() < deadline:
@@ -185,15 +190,15 @@ def test_interrupt_leaves_a_consistent_table(scene, tmp_path):
     assert proc.returncode == 130, err
     assert err.decode().strip().endswith("softbody: interrupted (SIGINT)")
     rows = _table(out)
-    assert 0 < len(rows) < 60
+    assert 0 < len(rows) < RUNS
     import pyarrow.dataset as ds
 
     series = ds.dataset(out / "series", format="parquet").to_table()
     assert set(series.column("run_id").to_pylist()) == rows.keys()
-    spec = sweeps.build_spec(str(scene), vary={"bodies.0.gas.nrt": np.linspace(5, 40, 60)},
-                             set={"simulation.duration": 1.0})  # fmt: skip
+    spec = sweeps.build_spec(str(scene), vary={"bodies.0.gas.nrt": np.linspace(5, 40, RUNS)},
+                             set={"simulation.duration": 2.0})  # fmt: skip
     result = sweeps.run_sweep(spec, out, workers=0, figure=False, progress=None)
-    assert (result.skipped, result.executed) == (len(rows), 60 - len(rows))
+    assert (result.skipped, result.executed) == (len(rows), RUNS - len(rows))
 
 
 def _dask() -> list[str]:
