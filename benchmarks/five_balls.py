@@ -64,7 +64,9 @@ def sampled_run(model, sim: sb.Simulator) -> tuple[float, float, float]:
     return float(np.mean(energy)), float(np.min(ratios)), float(np.max(ratios))
 
 
-def run(integrator: str, step: str, options: dict, reference_energy: float) -> dict:
+def setup(integrator: str, step: str, options: dict) -> tuple[sb.Model, float, dict]:
+    """The scene's model, the step [s] a run of RUNS takes (the scene's, 1/60 s, or 0.9 of
+    the integrator's stability estimate) and its Simulator options."""
     scene = load_scene("bouncing-balls")
     model = scene.model
     if step == "scene dt":
@@ -74,6 +76,11 @@ def run(integrator: str, step: str, options: dict, reference_energy: float) -> d
         options = {"implicit_tolerance": 1e-3, **options}
     else:
         dt = 0.9 * sb.Simulator(model, integrator=integrator, dt=1e-6).stable_dt
+    return model, dt, options
+
+
+def run(integrator: str, step: str, options: dict, reference_energy: float) -> dict:
+    model, dt, options = setup(integrator, step, options)
     with warnings.catch_warnings():
         # a step past the (conservative) projective estimate warns; the checks decide
         warnings.simplefilter("ignore", sb.StabilityWarning)

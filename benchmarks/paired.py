@@ -57,18 +57,9 @@ def build(kind: str, case: int, subdivisions: int = 4) -> tuple[sb.Model, sb.Sim
         model = ball_drop(subdivisions)
     else:
         import five_balls
-        from softbody.scenes.loader import load_scene
 
         integrator, step, options = five_balls.RUNS[case]
-        scene = load_scene("bouncing-balls")
-        model = scene.model
-        if step == "scene dt":
-            dt = scene.dt
-        elif step == "1/60 s":
-            dt = 1.0 / 60.0
-            options = {"implicit_tolerance": 1e-3, **options}
-        else:
-            dt = 0.9 * sb.Simulator(model, integrator=integrator, dt=1e-6).stable_dt
+        model, dt, options = five_balls.setup(integrator, step, options)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", sb.StabilityWarning)
         _CACHE[key] = model, sb.Simulator(model, integrator=integrator, dt=dt, **options)

@@ -168,25 +168,27 @@ def test_a_blow_up_leaves_a_consistent_state():
     np.testing.assert_array_equal(start.particle_qd, state.particle_qd)
 
 
+class _Stop(Exception):
+    """What the tests' SIGUSR1 handler raises."""
+
+
+def _raise_stop(signum, frame):
+    raise _Stop()
+
+
 def test_an_exception_from_a_signal_handler_stops_the_run_on_the_main_thread():
     """Contract: the compiled loop runs Python's signal handlers between steps on the main
     thread, so a handler's exception, raised 0.3 s into a run of 10**7 steps (seconds),
     ends the run there with the state consistent (time = step_count dt)."""
 
-    class Stop(Exception):
-        pass
-
-    def on_signal(signum, frame):
-        raise Stop()
-
     model = ball_model(subdivisions=1)
     sim = sb.Simulator(model, integrator="symplectic_euler", dt=1e-4)
     state = model.state()
-    previous = signal.signal(signal.SIGUSR1, on_signal)
+    previous = signal.signal(signal.SIGUSR1, _raise_stop)
     timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGUSR1))
     try:
         timer.start()
-        with pytest.raises(Stop):
+        with pytest.raises(_Stop):
             sim.run(state, 10**7)
     finally:
         timer.cancel()
@@ -390,12 +392,6 @@ def test_one_simulator_refuses_a_second_thread():
     second thread while one runs raises RuntimeError saying to use one Simulator per
     thread (instead of sharing the solver's buffers and silently giving wrong states)."""
 
-    class Stop(Exception):
-        pass
-
-    def on_signal(signum, frame):
-        raise Stop()
-
     model = ball_model(subdivisions=1)
     sim = sb.Simulator(model, integrator="symplectic_euler", dt=1e-4)
     errors: list[BaseException] = []
@@ -410,11 +406,11 @@ def test_one_simulator_refuses_a_second_thread():
                 errors.append(exc)
         os.kill(os.getpid(), signal.SIGUSR1)  # ends the main thread's run
 
-    previous = signal.signal(signal.SIGUSR1, on_signal)
+    previous = signal.signal(signal.SIGUSR1, _raise_stop)
     other = threading.Thread(target=second_caller)
     try:
         other.start()
-        with pytest.raises(Stop):
+        with pytest.raises(_Stop):
             sim.run(model.state(), 10**7)  # seconds; the signal ends it 0.2 s in
     finally:
         other.join(timeout=60)

@@ -10,6 +10,7 @@ round-off.
 
 from __future__ import annotations
 
+import functools
 import os
 import warnings
 import weakref
@@ -51,7 +52,13 @@ def terms() -> list[dict]:
     (projective dynamics solves it by its projection), ``fused`` (the fused symplectic
     Euler pass covers it), ``energy`` (it has one) and ``external`` (its energy is work
     done from outside the model, such as the grab spring's)."""
-    return [dict(t) for t in _core.term_table()]
+    return [dict(t) for t in _term_table()]
+
+
+@functools.cache
+def _term_table() -> tuple:
+    """The registry as the core reports it (fixed for a build: read once)."""
+    return tuple(_core.term_table())
 
 
 def available_threads() -> int:

@@ -5,6 +5,7 @@ registry's order; and the potential energy of the conservative ones.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import pkgutil
 from typing import NamedTuple
@@ -50,8 +51,10 @@ def terms(
     }
 
 
+@functools.cache
 def reference_terms() -> dict:
-    """Every reference module's ``TERMS``: term name -> its force function."""
+    """Every reference module's ``TERMS``: term name -> its force function (the package
+    scanned once)."""
     out: dict = {}
     for info in pkgutil.iter_modules(softbody.reference.__path__):
         module = importlib.import_module(f"softbody.reference.{info.name}")
