@@ -21,7 +21,7 @@
 #define SOFTBODY_ENUM_SOFT_CONTACT_MODE(X) X(NONE, 0) X(BOUNDING, 1) X(SURFACE, 2)
 #define SOFTBODY_ENUM_STATUS(X)                                                              \
     X(OK, 0) X(NONFINITE, 1) X(RUNAWAY, 2) X(BAD_VOLUME, 3) X(SHRUNK, 4) X(EXPLODED, 5)    \
-    X(NEED_HASH, 6) X(STOPPED, 7)
+    X(NEED_HASH, 6) X(STOPPED, 7) X(BAD_GAS, 8)
 
 // Every set, with the name of its Python IntEnum.
 #define SOFTBODY_ENUMS(X)                                        \

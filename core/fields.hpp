@@ -21,7 +21,11 @@
     X(M, volumes, mc_count, mc_samples)           \
     X(K, gases, schedule_count, schedule_time)    \
     X(P, pins, count, pin_particle)               \
-    X(C, colliders, count, collider_kind)
+    X(C, colliders, count, collider_kind)         \
+    X(V, vents, count, vent_body)                 \
+    X(O, orifices, count, orifice_bodies)         \
+    X(I, inflators, count, inflator_body)         \
+    X(Q, inflators, table_count, inflator_time)
 
 #define SOFTBODY_FIELDS_PARTICLES(F)                                                              \
     F(particles, mass, particle_mass, f64, (N), none, "kg",                                       \
@@ -101,7 +105,17 @@
     F(gases, schedule_time, schedule_time, f64, (K), none, "s",                                   \
       "gas schedule times")                                                                       \
     F(gases, schedule_value, schedule_value, f64, (K), none, "J or Pa",                           \
-      "gas schedule values (nRT [J] or P0 [Pa])")
+      "gas schedule values (nRT [J] or P0 [Pa])")                                                 \
+    F(gases, molar_mass, body_gas_molar_mass, f64, (B), finite_nonneg, "kg/mol",                  \
+      "molar mass of each body's gas (0.028965 for air)")                                         \
+    F(gases, temperature, body_gas_temperature, f64, (B), finite_nonneg, "K",                     \
+      "temperature of each body's gas at the initial positions (State starts from it)")          \
+    F(gases, ambient_temperature, body_ambient_temperature, f64, (B), finite_nonneg, "K",         \
+      "temperature of the air outside each body: what flows in through its vents and leaks")     \
+    F(gases, leak, body_leak_coefficient, f64, (B), finite_nonneg, "kg/(s m^2 Pa)",               \
+      "fabric leakage of each body: mass flow per area per pressure difference; 0 for none")     \
+    F(gases, flow_paths, body_flow_paths, i64, (B), index(0, 1 << 30), "",                        \
+      "vents, orifices and leaks each body's gas can leave through (the outflow limiter)")
 
 #define SOFTBODY_FIELDS_PINS(F)                                                                   \
     F(pins, particle, pin_particle, i64, (P), index(0, N), "",                                    \
@@ -151,6 +165,39 @@
     F(colliders, motion_frequency, collider_motion_frequency, f64, (C), none, "Hz",               \
       "frequency of oscillating colliders")
 
+#define SOFTBODY_FIELDS_VENTS(F)                                                                  \
+    F(vents, body, vent_body, i64, (V), index(0, B), "",                                          \
+      "body each vent lets gas out of (to its ambient pressure)")                                \
+    F(vents, area, vent_area, f64, (V), finite_nonneg, "m^2",                                     \
+      "open area of each vent")                                                                   \
+    F(vents, discharge, vent_discharge_coefficient, f64, (V), finite_nonneg, "",                  \
+      "discharge coefficient C_d of each vent")                                                   \
+    F(vents, open_pressure, vent_open_pressure, f64, (V), none, "Pa",                             \
+      "gauge pressure P - P_ambient at which each vent opens and stays open; inf: never by "     \
+      "pressure")                                                                                 \
+    F(vents, open_time, vent_open_time, f64, (V), none, "s",                                      \
+      "time at which each vent opens; -inf: open from the start, inf: never by time")
+
+#define SOFTBODY_FIELDS_ORIFICES(F)                                                               \
+    F(orifices, bodies, orifice_bodies, i64, (O, 2), index(0, B), "",                             \
+      "the two bodies (chambers) each orifice joins")                                             \
+    F(orifices, area, orifice_area, f64, (O), finite_nonneg, "m^2",                               \
+      "open area of each orifice")                                                                \
+    F(orifices, discharge, orifice_discharge_coefficient, f64, (O), finite_nonneg, "",            \
+      "discharge coefficient C_d of each orifice")
+
+#define SOFTBODY_FIELDS_INFLATORS(F)                                                              \
+    F(inflators, body, inflator_body, i64, (I), index(0, B), "",                                  \
+      "body each inflator fills")                                                                 \
+    F(inflators, temperature, inflator_temperature, f64, (I), finite_nonneg, "K",                 \
+      "temperature of the gas each inflator delivers")                                            \
+    F(inflators, range, inflator_range, i64, (I, 2), range(Q), "",                                \
+      "[begin, end) rows of each inflator's mass-flow table")                                     \
+    F(inflators, time, inflator_time, f64, (Q), finite, "s",                                      \
+      "mass-flow table times, increasing within each inflator")                                   \
+    F(inflators, mass_flow, inflator_mass_flow, f64, (Q), finite_nonneg, "kg/s",                  \
+      "mass-flow table values, piecewise linear in time")
+
 // The parts: P(struct, member of Model, its fields, members it holds besides them).
 #define SOFTBODY_MODEL_PARTS(P)                                                   \
     P(Particles, particles, SOFTBODY_FIELDS_PARTICLES, index count = 0;)          \
@@ -164,4 +211,7 @@
     P(Pins, pins, SOFTBODY_FIELDS_PINS, index count = 0;)                         \
     P(Drag, drag, SOFTBODY_FIELDS_DRAG, )                                         \
     P(SoftContacts, soft_contacts, SOFTBODY_FIELDS_SOFT_CONTACTS, )               \
-    P(Colliders, colliders, SOFTBODY_FIELDS_COLLIDERS, index count = 0;)
+    P(Colliders, colliders, SOFTBODY_FIELDS_COLLIDERS, index count = 0;)          \
+    P(Vents, vents, SOFTBODY_FIELDS_VENTS, index count = 0;)                      \
+    P(Orifices, orifices, SOFTBODY_FIELDS_ORIFICES, index count = 0;)             \
+    P(Inflators, inflators, SOFTBODY_FIELDS_INFLATORS, index count = 0; index table_count = 0;)

@@ -81,6 +81,11 @@ void eval_energies(const Model& m, const Control& c, double t, const double* q,
     forms::energies(Eval{m, c, t, q, q, gas}, out.total, out.body);
 }
 
+void eval_flows(const Model& m, const Control& c, double t, const double* q, const double* moles,
+                const double* temperature, const double* vent_open, const BodyGas& gas) {
+    gas_state::flows_at(m, c, t, q, moles, temperature, vent_open, gas);
+}
+
 unsigned active_terms(const Model& m, const Control& c) {
     unsigned mask = 0;
     Terms::each([&](auto term, int k) {
@@ -123,7 +128,7 @@ const KernelTable& kernel_table() {
                                    projective_solve, eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
-                                   eval_energies, active_terms, stiffness_bounds};
+                                   eval_energies, eval_flows, active_terms, stiffness_bounds};
     return table;
 }
 

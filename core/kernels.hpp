@@ -99,6 +99,12 @@ struct KernelTable {
     /// its volume by its own method (into gas.volume, with gas.lo/hi as scratch).
     void (*eval_energies)(const Model&, const Control&, double t, const double* q,
                           const BodyGas& gas, TermEnergies& out);
+    /// The molar flows [mol/s] into and out of each body's gas (gas.flow_in, flow_in_t,
+    /// flow_out) at time t, positions q, amounts moles (B,) [mol], temperatures (B,) [K]
+    /// and vent latches (V,), by the flow terms' laws without the step limiter.
+    void (*eval_flows)(const Model&, const Control&, double t, const double* q,
+                       const double* moles, const double* temperature, const double* vent_open,
+                       const BodyGas& gas);
     /// Bit k set: registered term k acts in a call with model m and control c.
     unsigned (*active_terms)(const Model& m, const Control& c);
     /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors.

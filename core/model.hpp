@@ -82,6 +82,9 @@ struct Control {
     double grab_stiffness = 0.0;              // [N/m]
     double grab_damping = 0.0;                // [N s/m]
     double wind[3] = {0.0, 0.0, 0.0};         // [m/s] the air's velocity in this call
+    const double* vent_area = nullptr;        // (V,) [m^2], NaN = the model's (a valve)
+    const double* orifice_area = nullptr;     // (O,) [m^2], NaN = the model's
+    const double* inflator_flow = nullptr;    // (I,) [kg/s], NaN = the inflator's table
 };
 
 /// The changing state a run advances in place (softbody.sim.state.State).
@@ -91,7 +94,13 @@ struct StateView {
     double* collider_q = nullptr;        // (C, 3) [m]
     double* collider_rot = nullptr;      // (C, 3, 3)
     double* collider_impulse = nullptr;  // (C, 3) [N s], accumulated over the call
+    double* gas_moles = nullptr;         // (B,) amount of gas in each body [mol]
+    double* gas_temperature = nullptr;   // (B,) its temperature [K]
+    double* vent_open = nullptr;         // (V,) 1 once a vent has opened, else 0
 };
+
+/// Rows (B,) of BodyGas::work: the schemes' gas stages (solvers/gas_state.hpp).
+constexpr int kGasWorkSlots = 9;
 
 /// What the gas terms compute once per force evaluation, per body.
 struct BodyGas {
@@ -100,6 +109,23 @@ struct BodyGas {
     double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2]
     double* lo = nullptr;               // (B, 3) bounds of bodies with a bounding or MC volume
     double* hi = nullptr;               // (B, 3)
+    // The gas state of this evaluation (terms/flows.hpp): amount n [mol] and theta [K], the
+    // temperature the gas would have at its reference volume after an isentropic change
+    // (the temperature itself for an isothermal gas), so that nRT = R n theta drives the
+    // gas law in closed form. Null moles: the model's value drives it (a call without a
+    // state: the diagnostics pass the state's value as an override).
+    const double* moles = nullptr;      // (B,)
+    const double* theta = nullptr;      // (B,)
+    // What the flow terms add up at this evaluation (flows.hpp), per body: molar inflow
+    // [mol/s], inflow times its temperature [mol K/s] and outflow [mol/s]; the surface area
+    // [m^2] (leaks), and the step h [s] the outflow limiter divides by.
+    double* flow_in = nullptr;          // (B,)
+    double* flow_in_t = nullptr;        // (B,)
+    double* flow_out = nullptr;         // (B,)
+    double* area = nullptr;             // (B,)
+    const double* vent_open = nullptr;  // (V,) the state's latches
+    double flow_step = 0.0;
+    double* work = nullptr;             // (kGasWork, B) the schemes' gas stages (gas_state.hpp)
 };
 
 /// The surface contacts' hash entries (triangle indices): a buffer its owner grows when a
@@ -292,7 +318,8 @@ struct TermTraits {
 /// OK; NONFINITE: a position or velocity became NaN or infinite; RUNAWAY: a particle moved
 /// faster than the speed limit; BAD_VOLUME: a body volume became NaN, zero or negative;
 /// SHRUNK / EXPLODED: a body volume fell below / grew past its limit; NEED_HASH: the
-/// spatial hash needs more room; STOPPED: RunParams::poll asked to stop (an interrupt), the
+/// spatial hash needs more room; BAD_GAS: a body's gas amount or temperature became
+/// negative or not finite (value: the amount [mol]); STOPPED: RunParams::poll asked to stop (an interrupt), the
 /// steps done are kept (enums.hpp lists them).
 enum Status : int { SOFTBODY_ENUM_STATUS(SOFTBODY_ENUM_MEMBER) };
 

@@ -87,6 +87,7 @@ def _touching_balls():
 
 
 def _simulate(solver, model, state, steps, ratio_max=1e3):
+    state.conform(model)  # the core takes a state that has met its model (its gas set)
     return solver.simulate(1, steps, 2e-4, control_data(model), state,
                            RunLimits(1e4, 1e-3, ratio_max))  # fmt: skip
 

@@ -186,6 +186,7 @@ def test_the_core_refuses_an_inconsistent_multigrid_hierarchy():
         _core.apply_multigrid(core, cases["vertex_neighbor"], np.zeros((model.particle_count, 3)))
     solver = _core.ImplicitSolver(core, multigrid=mg)
     state = model.state()
+    state.conform(model)  # the core takes a state that has met its model (its gas set)
     args = (control_data(model), state, RunLimits(1e4, 1e-3, 1e3))
     with pytest.raises(ValueError, match="tolerance must lie in"):
         solver.simulate(False, 1, 1 / 60, *args, 0.0, 10, False)

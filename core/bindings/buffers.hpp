@@ -21,6 +21,8 @@ constexpr Index kMostEntriesPerTriangle = 512;
 /// for surface soft contacts (soft_contact_mode 2) the spatial hash with room for
 /// `hash_capacity` entries.
 class Buffers {
+    static constexpr size_t gas_state_slots = softbody::kGasWorkSlots;
+
 public:
     explicit Buffers(const softbody::Model& m, int rows, Index hash_capacity = 0) {
         const size_t n3 = static_cast<size_t>(3 * m.particles.count);
@@ -29,6 +31,7 @@ public:
         per_body_.assign(11, std::vector<double>(3 * b, 0.0));
         per_collider_.assign(3, std::vector<double>(3 * c, 0.0));
         gradient_.assign(n3, 0.0);
+        gas_work_.assign((gas_state_slots + 4) * b, 0.0);
         if (rows > 0) {  // the force pass's packed rows (a volume-only call needs none)
             const size_t lanes = static_cast<size_t>(8 * m.slots.group_count);
             rows_buffer_.assign(8 * lanes, 0.0);  // padding rows stay zero
@@ -41,6 +44,11 @@ public:
         gas.lo = per_body_[2].data();
         gas.hi = per_body_[3].data();
         gas.volume_gradient = gradient_.data();
+        gas.work = gas_work_.data();
+        gas.flow_in = gas.work + gas_state_slots * b;
+        gas.flow_in_t = gas.flow_in + b;
+        gas.flow_out = gas.flow_in_t + b;
+        gas.area = gas.flow_out + b;
         contact.body_lo = per_body_[4].data();
         contact.body_hi = per_body_[5].data();
         contact.body_velocity = per_body_[6].data();
@@ -80,7 +88,7 @@ public:
 
 private:
     std::vector<std::vector<double>> rows_, per_body_, per_collider_;
-    std::vector<double> gradient_, rows_buffer_, lane_pnet_;
+    std::vector<double> gradient_, rows_buffer_, lane_pnet_, gas_work_;
     std::vector<Index> hash_start_, hash_count_, hash_entries_;
     softbody::HashEntries entries_;
     Index most_entries_ = 0;
@@ -113,7 +121,7 @@ inline Index checked_capacity(const softbody::Model& m, std::optional<Index> ask
 
 /// A run's state arrays and limits, checked against the model (views held for one call).
 struct CheckedRun {
-    F64 q, qd, collider_q, collider_rot, collider_impulse;
+    F64 q, qd, collider_q, collider_rot, collider_impulse, gas_moles, gas_temperature, vent_open;
     softbody::StateView state;
     softbody::RunParams params;
 };
@@ -133,8 +141,13 @@ inline CheckedRun checked_run(const softbody::Model& m, Index steps, double dt, 
         writable(state.attr("collider_rotation"), "collider_rot", {m.colliders.count, 3, 3});
     run.collider_impulse =
         writable(state.attr("collider_impulse"), "collider_impulse", {m.colliders.count, 3});
-    run.state = {run.q.data(), run.qd.data(), run.collider_q.data(), run.collider_rot.data(),
-                 run.collider_impulse.data()};
+    run.gas_moles = writable(state.attr("body_gas_moles"), "body_gas_moles", {m.bodies.count});
+    run.gas_temperature =
+        writable(state.attr("body_gas_temperature"), "body_gas_temperature", {m.bodies.count});
+    run.vent_open = writable(state.attr("vent_open"), "vent_open", {m.vents.count});
+    run.state = {run.q.data(),          run.qd.data(),        run.collider_q.data(),
+                 run.collider_rot.data(), run.collider_impulse.data(), run.gas_moles.data(),
+                 run.gas_temperature.data(), run.vent_open.data()};
     run.params.steps = steps;
     run.params.t0 = nb::cast<double>(state.attr("time"));
     run.params.dt = dt;
@@ -142,6 +155,15 @@ inline CheckedRun checked_run(const softbody::Model& m, Index steps, double dt, 
     run.params.ratio_min = nb::cast<double>(limits.attr("ratio_min"));
     run.params.ratio_max = nb::cast<double>(limits.attr("ratio_max"));
     return run;
+}
+
+/// A solver's gas buffers pointed at a run's state (its amounts and vent latches) for steps
+/// of dt [s] (the flows' limiter).
+inline void attach_gas(softbody::BodyGas& gas, const CheckedRun& run) {
+    gas.moles = run.state.gas_moles;
+    gas.theta = gas.work;  // gas_state::kTheta
+    gas.vent_open = run.state.vent_open;
+    gas.flow_step = run.params.dt;
 }
 
 }  // namespace softbody::bindings

@@ -149,6 +149,12 @@ struct CoreControl {
         for (int k = 0; k < 3; ++k) view.grab_target[k] = grab.data()[k];
         view.grab_stiffness = nb::cast<double>(d.attr("grab_stiffness"));
         view.grab_damping = nb::cast<double>(d.attr("grab_damping"));
+        vent_area = attribute<ConstF64>(d, "vent_area", {m.vents.count});
+        orifice_area = attribute<ConstF64>(d, "orifice_area", {m.orifices.count});
+        inflator_flow = attribute<ConstF64>(d, "inflator_mass_flow", {m.inflators.count});
+        view.vent_area = vent_area.data();
+        view.orifice_area = orifice_area.data();
+        view.inflator_flow = inflator_flow.data();
         const double* wind = attribute<ConstF64>(d, "wind", {3}).data();
         for (int k = 0; k < 3; ++k) {
             if (!std::isfinite(wind[k])) fail("Control wind must be 3 finite numbers [m/s]");
@@ -156,7 +162,7 @@ struct CoreControl {
         }
     }
 
-    ConstF64 gas, particle_f, anchor, pin, target;
+    ConstF64 gas, particle_f, anchor, pin, target, vent_area, orifice_area, inflator_flow;
     softbody::Control view;
 };
 

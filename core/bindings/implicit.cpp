@@ -165,6 +165,7 @@ public:
         if (max_iterations < 1) fail("max_iterations must be >= 1");
         CheckedRun run = checked_run(m, steps, dt, state, limits);
         CoreControl c(m, control);
+        attach_gas(w_.gas, run);
         softbody::ImplicitParams ip;
         ip.bdf2 = bdf2;
         ip.tolerance = tolerance;

@@ -130,6 +130,7 @@ public:
         CheckedRun run = checked_run(m, steps, dt, state, limits);
         run.params.iterations = iterations;
         CoreControl c(m, control);
+        attach_gas(w_.gas, run);
         RunPoll poll(run.params, progress);
         softbody::RunResult r;
         {

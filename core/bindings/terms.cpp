@@ -162,6 +162,27 @@ nb::ndarray<nb::numpy, double> copy_array(const double* data, size_t count) {
     return to_numpy(std::vector<double>(data, data + count));
 }
 
+/// The molar flows at a state: (inflow (B,), inflow times its temperature (B,), outflow
+/// (B,)) [mol/s, mol K/s, mol/s], by the flow terms' laws without the step limiter.
+nb::tuple eval_flows(const CoreModel& core, nb::handle control, double t, ConstF64 q,
+                     ConstF64 moles, ConstF64 temperature, ConstF64 vent_open) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particles.count, 3});
+    check_shape(moles, "moles", {m.bodies.count});
+    check_shape(temperature, "temperature", {m.bodies.count});
+    check_shape(vent_open, "vent_open", {m.vents.count});
+    CoreControl c(m, control);
+    Buffers b(m, 0);
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().eval_flows(m, c.view, t, q.data(), moles.data(), temperature.data(),
+                                       vent_open.data(), b.gas);
+    }
+    const size_t count = static_cast<size_t>(m.bodies.count);
+    return nb::make_tuple(copy_array(b.gas.flow_in, count), copy_array(b.gas.flow_in_t, count),
+                          copy_array(b.gas.flow_out, count));
+}
+
 /// Each registered term's energy at (q, t): per term with an energy its total and each
 /// body's share.
 nb::dict eval_energies(const CoreModel& core, nb::handle control, double t, ConstF64 q) {
@@ -322,6 +343,11 @@ void bind_terms(nb::module_& mod) {
             nb::arg("body_tri_range").noconvert(), nb::arg("body_volume_method").noconvert(),
             nb::arg("body_mc_range").noconvert(), nb::arg("mc_samples").noconvert(),
             "Volume (B,) [m^3] of each body by its method, from plain arrays.");
+    mod.def("eval_flows", &eval_flows, nb::arg("model"), nb::arg("control"), nb::arg("t"),
+            nb::arg("q").noconvert(), nb::arg("moles").noconvert(),
+            nb::arg("temperature").noconvert(), nb::arg("vent_open").noconvert(),
+            "(inflow, inflow times its temperature, outflow) (B,) each [mol/s, mol K/s, "
+            "mol/s]: every flow term's molar flows at a state, without the step limiter.");
     mod.def("eval_volumes", &eval_volumes, nb::arg("model"), nb::arg("control"), nb::arg("t"),
             nb::arg("q").noconvert(),
             "(volume (B,) [m^3], pressure (B,) [Pa], dV/dx (N, 3) [m^2]) at time t [s].");

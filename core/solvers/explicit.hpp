@@ -8,6 +8,7 @@
 #include "simd.hpp"
 #include "solvers/common.hpp"
 #include "solvers/forms.hpp"
+#include "solvers/gas_state.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::explicit_solver {
@@ -37,33 +38,76 @@ inline void accumulate(const Model& m, double weight, const double* vs, const do
     }
 }
 
-/// One step of `scheme` from (w.q0, w.v0) with the start forces in w.f, into q, qd.
+/// One step of `scheme` from (w.q0, w.v0) with the start forces in w.f, into q, qd. With
+/// `flowing`, the gas state too, from its start (kN0, kT0) with the rates there (kDn, kDt),
+/// by the same stages (solvers/gas_state.hpp), into s's amounts and kTheta.
 inline void step(const Model& m, const Control& c, int scheme, double t, double dt, double* q,
-                 double* qd, const ExplicitBuffers& w) {
+                 double* qd, const ExplicitBuffers& w, bool flowing, const StateView& s) {
+    using namespace gas_state;
     const index n = m.particles.count;
+    const BodyGas& g = w.gas;
+    double* n0 = slot(m, g, kN0);
+    double* t0 = slot(m, g, kT0);
+    double* ns = slot(m, g, kNs);
+    double* ts = slot(m, g, kTs);
+    double* dn = slot(m, g, kDn);
+    double* dth = slot(m, g, kDt);
+    double* theta = slot(m, g, kTheta);
+    const BodyGas stage_gas = at(g, ns, ts);
+    // the forces (and, flowing, the gas rates) at a stage whose gas state is ns, ts
+    auto eval = [&](double time, const double* x, const double* v) {
+        if (!flowing) {
+            forms::eval_forces(m, c, time, x, v, g, w.lanes, w.f);
+            return;
+        }
+        forms::eval_forces(m, c, time, x, v, stage_gas, w.lanes, w.f);
+        rates(m, c, time, x, v, stage_gas, dn, dth);
+    };
     if (scheme == Integrator::EULER) {  // explicit Euler (first order)
         stage(m, w.q0, w.v0, dt, w.v0, w.f, q, qd);
+        if (flowing) advance(m, dt, n0, t0, dn, dth, s.gas_moles, theta);
     } else if (scheme == Integrator::MIDPOINT) {  // midpoint: slopes at the half step (second order)
         stage(m, w.q0, w.v0, 0.5 * dt, w.v0, w.f, w.qs, w.vs);
-        forms::eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.lanes, w.f);
+        if (flowing) advance(m, 0.5 * dt, n0, t0, dn, dth, ns, ts);
+        eval(t + 0.5 * dt, w.qs, w.vs);
         stage(m, w.q0, w.v0, dt, w.vs, w.f, q, qd);
+        if (flowing) advance(m, dt, n0, t0, dn, dth, s.gas_moles, theta);
     } else if (scheme == Integrator::RK4) {  // classical RK4
+        double* an = slot(m, g, kAccN);
+        double* at_ = slot(m, g, kAccT);
+        const index bodies = m.bodies.count;
+        auto gas_accumulate = [&](double weight) {
+            if (!flowing) return;
+            for (index b = 0; b < bodies; ++b) {
+                an[b] += weight * dn[b];
+                at_[b] += weight * dth[b];
+            }
+        };
+        if (flowing) std::fill(an, an + bodies, 0.0), std::fill(at_, at_ + bodies, 0.0);
         for (index k = 0; k < 3 * n; ++k) w.acc_q[k] = w.acc_v[k] = 0.0;
         accumulate(m, 1.0, w.v0, w.f, w.acc_q, w.acc_v);
+        gas_accumulate(1.0);
         stage(m, w.q0, w.v0, 0.5 * dt, w.v0, w.f, w.qs, w.vs);
-        forms::eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.lanes, w.f);
+        if (flowing) advance(m, 0.5 * dt, n0, t0, dn, dth, ns, ts);
+        eval(t + 0.5 * dt, w.qs, w.vs);
         accumulate(m, 2.0, w.vs, w.f, w.acc_q, w.acc_v);
+        gas_accumulate(2.0);
         stage(m, w.q0, w.v0, 0.5 * dt, w.vs, w.f, w.qs, w.vs);
-        forms::eval_forces(m, c, t + 0.5 * dt, w.qs, w.vs, w.gas, w.lanes, w.f);
+        if (flowing) advance(m, 0.5 * dt, n0, t0, dn, dth, ns, ts);
+        eval(t + 0.5 * dt, w.qs, w.vs);
         accumulate(m, 2.0, w.vs, w.f, w.acc_q, w.acc_v);
+        gas_accumulate(2.0);
         stage(m, w.q0, w.v0, dt, w.vs, w.f, w.qs, w.vs);
-        forms::eval_forces(m, c, t + dt, w.qs, w.vs, w.gas, w.lanes, w.f);
+        if (flowing) advance(m, dt, n0, t0, dn, dth, ns, ts);
+        eval(t + dt, w.qs, w.vs);
         accumulate(m, 1.0, w.vs, w.f, w.acc_q, w.acc_v);
+        gas_accumulate(1.0);
         const double h = dt / 6.0;
         for (index k = 0; k < 3 * n; ++k) {
             q[k] = w.q0[k] + h * w.acc_q[k];
             qd[k] = w.v0[k] + h * w.acc_v[k];
         }
+        if (flowing) advance(m, h, n0, t0, an, at_, s.gas_moles, theta);
     } else if (scheme == Integrator::SYMPLECTIC_EULER) {  // symplectic Euler: v += dt a(q, v), then q += dt v_new
         for (index i = 0; i < n; ++i) {
             const double h = dt * m.particles.inv_mass[i];
@@ -74,6 +118,7 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
                 q[r] = w.q0[r] + dt * v;
             }
         }
+        if (flowing) advance(m, dt, n0, t0, dn, dth, s.gas_moles, theta);
     } else {  // velocity Verlet: half kick, drift, forces at the new positions, half kick
         for (index i = 0; i < n; ++i) {
             const double h = 0.5 * dt * m.particles.inv_mass[i];
@@ -84,10 +129,25 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
                 q[r] = w.q0[r] + dt * v;
             }
         }
-        forms::eval_forces(m, c, t + dt, q, w.vs, w.gas, w.lanes, w.f);
+        // the gas by Heun: a predictor to the step's end, then the mean of the two rates
+        double* an = slot(m, g, kAccN);
+        double* at_ = slot(m, g, kAccT);
+        if (flowing) {
+            std::copy(dn, dn + m.bodies.count, an);
+            std::copy(dth, dth + m.bodies.count, at_);
+            advance(m, dt, n0, t0, dn, dth, ns, ts);
+        }
+        eval(t + dt, q, w.vs);
         for (index i = 0; i < n; ++i) {
             const double h = 0.5 * dt * m.particles.inv_mass[i];
             for (int k = 0; k < 3; ++k) qd[3 * i + k] = w.vs[3 * i + k] + h * w.f[3 * i + k];
+        }
+        if (flowing) {
+            for (index b = 0; b < m.bodies.count; ++b) {
+                an[b] = 0.5 * (an[b] + dn[b]);
+                at_[b] = 0.5 * (at_[b] + dth[b]);
+            }
+            advance(m, dt, n0, t0, an, at_, s.gas_moles, theta);
         }
     }
 }
@@ -180,6 +240,7 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
         const double h = p.dt * m.particles.inv_mass[i];
         for (int k = 0; k < 3; ++k) h3[3 * i + k] = h;
     }
+    const bool flowing = gas_state::flowing(m, c);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
@@ -189,6 +250,8 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
             r.steps_done = step_index;
             return r;
         }
+        // the gas by forward Euler, symplectic Euler's own order, from the rates here
+        if (flowing) gas_state::forward_euler(m, c, t, p.dt, s.q, s.qd, s, w.gas);
         colliders::Seen seen;
         symplectic_pass(m, c, p.dt, h3, w.gas, w.f, s.q, s.qd, w.q0, w.v0, seen);
         const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact, &seen);
@@ -202,37 +265,56 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
             loop::copy(w.q0, s.q, 3 * n);
             loop::copy(w.v0, s.qd, 3 * n);
             r.steps_done = step_index;
-            return r;
         }
+        if (flowing) r = gas_state::end_step(m, s, w.gas, r, step_index, w.q0, w.v0);
+        if (r.status != OK) return r;
     }
     return {OK, p.steps, -1, 0.0};
 }
 
-/// Advance s.q, s.qd by p.steps steps of p.dt from p.t0. On a particle failure the state goes
-/// back to the failing step's start; on a volume failure it is the state whose volume failed.
-/// NEED_HASH (value: the entries needed) also leaves the state at the failing step's start.
-inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
-                          const StateView& s, const ExplicitBuffers& w) {
+/// The steps of simulate (gas_state::begin done, finish to follow).
+inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
+                           const StateView& s, const ExplicitBuffers& w) {
     const index n3 = 3 * m.particles.count;
-    loop::begin_run(m, c, p, s, w.contact);
     if (fused_symplectic(m, c, p.scheme)) return simulate_symplectic_fused(m, c, p, s, w);
+    const bool flowing = gas_state::flowing(m, c);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);
+        if (flowing) gas_state::save_start(m, s, w.gas);
         forms::eval_forces(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);
         RunResult r = loop::check_volumes(m, w.gas.volume, p.ratio_min, p.ratio_max);
         if (r.status != OK) {
             r.steps_done = step_index;
             return r;
         }
-        step(m, c, p.scheme, t, p.dt, s.q, s.qd, w);
+        if (flowing) {
+            gas_state::latch(m, c, t, s.q, w.gas, s.vent_open);
+            gas_state::rates(m, c, t, s.q, s.qd, w.gas, gas_state::slot(m, w.gas, gas_state::kDn),
+                             gas_state::slot(m, w.gas, gas_state::kDt));
+        }
+        step(m, c, p.scheme, t, p.dt, s.q, s.qd, w, flowing, s);
         // contacts and particle checks; a failure (or a hash too small) undoes the step
         r = loop::end_step(m, c, p, step_index, t, s, w.q0, w.v0, w.contact);
+        if (flowing) r = gas_state::end_step(m, s, w.gas, r, step_index, w.q0, w.v0);
         if (r.status != OK) return r;
     }
     return {OK, p.steps, -1, 0.0};
+}
+
+/// Advance s.q, s.qd (and the gas state) by p.steps steps of p.dt from p.t0. On a particle
+/// failure the state goes back to the failing step's start; on a volume failure it is the
+/// state whose volume failed. NEED_HASH (value: the entries needed) also leaves the state
+/// at the failing step's start.
+inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
+                          const StateView& s, const ExplicitBuffers& w) {
+    loop::begin_run(m, c, p, s, w.contact);
+    gas_state::begin(m, s.q, s, w.gas);
+    const RunResult r = run_steps(m, c, p, s, w);
+    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, w.gas);
+    return r;
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::explicit_solver

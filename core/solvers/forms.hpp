@@ -52,12 +52,13 @@ inline void update(const Eval& e) {
     Terms::each([&](auto term, int) { decltype(term)::update(e, false); });
 }
 
-/// Whether every term that acts in this call is one the fused symplectic pass covers.
+/// Whether every term that acts in this call with a force is one the fused symplectic
+/// pass covers (the flows move gas, which that pass's loop steps itself).
 inline bool all_fused(const Model& m, const Control& c) {
     bool fused = true;
     Terms::each([&](auto term, int) {
         using T = decltype(term);
-        if (!T::kFused && T::active(m, c)) fused = false;
+        if (!T::kFused && !T::kFlow && T::active(m, c)) fused = false;
     });
     return fused;
 }

@@ -14,6 +14,7 @@
 #include "model.hpp"
 #include "solvers/common.hpp"
 #include "solvers/forms.hpp"
+#include "solvers/gas_state.hpp"
 #include "solvers/multigrid.hpp"
 #include "vec.hpp"
 
@@ -285,14 +286,12 @@ inline bool contacts_acted(index n3, const double* q, const double* qd, const do
     return false;
 }
 
-/// Advance s.q, s.qd by p.steps implicit steps (ip.bdf2: BDF2, else backward Euler). BDF2
-/// steps as backward Euler when it has no previous step (the run's first step without
-/// ip.history) or the last step's contacts acted. Failures as explicit_solver::simulate.
-inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
+/// The steps of simulate (gas_state::begin done, finish to follow).
+inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                           const ImplicitParams& ip, const StateView& s, const ImplicitBuffers& w,
                           const MultigridView* mg) {
     const index n3 = 3 * m.particles.count;
-    loop::begin_run(m, c, p, s, w.contact);
+    const bool flowing = gas_state::flowing(m, c);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
@@ -304,6 +303,7 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
             r.steps_done = step_index;
             return r;
         }
+        if (flowing) gas_state::forward_euler(m, c, t, p.dt, s.q, s.qd, s, w.gas);
         const bool two_step = ip.bdf2 && (step_index > 0 || ip.history) && w.contacts_acted[0] == 0;
         const index its = step(m, c, t, p.dt, s.q, s.qd, w, mg, ip.tolerance, ip.max_iterations,
                                two_step);
@@ -316,10 +316,25 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
         }
         // contacts and particle checks; a failure (or a hash too small) undoes the step
         r = loop::end_step(m, c, p, step_index, t, s, w.q0, w.v0, w.contact);
+        if (flowing) r = gas_state::end_step(m, s, w.gas, r, step_index, w.q0, w.v0);
         if (r.status != OK) return r;
         if (ip.bdf2) w.contacts_acted[0] = contacts_acted(n3, s.q, s.qd, w.qs, w.vs) ? 1 : 0;
     }
     return {OK, p.steps, -1, 0.0};
+}
+
+/// Advance s.q, s.qd (and the gas state: solvers/gas_state.hpp, forward Euler with the
+/// rates at each step's start) by p.steps implicit steps (ip.bdf2: BDF2, else backward
+/// Euler). BDF2 steps as backward Euler when it has no previous step (the run's first step
+/// without ip.history) or the last step's contacts acted. Failures as explicit_solver::simulate.
+inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
+                          const ImplicitParams& ip, const StateView& s, const ImplicitBuffers& w,
+                          const MultigridView* mg) {
+    loop::begin_run(m, c, p, s, w.contact);
+    gas_state::begin(m, s.q, s, w.gas);
+    const RunResult r = run_steps(m, c, p, ip, s, w, mg);
+    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, w.gas);
+    return r;
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::implicit_solver

@@ -19,6 +19,7 @@
 #include "model.hpp"
 #include "solvers/common.hpp"
 #include "solvers/forms.hpp"
+#include "solvers/gas_state.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::projective {
@@ -158,14 +159,13 @@ inline void step(const Model& m, const Control& c, double t, double dt, index it
     }
 }
 
-/// Advance s.q, s.qd by p.steps steps of p.dt from p.t0, p.iterations iterations each. The
-/// checks, contacts and restores are the explicit loop's (solvers/explicit.hpp).
-inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
+/// The steps of simulate (gas_state::begin done, finish to follow).
+inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
     const index n3 = 3 * m.particles.count;
     BodyGas volumes_only = w.gas;  // the checks need the volumes, not dV/dx (half the time)
     volumes_only.volume_gradient = nullptr;
-    loop::begin_run(m, c, p, s, w.contact);
+    const bool flowing = gas_state::flowing(m, c);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
@@ -177,12 +177,30 @@ inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
             r.steps_done = step_index;
             return r;
         }
+        if (flowing) {  // the flows at the step's start, from its pressures
+            gas::pressures(m, c, t, volumes_only);
+            gas_state::forward_euler(m, c, t, p.dt, s.q, s.qd, s, volumes_only);
+        }
         step(m, c, t, p.dt, p.iterations, a, s.q, s.qd, w);
         // contacts and particle checks; a failure (or a hash too small) undoes the step
         r = loop::end_step(m, c, p, step_index, t, s, w.q0, w.v0, w.contact);
+        if (flowing) r = gas_state::end_step(m, s, w.gas, r, step_index, w.q0, w.v0);
         if (r.status != OK) return r;
     }
     return {OK, p.steps, -1, 0.0};
+}
+
+/// Advance s.q, s.qd (and the gas state: solvers/gas_state.hpp, forward Euler with the
+/// rates at each step's start, so the iterations' forces at the step's end see the gas
+/// there) by p.steps steps of p.dt from p.t0, p.iterations iterations each. The checks,
+/// contacts and restores are the explicit loop's (solvers/explicit.hpp).
+inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
+                          const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
+    loop::begin_run(m, c, p, s, w.contact);
+    gas_state::begin(m, s.q, s, w.gas);
+    const RunResult r = run_steps(m, c, p, s, a, w);
+    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, w.gas);
+    return r;
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::projective

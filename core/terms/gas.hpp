@@ -25,10 +25,11 @@
 
 namespace softbody::SOFTBODY_KERNELS::gas {
 
-/// The driving value (nRT [J] or P0 [Pa]) of body b at time t [s]: a finite override wins,
-/// else the body's piecewise-linear schedule, else its value.
-inline double value_at(const Model& m, const Control& c, index b, double t) {
-    if (std::isfinite(c.gas_override[b])) return c.gas_override[b];
+constexpr double kGasConstant = 8.314462618;  // R [J / (mol K)]
+
+/// Body b's driving value (nRT [J] or P0 [Pa]) at time t [s] by the model: its
+/// piecewise-linear schedule, else its value.
+inline double model_value_at(const Model& m, index b, double t) {
     const index begin = m.gases.schedule_range[2 * b], end = m.gases.schedule_range[2 * b + 1];
     if (end == begin) return m.gases.value[b];
     const double* time = m.gases.schedule_time;
@@ -42,6 +43,13 @@ inline double value_at(const Model& m, const Control& c, index b, double t) {
     return value[end - 1];
 }
 
+/// The driving value (nRT [J] or P0 [Pa]) of body b at time t [s]: a finite override wins,
+/// else the model's (model_value_at).
+inline double value_at(const Model& m, const Control& c, index b, double t) {
+    if (std::isfinite(c.gas_override[b])) return c.gas_override[b];
+    return model_value_at(m, b, t);
+}
+
 /// Absolute pressure [Pa] of a gas law at volume v [m^3] (NaN for v <= 0 unless fixed).
 inline double pressure(index law, double value, double gamma, double reference_volume, double v) {
     if (law == GasLaw::FIXED_PRESSURE) return value;
@@ -50,11 +58,26 @@ inline double pressure(index law, double value, double gamma, double reference_v
     return value * std::pow(reference_volume, gamma - 1.0) / std::pow(v, gamma);
 }
 
+/// Whether body b's driving value is prescribed at time t (a fixed pressure, a schedule or
+/// a Control override), not its gas state's.
+inline bool prescribed(const Model& m, const Control& c, index b) {
+    return m.gases.law[b] == GasLaw::FIXED_PRESSURE || std::isfinite(c.gas_override[b]) ||
+           m.gases.schedule_range[2 * b + 1] > m.gases.schedule_range[2 * b];
+}
+
+/// The driving value of body b at time t with the gas state in gas: nRT = R n theta from
+/// the state (terms/flows.hpp) unless prescribed or there is no state (value_at).
+inline double driving_value(const Model& m, const Control& c, const BodyGas& gas, index b,
+                            double t) {
+    if (gas.moles == nullptr || prescribed(m, c, b)) return value_at(m, c, b, t);
+    return kGasConstant * gas.moles[b] * gas.theta[b];
+}
+
 /// The pressure of every body at time t from the volumes in gas.
 inline void pressures(const Model& m, const Control& c, double t, const BodyGas& gas) {
     for (index b = 0; b < m.bodies.count; ++b)
-        gas.pressure[b] = pressure(m.gases.law[b], value_at(m, c, b, t), m.gases.gamma[b],
-                                   m.gases.reference_volume[b], gas.volume[b]);
+        gas.pressure[b] = pressure(m.gases.law[b], driving_value(m, c, gas, b, t),
+                                   m.gases.gamma[b], m.gases.reference_volume[b], gas.volume[b]);
 }
 
 /// Volumes (with gas.volume_gradient set, their gradients too) and the pressures of every
@@ -178,7 +201,7 @@ inline double energies(const Model& m, const Control& c, double t, const BodyGas
     for (index b = 0; b < m.bodies.count; ++b) {
         const double e =
             m.bodies.closed[b] == 1
-                ? law_energy(m.gases.law[b], value_at(m, c, b, t), m.gases.gamma[b],
+                ? law_energy(m.gases.law[b], driving_value(m, c, gas, b, t), m.gases.gamma[b],
                              m.gases.reference_volume[b], m.gases.ambient_pressure[b],
                              gas.volume[b])
                 : 0.0;

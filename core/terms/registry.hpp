@@ -8,6 +8,7 @@
 #include "terms/attachments.hpp"
 #include "terms/drag.hpp"
 #include "terms/external.hpp"
+#include "terms/flows.hpp"
 #include "terms/gas.hpp"
 #include "terms/gravity.hpp"
 #include "terms/springs.hpp"
@@ -33,7 +34,11 @@ using Terms = TermList<
     attachments::Term,  // springs to anchor points Control moves
     external::Term,     // per-particle forces from Control
     external::GrabTerm, // a grabbed particle pulled to a target
-    drag::Term>;        // air drag on faces
+    drag::Term,         // air drag on faces
+    flows::VentTerm,    // gas out of (or into) a body through vents
+    flows::OrificeTerm, // gas between two bodies
+    flows::InflatorTerm,// gas delivered by inflators
+    flows::LeakTerm>;   // gas through the fabric
 
 /// Each term's traits (terms/term.hpp) in registry order (softbody._core.term_table).
 inline const TermTraits* term_traits() {

@@ -22,6 +22,9 @@
 //   project     projective dynamics' local step: the term's part of the global step's
 //               right-hand side at the iterate (a kProjected term's matrix part is in the
 //               factor Python builds)
+//   flow        a gas-flow term's molar flows into and out of the bodies' gas at e, added
+//               to e.gas's flow_in, flow_in_t and flow_out (terms/flows.hpp), which every
+//               scheme integrates into the gas state (solvers/gas_state.hpp)
 //   active      whether the term acts at all in a call (the fused symplectic Euler pass
 //               covers only kFused terms: a call with another active term takes the
 //               general step)
@@ -57,6 +60,7 @@ struct TermBase {
     // its energy is work done from outside the model (the grab spring: the user's hand),
     // which softbody.diagnostics leaves out of the model's total
     static constexpr bool kExternal = false;
+    static constexpr bool kFlow = false;  // it moves gas (its `flow` form), no force
     static bool active(const Model&, const Control&) { return true; }
     static void update(const Eval&, bool /*lanes_ran*/) {}
     static void force(const Eval&, double* /*f*/) {}
@@ -69,6 +73,7 @@ struct TermBase {
                                     const SmootherBlocks&) {}
     static void project(const Model&, const Control&, double /*h*/, const double* /*x*/,
                         const double* /*x0*/, double* /*rhs*/) {}
+    static void flow(const Eval&) {}
 };
 
 }  // namespace softbody::SOFTBODY_KERNELS

@@ -8,6 +8,7 @@ import numpy as np
 
 from softbody import _core
 from softbody.core import core_model, terms
+from softbody.gas import GAS_CONSTANT, GasLaw
 from softbody.mesh import TriMesh
 from softbody.reference import gas as ref_gas
 from softbody.sim.control import Control, control_data
@@ -18,11 +19,36 @@ from softbody.sim.state import State, kernel_input
 def _control(model: Model, state: State, control: Control | None):
     """The kernel arrays of ``control``; without one, neutral inputs but for the gas values
     the state's last step applied (``state.body_gas_override``), so that a readback
-    reports what a :class:`Control` set, not the model's value. ``state`` is conformed."""
+    reports what a :class:`Control` set, not the model's value. Where neither prescribes
+    a body's gas, its value is the state's: nRT = R n T at the state's amount and
+    temperature (``state.body_gas_moles``, ``body_gas_temperature``; an adiabatic gas's
+    taken to its reference volume along its isentrope). ``state`` is conformed."""
+    state.conform(model)
     if control is not None:
-        return control.write(model, control_data(model))
-    data = control_data(model)
-    np.copyto(data.gas_override, state.body_gas_override)
+        data = control.write(model, control_data(model))
+    else:
+        data = control_data(model)
+        np.copyto(data.gas_override, state.body_gas_override)
+    ranges = np.asarray(model.body_schedule_range)
+    law = np.asarray(model.body_gas_law)
+    fill = (
+        ~np.isfinite(data.gas_override)
+        & (law != GasLaw.FIXED_PRESSURE)
+        & (ranges[:, 1] == ranges[:, 0])
+        & (np.asarray(model.body_closed) == 1)
+    )
+    if fill.any():
+        temperature = np.array(state.body_gas_temperature, dtype=np.float64)
+        adiabatic = law == GasLaw.ADIABATIC
+        if np.any(fill & adiabatic):
+            volume = _core.eval_volumes(
+                core_model(model), data, float(state.time), state.particle_q
+            )[0]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = (volume / model.body_gas_reference_volume) ** (model.body_gas_gamma - 1)
+            temperature = np.where(adiabatic, temperature * ratio, temperature)
+        value = GAS_CONSTANT * state.body_gas_moles * temperature
+        data.gas_override[fill] = value[fill]
     return data
 
 
@@ -114,6 +140,56 @@ def body_mesh(model: Model, state: State, body: int) -> TriMesh:
     p0, p1 = (int(i) for i in model.body_particle_range[body])
     t0, t1 = (int(i) for i in model.body_tri_range[body])
     return TriMesh(state.particle_q[p0:p1], model.tri_indices[t0:t1] - p0)
+
+
+@dataclass(frozen=True)
+class GasFlows:
+    """The gas flowing into and out of each body at one state, by the laws of its vents,
+    orifices, inflators and leaks (``core/terms/flows.hpp``; the step limiter, which acts
+    only within a step too long for a flow, left out). Shapes (B,)."""
+
+    inflow: np.ndarray
+    """Molar flow into each body [mol/s]."""
+    outflow: np.ndarray
+    """Molar flow out of each body [mol/s]."""
+    inflow_temperature: np.ndarray
+    """Mean temperature of the gas flowing in [K] (NaN where none flows in)."""
+    mass_inflow: np.ndarray
+    """Mass flow into each body [kg/s] (its gas's molar mass times ``inflow``)."""
+    mass_outflow: np.ndarray
+    """Mass flow out of each body [kg/s]."""
+
+    @property
+    def net(self) -> np.ndarray:
+        """dn/dt [mol/s] of each body's gas: inflow - outflow."""
+        return self.inflow - self.outflow
+
+
+def body_gas_flows(model: Model, state: State, control: Control | None = None) -> GasFlows:
+    """The gas flows of every body at ``state`` (its positions, gas amounts, temperatures
+    and vent latches) under ``control`` (valve areas, inflator flows; default: none).
+    An orifice's flow appears as the outflow of its high-pressure body and the inflow of
+    the other."""
+    state.conform(model)
+    if control is not None:
+        data = control.write(model, control_data(model))
+    else:  # the state's gas drives every body the last step did not prescribe
+        data = control_data(model)
+        np.copyto(data.gas_override, state.body_gas_override)
+    inflow, inflow_t, outflow = _core.eval_flows(
+        core_model(model), data, float(state.time), state.particle_q, state.body_gas_moles,
+        state.body_gas_temperature, state.vent_open,
+    )  # fmt: skip
+    molar_mass = np.asarray(model.body_gas_molar_mass)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        temperature = np.where(inflow > 0, inflow_t / inflow, np.nan)
+    return GasFlows(
+        inflow=inflow,
+        outflow=outflow,
+        inflow_temperature=temperature,
+        mass_inflow=inflow * molar_mass,
+        mass_outflow=outflow * molar_mass,
+    )
 
 
 def body_area(model: Model, state: State) -> np.ndarray:

@@ -28,6 +28,12 @@ import numpy as np
 #: Molar gas constant R [J / (mol K)].
 GAS_CONSTANT = 8.314462618
 
+#: Molar mass of dry air [kg/mol].
+AIR_MOLAR_MASS = 0.028965
+
+#: The temperature a gas given by nRT alone is taken to have [K] (20 C).
+ROOM_TEMPERATURE = 293.15
+
 
 class GasLaw(IntEnum):
     """The equation of state of a body's gas."""
@@ -68,6 +74,15 @@ class Gas:
     schedule : tuple of (time [s], value) pairs or None
         Piecewise-linear ``value`` over time, held constant before the first and after the
         last point (inflate, deflate, heat). Overrides ``value`` when given.
+    temperature : float
+        Temperature of the gas at the body's initial positions [K]; with nRT it fixes the
+        amount n [mol] that ``State.body_gas_moles`` starts from.
+    molar_mass : float
+        Molar mass of the gas [kg/mol] (air: 0.028965): what turns a mass flow through a
+        vent, an orifice or an inflator into moles.
+    ambient_temperature : float
+        Temperature of the air outside [K]: what flows in through vents and leaks when the
+        outside pressure is higher.
     """
 
     law: GasLaw
@@ -76,6 +91,9 @@ class Gas:
     reference_volume: float | None = None
     ambient_pressure: float = 0.0
     schedule: tuple[tuple[float, float], ...] | None = None
+    temperature: float = ROOM_TEMPERATURE
+    molar_mass: float = AIR_MOLAR_MASS
+    ambient_temperature: float = ROOM_TEMPERATURE
 
     def __post_init__(self):
         object.__setattr__(self, "law", GasLaw(self.law))
@@ -93,6 +111,9 @@ class Gas:
         object.__setattr__(
             self, "ambient_pressure", _finite("gas ambient_pressure", self.ambient_pressure)
         )
+        for name in ("temperature", "molar_mass", "ambient_temperature"):
+            value = _finite(f"gas {name}", getattr(self, name), strict=True)
+            object.__setattr__(self, name, value)
         if self.schedule is not None:
             pts = np.asarray(self.schedule, dtype=np.float64)
             if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) == 0:
@@ -117,11 +138,41 @@ class Gas:
         return cls(GasLaw.ISOTHERMAL, nrt, ambient_pressure=ambient_pressure, schedule=schedule)
 
     @classmethod
-    def ideal(cls, moles: float, temperature: float, *, ambient_pressure: float = 0.0) -> Gas:
-        """Isothermal gas from amount [mol] and temperature [K]: nRT = moles * R * T."""
+    def ideal(
+        cls,
+        moles: float,
+        temperature: float,
+        *,
+        molar_mass: float = AIR_MOLAR_MASS,
+        gamma: float = 1.4,
+        process: str = "isothermal",
+        ambient_pressure: float = 0.0,
+        ambient_temperature: float = ROOM_TEMPERATURE,
+    ) -> Gas:
+        """An ideal gas of ``moles`` [mol] at ``temperature`` [K] (at the body's initial
+        positions): P = n R T / V, with the amount and temperature in ``State`` so that
+        vents, orifices, inflators and leaks change them.
+
+        ``process="isothermal"`` keeps T (heat exchange with the surroundings is fast);
+        ``"adiabatic"`` exchanges no heat: P V^gamma is constant while no gas flows, and
+        the first law of the open system, d(n c_v T) = enthalpy in - enthalpy out - P dV,
+        sets T when it does. ``molar_mass`` [kg/mol] and ``gamma`` (c_p / c_v) name the
+        species (air: 0.028965, 1.4); ``ambient_temperature`` [K] is the outside air's.
+        """
         n = _finite("gas moles", moles)
         temp = _finite("gas temperature", temperature, strict=True)
-        return cls.isothermal(n * GAS_CONSTANT * temp, ambient_pressure=ambient_pressure)
+        if process not in ("isothermal", "adiabatic"):
+            raise ValueError(f"gas process must be 'isothermal' or 'adiabatic', got {process!r}")
+        law = GasLaw.ISOTHERMAL if process == "isothermal" else GasLaw.ADIABATIC
+        return cls(
+            law,
+            n * GAS_CONSTANT * temp,
+            gamma=gamma,
+            ambient_pressure=ambient_pressure,
+            temperature=temp,
+            molar_mass=molar_mass,
+            ambient_temperature=ambient_temperature,
+        )
 
     @classmethod
     def fixed_pressure(

@@ -111,6 +111,10 @@ class ModelBuilder:
         self._soft_contact = ("none", 0.5, 0.1, None)
         self.air_density = DEFAULT_AIR_DENSITY
         self.wind = np.zeros(3)
+        self._vents: list[tuple[int, float, float, float, float]] = []
+        self._orifices: list[tuple[int, int, float, float]] = []
+        self._inflators: list[tuple[int, float, np.ndarray]] = []
+        self._leaks: dict[int, float] = {}
 
     # -- sizes ---------------------------------------------------------------------------
     @property
@@ -539,6 +543,133 @@ class ModelBuilder:
         self.air_density = _number("air density", density)
         self.wind = _vec3("wind", wind)
 
+    # -- gas flows -----------------------------------------------------------------------
+    def _gas_body(self, name: str, body) -> int:
+        """``body`` as the index of a closed body whose gas can flow (an ideal gas, not a
+        fixed pressure or a schedule), or a ValueError naming ``name``."""
+        if isinstance(body, bool) or not isinstance(body, int | np.integer):
+            raise ValueError(f"{name} must be a body index, got {body!r}")
+        body = int(body)
+        if not 0 <= body < len(self._bodies):
+            raise ValueError(f"{name} {body} is not a body (the model has {len(self._bodies)})")
+        b = self._bodies[body]
+        if not b.closed:
+            raise ValueError(f"{name} {body} is a cloth: an open surface holds no gas")
+        if b.gas.law == GasLaw.FIXED_PRESSURE or b.gas.schedule is not None:
+            raise ValueError(
+                f"{name} {body} has a prescribed gas (a fixed pressure or a schedule): gas can "
+                "flow only into and out of an ideal gas (Gas.ideal, isothermal or adiabatic)"
+            )
+        return body
+
+    def add_vent(
+        self,
+        body: int,
+        *,
+        area: float,
+        discharge_coefficient: float = 0.62,
+        opening_pressure: float | None = None,
+        opening_time: float | None = None,
+    ) -> int:
+        """An orifice from ``body`` to the air outside it (at its gas's ambient pressure and
+        temperature); returns the vent's index.
+
+        Gas leaves by the orifice law (choked or subsonic, ``core/terms/flows.hpp``) while
+        the inside pressure is higher, and air comes in the same way while it is lower.
+        ``area`` [m^2] is the open area, ``discharge_coefficient`` C_d in (0, 1]. The vent
+        opens when the gauge pressure P - P_ambient first reaches ``opening_pressure``
+        [Pa] or the time reaches ``opening_time`` [s], whichever comes first, and stays
+        open; with neither it is open from the start. ``Control.vent_area`` sets its area
+        per call (a valve).
+        """
+        body = self._gas_body("vent body", body)
+        area = _number("vent area", area)
+        cd = _number("vent discharge_coefficient", discharge_coefficient, strict=True)
+        if cd > 1.0:
+            raise ValueError(f"vent discharge_coefficient must lie in (0, 1], got {cd!r}")
+        if opening_pressure is None and opening_time is None:
+            pressure, time = np.inf, -np.inf
+        else:
+            pressure = (
+                np.inf
+                if opening_pressure is None
+                else _number("vent opening_pressure", opening_pressure, minimum=None)
+            )
+            time = np.inf if opening_time is None else _number("vent opening_time", opening_time)
+        self._vents.append((body, area, cd, pressure, time))
+        return len(self._vents) - 1
+
+    def add_orifice(
+        self, body_a: int, body_b: int, *, area: float, discharge_coefficient: float = 0.62
+    ) -> int:
+        """An orifice between two bodies (chambers): gas flows both ways by the orifice law,
+        from the higher pressure to the lower; returns its index. The two gases must be
+        the same species (molar mass and gamma). ``area`` [m^2], ``discharge_coefficient``
+        C_d in (0, 1]; ``Control.orifice_area`` sets the area per call (0 closes it)."""
+        a = self._gas_body("orifice body_a", body_a)
+        b = self._gas_body("orifice body_b", body_b)
+        if a == b:
+            raise ValueError(f"an orifice joins two different bodies, got body {a} twice")
+        ga, gb = self._bodies[a].gas, self._bodies[b].gas
+        if ga.molar_mass != gb.molar_mass or ga.gamma != gb.gamma:
+            raise ValueError(
+                f"orifice bodies {a} and {b} hold different gases (molar mass {ga.molar_mass:g} "
+                f"and {gb.molar_mass:g} kg/mol, gamma {ga.gamma:g} and {gb.gamma:g}): an "
+                "orifice joins chambers of one species"
+            )
+        area = _number("orifice area", area)
+        cd = _number("orifice discharge_coefficient", discharge_coefficient, strict=True)
+        if cd > 1.0:
+            raise ValueError(f"orifice discharge_coefficient must lie in (0, 1], got {cd!r}")
+        self._orifices.append((a, b, area, cd))
+        return len(self._orifices) - 1
+
+    def add_inflator(
+        self,
+        body: int,
+        *,
+        mass_flow: float | Sequence[tuple[float, float]],
+        temperature: float,
+    ) -> int:
+        """Gas of the body's own species delivered into ``body``; returns its index.
+
+        ``mass_flow`` is a constant [kg/s] or a piecewise-linear table of (time [s], mass
+        flow [kg/s]) rows, held before the first and after the last row; the gas enters
+        at ``temperature`` [K] (an adiabatic body heats or cools by its enthalpy).
+        ``Control.inflator_mass_flow`` overrides the table per call.
+        """
+        body = self._gas_body("inflator body", body)
+        temperature = _number("inflator temperature", temperature, strict=True)
+        if isinstance(mass_flow, int | float | np.integer | np.floating) and not isinstance(
+            mass_flow, bool
+        ):
+            table = np.array([[0.0, _number("inflator mass_flow", mass_flow)]])
+        else:
+            try:
+                table = np.asarray(mass_flow, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(
+                    "inflator mass_flow must be a number [kg/s] or (time, kg/s) rows"
+                ) from None
+            if table.ndim != 2 or table.shape[1] != 2 or len(table) == 0:
+                raise ValueError("inflator mass_flow must be a non-empty list of (time, kg/s) rows")
+            if not np.all(np.isfinite(table)):
+                raise ValueError("inflator mass_flow holds NaN or infinite numbers")
+            if np.any(np.diff(table[:, 0]) <= 0):
+                raise ValueError("inflator mass_flow times must increase strictly")
+            if np.any(table[:, 1] < 0):
+                raise ValueError("inflator mass_flow values must be >= 0 [kg/s]")
+        self._inflators.append((body, temperature, table))
+        return len(self._inflators) - 1
+
+    def add_leak(self, body: int, *, coefficient: float) -> None:
+        """Fabric leakage of ``body``: a mass flow c A |P - P_ambient| [kg/s] through its
+        current surface area A [m^2], out while the inside pressure is higher, in (at the
+        ambient temperature) while it is lower; ``coefficient`` c [kg/(s m^2 Pa)] >= 0.
+        Setting it again replaces it."""
+        body = self._gas_body("leak body", body)
+        self._leaks[body] = _number("leak coefficient", coefficient)
+
     # -- finalize ------------------------------------------------------------------------
     def finalize(self) -> Model:
         """Freeze everything into an immutable :class:`Model`."""
@@ -634,6 +765,20 @@ class ModelBuilder:
         if margin is None:
             margin = 0.5 * float(np.median(edge_length))
         colliders = collider_arrays(self._colliders)
+        vents = np.array(self._vents, dtype=np.float64).reshape(-1, 5)
+        orifices = np.array(self._orifices, dtype=np.float64).reshape(-1, 4)
+        tables = [t for _, _, t in self._inflators]
+        table_counts = np.array([len(t) for t in tables], dtype=np.int64)
+        table_end = np.cumsum(table_counts)
+        table = np.vstack(tables) if tables else np.zeros((0, 2))
+        leak = np.zeros(bcount)
+        for body, coefficient in self._leaks.items():
+            leak[body] = coefficient
+        flow_paths = (
+            np.bincount(vents[:, 0].astype(np.int64), minlength=bcount)
+            + np.bincount(orifices[:, :2].astype(np.int64).ravel(), minlength=bcount)
+            + (leak > 0)
+        ).astype(np.int64)
         return Model(
             gravity=self.gravity.copy(),
             particle_q=q,
@@ -671,6 +816,26 @@ class ModelBuilder:
             schedule_time=np.ascontiguousarray(sched[:, 0]),
             schedule_value=np.ascontiguousarray(sched[:, 1]),
             body_rest_volume=rest_volume,
+            body_gas_molar_mass=np.array([b.gas.molar_mass for b in bodies], dtype=np.float64),
+            body_gas_temperature=np.array([b.gas.temperature for b in bodies], dtype=np.float64),
+            body_ambient_temperature=np.array(
+                [b.gas.ambient_temperature for b in bodies], dtype=np.float64
+            ),
+            body_leak_coefficient=leak,
+            body_flow_paths=flow_paths,
+            vent_body=vents[:, 0].astype(np.int64),
+            vent_area=np.ascontiguousarray(vents[:, 1]),
+            vent_discharge_coefficient=np.ascontiguousarray(vents[:, 2]),
+            vent_open_pressure=np.ascontiguousarray(vents[:, 3]),
+            vent_open_time=np.ascontiguousarray(vents[:, 4]),
+            orifice_bodies=np.ascontiguousarray(orifices[:, :2].astype(np.int64)),
+            orifice_area=np.ascontiguousarray(orifices[:, 2]),
+            orifice_discharge_coefficient=np.ascontiguousarray(orifices[:, 3]),
+            inflator_body=np.array([b for b, _, _ in self._inflators], dtype=np.int64),
+            inflator_temperature=np.array([t for _, t, _ in self._inflators], dtype=np.float64),
+            inflator_range=np.stack([table_end - table_counts, table_end], axis=1).reshape(-1, 2),
+            inflator_time=np.ascontiguousarray(table[:, 0]),
+            inflator_mass_flow=np.ascontiguousarray(table[:, 1]),
             pin_particle=np.flatnonzero(pinned).astype(np.int64),
             tri_body=np.repeat(np.arange(bcount), tri_counts).astype(np.int64),
             body_closed=np.array([int(b.closed) for b in bodies], dtype=np.int64),

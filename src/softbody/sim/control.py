@@ -27,6 +27,9 @@ class ControlData(NamedTuple):
     grab_stiffness: float  # [N/m]
     grab_damping: float  # [N s/m]
     wind: np.ndarray  # (3,) air velocity [m/s] of this call
+    vent_area: np.ndarray  # (V,) open area of each vent [m^2], NaN = the model's
+    orifice_area: np.ndarray  # (O,) open area of each orifice [m^2], NaN = the model's
+    inflator_mass_flow: np.ndarray  # (I,) [kg/s], NaN = the inflator's table
 
 
 @dataclass(eq=False)
@@ -65,6 +68,15 @@ class Control:
     wind: np.ndarray | None = None
     """Air velocity [m/s], shape (3,), for this call (a gust); None keeps the model's
     ``wind``."""
+    vent_area: np.ndarray | None = None
+    """Open area of each vent [m^2] for this call (a valve), shape (V,); NaN entries (and
+    None) keep the vent's own area. A vent still opens only at its pressure or time."""
+    orifice_area: np.ndarray | None = None
+    """Open area of each orifice between two bodies [m^2], shape (O,); NaN (and None) keep
+    the orifice's own; 0 closes it."""
+    inflator_mass_flow: np.ndarray | None = None
+    """Mass flow of each inflator [kg/s] for this call, shape (I,); NaN (and None) follow
+    the inflator's table."""
 
     @classmethod
     def neutral(cls, model: Model) -> Control:
@@ -141,6 +153,18 @@ class Control:
             if not np.all(np.isfinite(wind)):
                 raise ValueError("Control.wind must be 3 finite numbers [m/s] (None = the model's)")
             np.copyto(out.wind, wind)
+        for name, value, target in (
+            ("vent_area", self.vent_area, out.vent_area),
+            ("orifice_area", self.orifice_area, out.orifice_area),
+            ("inflator_mass_flow", self.inflator_mass_flow, out.inflator_mass_flow),
+        ):
+            if value is None:
+                target[:] = np.nan
+                continue
+            a = arr(name, value, target.shape)
+            if np.any(np.isinf(a)) or np.any(a < 0):
+                raise ValueError(f"Control.{name} must be >= 0 and finite (NaN = unchanged)")
+            np.copyto(target, a)
         return out._replace(
             pin_active=active,
             grab_particle=grab,
@@ -163,4 +187,7 @@ def control_data(model: Model) -> ControlData:
         grab_stiffness=0.0,
         grab_damping=0.0,
         wind=np.array(model.wind, dtype=np.float64),
+        vent_area=np.full(len(model.vent_body), np.nan),
+        orifice_area=np.full(len(model.orifice_bodies), np.nan),
+        inflator_mass_flow=np.full(len(model.inflator_body), np.nan),
     )

@@ -93,7 +93,10 @@ class Model(CoreFields):
 
     # -- factories -----------------------------------------------------------------------
     def state(self):
-        """A new :class:`State` at the initial positions and velocities, time 0."""
+        """A new :class:`State` at the initial positions and velocities, time 0, with the
+        initial gas amounts; its gas temperatures are left None, so that they are set on
+        each gas's isentrope at the state's positions when it first meets the model (the
+        model's temperatures, unless positions were changed first)."""
         from softbody.sim.state import State
 
         return State(
@@ -102,7 +105,54 @@ class Model(CoreFields):
             collider_q=self.collider_center.copy(),
             collider_rotation=self.collider_rotation.copy(),
             body_gas_override=np.full(self.body_count, np.nan),
+            body_gas_moles=self.initial_gas_moles(),
+            vent_open=np.zeros(len(self.vent_body)),
         )
+
+    def gas_temperature_at(self, particle_q: np.ndarray) -> np.ndarray:
+        """Each body's gas temperature [K] at positions ``particle_q`` (N, 3), shape (B,),
+        on the isentrope through its initial state: the model's temperature for an
+        isothermal or fixed-pressure gas, T0 (V_rest / V)^(g - 1) for an adiabatic one
+        (V by the body's own volume method)."""
+        from softbody import _core
+        from softbody.sim.state import kernel_input
+
+        temperature = np.array(self.body_gas_temperature, dtype=np.float64)
+        adiabatic = (np.asarray(self.body_gas_law) == GasLaw.ADIABATIC) & (self.body_closed == 1)
+        if not adiabatic.any():
+            return temperature
+        volume = _core.body_volumes(
+            kernel_input(particle_q),
+            self.tri_indices,
+            self.body_particle_range,
+            self.body_tri_range,
+            self.body_volume_method,
+            self.body_mc_range,
+            self.mc_samples,
+        )
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = (self.body_rest_volume / volume) ** (self.body_gas_gamma - 1.0)
+        return np.where(adiabatic & np.isfinite(ratio), temperature * ratio, temperature)
+
+    def initial_gas_moles(self) -> np.ndarray:
+        """Each body's amount of gas at the initial positions [mol], shape (B,): nRT / (R T)
+        of an isothermal or adiabatic gas (nRT at its reference volume, which is the rest
+        volume unless given), P0 V / (R T) of a fixed-pressure one; 0 for an open surface."""
+        from softbody.gas import GAS_CONSTANT
+
+        value = np.asarray(self.body_gas_value, dtype=np.float64)
+        temperature = np.asarray(self.body_gas_temperature, dtype=np.float64)
+        law = np.asarray(self.body_gas_law)
+        gamma = np.asarray(self.body_gas_gamma, dtype=np.float64)
+        rest, ref = self.body_rest_volume, self.body_gas_reference_volume
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # an adiabatic gas: T at the rest volume, nRT = R n T_ref at V_ref, with
+            # T_ref = T (V_rest / V_ref)^(g - 1) on its isentrope
+            at_rest = np.where(law == GasLaw.ADIABATIC, (rest / ref) ** (gamma - 1.0), 1.0)
+            nrt = np.where(law == GasLaw.FIXED_PRESSURE, value * rest, value)
+            moles = nrt / (GAS_CONSTANT * temperature * at_rest)
+        moles = np.where((self.body_closed == 1) & np.isfinite(moles), moles, 0.0)
+        return moles.astype(np.float64)
 
     def control(self):
         """A :class:`Control` that changes nothing: model gas, no forces, anchors in place."""

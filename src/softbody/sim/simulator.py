@@ -501,6 +501,8 @@ class Simulator:
             body, particle = int(index), -1
             lo, hi = self.volume_limits
             what = {
+                Status.BAD_GAS: f"gas amount became {value:.3g} mol (negative or not finite; "
+                "a flow too fast for the step)",
                 Status.BAD_VOLUME: f"volume became {value:.3g} m^3 (collapsed or inverted)",
                 Status.SHRUNK: f"volume fell to {value:.3g} of its rest volume (limit {lo:g})",
                 Status.EXPLODED: f"volume grew to {value:.3g} times its rest volume (limit {hi:g})",

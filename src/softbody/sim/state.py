@@ -66,6 +66,22 @@ class State:
     (and before any step). :func:`softbody.body_pressure`, :func:`softbody.body_gas_value`
     and :func:`softbody.energies` read it when given no control, so they report what was
     applied. None until the state meets its model (``model.state()`` fills it)."""
+    body_gas_moles: np.ndarray | None = None
+    """Amount of gas in each body [mol], shape (B,): what the gas law's nRT comes from
+    (``Gas.ideal``), changed by vents, orifices, inflators and leaks; for a body whose gas
+    is prescribed (a fixed pressure, a schedule, a :class:`Control` value) the amount that
+    value means at the body's temperature. 0 for an open surface. None until the state
+    meets its model (the model's initial amounts)."""
+    body_gas_temperature: np.ndarray | None = None
+    """Temperature of each body's gas [K], shape (B,): constant for an isothermal gas; for
+    an adiabatic gas it follows its volume (P V^gamma constant) and the enthalpy the flows
+    bring and take. A state's gas is what its amount and temperature say: positions set by
+    hand leave the temperature as it was; set this to None to put each adiabatic gas back
+    on its isentrope at the state's positions (which is what a state that never had one
+    gets when it meets its model: the model's temperature at the initial volume)."""
+    vent_open: np.ndarray | None = None
+    """1.0 for each vent that has opened (at its opening pressure or time; it stays open),
+    else 0.0, shape (V,). None until the state meets its model (all closed)."""
 
     def __post_init__(self):
         if self.collider_q is None:
@@ -79,8 +95,9 @@ class State:
         self.collider_impulse = kernel_array(self.collider_impulse)
         self.particle_q = kernel_array(self.particle_q)
         self.particle_qd = kernel_array(self.particle_qd)
-        if self.body_gas_override is not None:
-            self.body_gas_override = kernel_array(self.body_gas_override)
+        for name in ("body_gas_override", "body_gas_moles", "body_gas_temperature", "vent_open"):
+            if getattr(self, name) is not None:
+                setattr(self, name, kernel_array(getattr(self, name)))
         if self.particle_q.ndim != 2 or self.particle_q.shape[1] != 3:
             raise ValueError(f"particle_q must have shape (N, 3), got {self.particle_q.shape}")
         if self.particle_qd.shape != self.particle_q.shape:
@@ -96,6 +113,12 @@ class State:
         n, c = model.particle_count, model.collider_count
         if self.body_gas_override is None:
             self.body_gas_override = np.full(model.body_count, np.nan)
+        if self.body_gas_moles is None:
+            self.body_gas_moles = model.initial_gas_moles()
+        if self.body_gas_temperature is None:
+            self.body_gas_temperature = model.gas_temperature_at(self.particle_q)
+        if self.vent_open is None:
+            self.vent_open = np.zeros(len(model.vent_body))
         for name, shape in (
             ("particle_q", (n, 3)),
             ("particle_qd", (n, 3)),
@@ -103,6 +126,9 @@ class State:
             ("collider_rotation", (c, 3, 3)),
             ("collider_impulse", (c, 3)),
             ("body_gas_override", (model.body_count,)),
+            ("body_gas_moles", (model.body_count,)),
+            ("body_gas_temperature", (model.body_count,)),
+            ("vent_open", (len(model.vent_body),)),
         ):
             value = getattr(self, name)
             if _kernel_ready(value, shape):
@@ -128,6 +154,9 @@ class State:
             self.collider_rotation.copy(),
             self.collider_impulse.copy(),
             None if self.body_gas_override is None else self.body_gas_override.copy(),
+            None if self.body_gas_moles is None else self.body_gas_moles.copy(),
+            None if self.body_gas_temperature is None else self.body_gas_temperature.copy(),
+            None if self.vent_open is None else self.vent_open.copy(),
         )
 
     def __repr__(self) -> str:

@@ -28,6 +28,7 @@ class Status(IntEnum):
     EXPLODED = 5  # a body volume grew past the upper limit
     NEED_HASH = 6  # the contacts' hash would need > 512 entries a triangle (value: entries)
     STOPPED = 7  # a signal handler or the progress callback raised (the core raises it)
+    BAD_GAS = 8  # a body's gas amount or temperature became negative or not finite
 
 
 @dataclass(frozen=True)
@@ -121,8 +122,17 @@ class Solver:
         the positions. Between steps it runs Python's signal handlers (on the main thread)
         and, every 50 ms or so, calls ``progress(steps_done)`` (when not None); an exception
         from either (``KeyboardInterrupt`` on Ctrl-C) stops the run after its last whole
-        step and is raised here.
+        step and is raised here. A state that has not met the model yet (its gas amounts,
+        temperatures or vent latches None) is conformed to it first.
         """
+        if state.body_gas_moles is None or state.body_gas_temperature is None or (
+            state.vent_open is None
+        ):
+            state.conform(self.model)
+        return self._simulate(state, steps, dt, control, limits, progress)
+
+    def _simulate(self, state, steps, dt, control, limits: RunLimits, progress) -> RunResult:
+        """The solver's run (simulate's contract), on a state that has met the model."""
         raise NotImplementedError
 
     @staticmethod

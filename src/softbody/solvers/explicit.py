@@ -68,7 +68,7 @@ class ExplicitSolver(Solver):
             float32=self.force_precision == "float32",
         )  # fmt: skip
 
-    def simulate(self, state, steps, dt, control, limits: RunLimits, progress=None) -> RunResult:
+    def _simulate(self, state, steps, dt, control, limits: RunLimits, progress) -> RunResult:
         return self._result(
             self._core.simulate(int(self.integrator), steps, dt, control, state, limits, progress)
         )

@@ -120,7 +120,7 @@ class ImplicitSolver(Solver):
             and np.array_equal(state.particle_qd, self._v_end)
         )
 
-    def simulate(self, state, steps, dt, control, limits: RunLimits, progress=None) -> RunResult:
+    def _simulate(self, state, steps, dt, control, limits: RunLimits, progress) -> RunResult:
         bdf2 = self.integrator == Integrator.BDF2
         # the system matrix's step: dt for backward Euler, 2/3 dt for BDF2
         h = dt * (2.0 / 3.0 if bdf2 else 1.0)

@@ -76,7 +76,7 @@ class ProjectiveSolver(Solver):
             self._core_model(), hash_capacity=hash_capacity, threads=self.threads
         )
 
-    def simulate(self, state, steps, dt, control, limits: RunLimits, progress=None) -> RunResult:
+    def _simulate(self, state, steps, dt, control, limits: RunLimits, progress) -> RunResult:
         factor = self.factor(dt)
         if self._core.factor is not factor:  # checked once per factor (per dt)
             self._core.set_factor(factor)

@@ -144,6 +144,9 @@ def _with_user_ball(model: Model, state: State) -> tuple[Model, State, int]:
         state.step_count,
         np.vstack([state.collider_q, park]),
         np.concatenate([state.collider_rotation, np.eye(3)[None]]),
+        body_gas_moles=state.body_gas_moles,
+        body_gas_temperature=state.body_gas_temperature,
+        vent_open=state.vent_open,
     )
     return model, state, model.collider_count - 1
 
