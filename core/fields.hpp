@@ -21,7 +21,8 @@
     X(M, volumes, mc_count, mc_samples)           \
     X(K, gases, schedule_count, schedule_time)    \
     X(P, pins, count, pin_particle)               \
-    X(C, colliders, count, collider_kind)
+    X(C, colliders, count, collider_kind)         \
+    X(H, bending, count, bending_hinges)
 
 #define SOFTBODY_FIELDS_PARTICLES(F)                                                              \
     F(particles, mass, particle_mass, f64, (N), none, "kg",                                       \
@@ -151,6 +152,17 @@
     F(colliders, motion_frequency, collider_motion_frequency, f64, (C), none, "Hz",               \
       "frequency of oscillating colliders")
 
+#define SOFTBODY_FIELDS_BENDING(F)                                                                \
+    F(bending, hinges, bending_hinges, i64, (H, 4), index(0, N), "",                              \
+      "particles of each hinge (interior edge): its edge x0, x1, then the corners x2 of the "     \
+      "triangle (x0, x1, x2) and x3 of (x1, x0, x3); core/terms/bending.hpp")                     \
+    F(bending, rest_angle, bending_rest_angle, f64, (H), finite, "rad",                           \
+      "rest dihedral angle theta0 of each hinge, in (-pi, pi]; 0 is flat")                        \
+    F(bending, stiffness, bending_stiffness, f64, (H), finite_nonneg, "N m",                      \
+      "hinge stiffness k = D |e0|^2 / A0 of each hinge; its energy is k (theta - theta0)^2")      \
+    F(bending, body, bending_body, i64, (H), index(0, B), "",                                     \
+      "body of each hinge")
+
 // The parts: P(struct, member of Model, its fields, members it holds besides them).
 #define SOFTBODY_MODEL_PARTS(P)                                                   \
     P(Particles, particles, SOFTBODY_FIELDS_PARTICLES, index count = 0;)          \
@@ -164,4 +176,5 @@
     P(Pins, pins, SOFTBODY_FIELDS_PINS, index count = 0;)                         \
     P(Drag, drag, SOFTBODY_FIELDS_DRAG, )                                         \
     P(SoftContacts, soft_contacts, SOFTBODY_FIELDS_SOFT_CONTACTS, )               \
-    P(Colliders, colliders, SOFTBODY_FIELDS_COLLIDERS, index count = 0;)
+    P(Colliders, colliders, SOFTBODY_FIELDS_COLLIDERS, index count = 0;)         \
+    P(Bending, bending, SOFTBODY_FIELDS_BENDING, index count = 0;)

@@ -6,6 +6,7 @@
 #pragma once
 
 #include "terms/attachments.hpp"
+#include "terms/bending.hpp"
 #include "terms/drag.hpp"
 #include "terms/external.hpp"
 #include "terms/gas.hpp"
@@ -33,7 +34,8 @@ using Terms = TermList<
     attachments::Term,  // springs to anchor points Control moves
     external::Term,     // per-particle forces from Control
     external::GrabTerm, // a grabbed particle pulled to a target
-    drag::Term>;        // air drag on faces
+    drag::Term,         // air drag on faces
+    bending::Term>;     // discrete-shell bending on interior edges
 
 /// Each term's traits (terms/term.hpp) in registry order (softbody._core.term_table).
 inline const TermTraits* term_traits() {

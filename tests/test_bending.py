@@ -1,0 +1,302 @@
+"""Material bending: the discrete-shell energy on a surface's hinges
+(``core/terms/bending.hpp``, ``softbody.reference.bending``, ``sb.Bending``).
+
+References, test by test: the NumPy reference (core against it to round-off); calculus
+(the force is minus the gradient of the energy, by central differences, whose O(h^2)
+error is estimated from two step sizes as in test_terms.py); the Gauss-Newton product's
+definition 2 k g g^T p computed here by hand; the plate's closed forms (a cylinder's
+energy D / (2 R^2) per area, a sphere's, a cantilever's tip deflection); energy
+conservation of velocity Verlet; the stability estimate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import softbody as sb
+from softbody import _core, core
+from softbody.core import core_model
+from softbody.reference import bending as rb
+from softbody.reference import jacobians
+from softbody.sim.control import control_data
+
+EPS = np.finfo(float).eps
+
+
+# -- models ------------------------------------------------------------------------------
+def _surface(mesh: sb.TriMesh, bending: sb.Bending, *, pinned=None) -> sb.Model:
+    """``mesh`` as an open surface with material bending and nothing else that pushes: no
+    gravity, no pressure, edge springs of stiffness 0 (so at rest velocities the core's
+    whole force is the bending force)."""
+    b = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+    b.add_cloth(mesh, mass=1.0, stiffness=0.0, damping=0.0, bending=bending, pinned=pinned,
+                mass_distribution="area")  # fmt: skip
+    return b.finalize()
+
+
+def _sphere_case(rest_shape: str) -> tuple[sb.Model, np.ndarray]:
+    """An icosphere (radius 0.3 m, 162 vertices, D = 0.02 N m) and a state with every
+    vertex moved by up to 5 mm (seed 5)."""
+    model = _surface(sb.icosphere(2, radius=0.3), sb.Bending(0.02, rest_shape=rest_shape))
+    rng = np.random.default_rng(5)
+    return model, model.particle_q + rng.uniform(-0.005, 0.005, model.particle_q.shape)
+
+
+def _grid_case(amplitude: float) -> tuple[sb.Model, np.ndarray]:
+    """A flat 1 x 0.8 m grid of 10 x 8 squares (D = 0.01 N m, rest flat) and a state with
+    every vertex moved in the plane by up to 1 cm and out of it by up to ``amplitude``
+    [m] (seed 7): 1e-9 m leaves every hinge within about 1e-8 rad of flat."""
+    model = _surface(sb.rectangle((1.0, 0.8), (10, 8)), sb.Bending(0.01))
+    rng = np.random.default_rng(7)
+    q = model.particle_q.copy()
+    q[:, :2] += rng.uniform(-0.01, 0.01, (len(q), 2))
+    q[:, 2] += rng.uniform(-amplitude, amplitude, len(q))
+    return model, q
+
+
+CASES = {
+    "sphere-rest-mesh": lambda: _sphere_case("mesh"),
+    "sphere-rest-flat": lambda: _sphere_case("flat"),
+    "grid": lambda: _grid_case(0.02),
+    "grid-near-flat": lambda: _grid_case(1e-9),
+}
+
+
+@pytest.fixture(params=core.simd_paths())
+def simd(request):
+    """Each instruction set this CPU runs, restored afterwards."""
+    before = core.simd_path()
+    core.use_simd(request.param)
+    yield request.param
+    core.use_simd(before)
+
+
+def _core_force(model: sb.Model, q: np.ndarray) -> np.ndarray:
+    zero = np.zeros_like(q)
+    return _core.eval_forces(core_model(model), control_data(model), 0.0, q, zero)[0]
+
+
+def _core_energy(model: sb.Model, q: np.ndarray) -> tuple[float, np.ndarray]:
+    out = _core.eval_energies(core_model(model), control_data(model), 0.0,
+                              np.ascontiguousarray(q))  # fmt: skip
+    return out["bending"]
+
+
+def _force_scale(model: sb.Model, q: np.ndarray) -> np.ndarray:
+    """Per particle the magnitudes its bending force sums, 2 k (|theta - theta0| + |theta|
+    + 1) |g_a| (N,): theta carries round-off of about eps (|theta| + 1)."""
+    theta, g, _ = rb.angles_and_gradients(model, q)
+    s = 2.0 * model.bending_stiffness * (np.abs(rb.excess(model, theta)) + np.abs(theta) + 1.0)
+    out = np.zeros(model.particle_count)
+    np.add.at(out, model.bending_hinges.reshape(-1),
+              (s[:, None] * np.linalg.norm(g, axis=2)).reshape(-1))  # fmt: skip
+    return out
+
+
+# -- force and energy ----------------------------------------------------------------------
+@pytest.mark.parametrize("name", list(CASES))
+def test_core_force_and_energy_match_the_reference(name, simd):
+    """The core's bending force (the whole force of a model with nothing else) and energy
+    (total and per body) equal the reference's to 64 eps times the magnitudes summed
+    (``_force_scale``; the energy's k (|theta - theta0| + |theta| + 1) |theta - theta0|);
+    the forces are not zero, and sum to zero (no net force on the surface)."""
+    model, q = CASES[name]()
+    got = _core_force(model, q)
+    want = rb.force(model, q)
+    scale = _force_scale(model, q)
+    assert np.all(np.abs(got - want) <= 64 * EPS * scale[:, None])
+    assert np.abs(want).max() > 1e6 * 64 * EPS * scale.max() or name == "grid-near-flat"
+    assert np.abs(want).max() > 0.0
+    np.testing.assert_allclose(want.sum(axis=0), 0.0, atol=64 * EPS * scale.sum())
+    total, body = _core_energy(model, q)
+    theta, _, _ = rb.angles_and_gradients(model, q)
+    d = np.abs(rb.excess(model, theta))
+    e_scale = np.sum(model.bending_stiffness * (d + np.abs(theta) + 1.0) * d)
+    assert abs(total - rb.energy(model, q)) <= 64 * EPS * e_scale
+    assert body.shape == (1,) and body[0] == total
+    assert total > 0.0
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_core_force_is_minus_the_gradient_of_the_core_energy(name):
+    """-dE/dx . p by central differences of the core's energy along three random
+    directions p (seed 11) equals f . p of the core's force, within the differences'
+    estimated O(h^2) error (twice |D(h) - D(h/2)| / 3) plus their round-off 64 eps |E| / h;
+    the allowance is under 1e-4 of what f . p sums, so the check is sharp. Near flat the
+    energy is tiny (about 1e-16 J), so the step there is 1e-10 m."""
+    model, q = CASES[name]()
+    f = _core_force(model, q)
+    h = 1e-10 if name == "grid-near-flat" else 1e-5
+    rng = np.random.default_rng(11)
+
+    def energy(x):
+        return _core_energy(model, x)[0]
+
+    for _ in range(3):
+        p = rng.normal(size=q.shape)
+        coarse = (energy(q + h * p) - energy(q - h * p)) / (2 * h)
+        fine = (energy(q + h / 2 * p) - energy(q - h / 2 * p)) / h
+        exact = -np.sum(f * p)
+        allowed = 2 * abs(coarse - fine) / 3 + 64 * EPS * (abs(energy(q)) + 1e-300) / h
+        assert abs(fine - exact) <= allowed, (fine, exact, allowed)
+        assert allowed < 1e-4 * np.sum(np.abs(f * p))
+
+
+def test_rest_shape_mesh_is_at_rest_and_flat_is_not():
+    """With rest_shape "mesh" the given mesh has zero energy and force up to round-off
+    (theta0 is the builder's NumPy angle, theta the core's: they differ by a few eps
+    (|theta| + 1)); with "flat" an icosphere has every rest angle 0 and positive energy,
+    every hinge bent the same way (theta > 0 on a convex surface wound outward)."""
+    mesh = sb.icosphere(2, radius=0.3)
+    at_rest = _surface(mesh, sb.Bending(0.02))
+    q = at_rest.particle_q
+    slack = 16 * EPS * (np.abs(at_rest.bending_rest_angle) + 1.0)
+    assert _core_energy(at_rest, q)[0] <= np.sum(at_rest.bending_stiffness * slack**2)
+    assert np.all(np.abs(_core_force(at_rest, q)) <= 16 * EPS * _force_scale(at_rest, q)[:, None])
+    flat = _surface(mesh, sb.Bending(0.02, rest_shape="flat"))
+    assert np.all(flat.bending_rest_angle == 0.0)
+    theta, _, live = rb.angles_and_gradients(flat, q)
+    assert np.all(live) and np.all(theta > 0.0)
+    assert _core_energy(flat, q)[0] > 0.0
+
+
+def test_hinges_are_the_interior_edges():
+    """Model.bending_hinges: one row per interior edge (a closed icosphere: every edge,
+    E = 3 F / 2; the grid: its edges less its boundary's), each with (x0, x1, x2) a face
+    and (x1, x0, x3) another, as wound; k = D |e0|^2 / A0 at the rest positions."""
+    sphere = _surface(sb.icosphere(2), sb.Bending(0.5))
+    assert len(sphere.bending_hinges) == 3 * sphere.tri_count // 2
+    nx, ny = 10, 8
+    grid = _surface(sb.rectangle((1.0, 0.8), (nx, ny)), sb.Bending(0.5))
+    edges = nx * (ny + 1) + ny * (nx + 1) + nx * ny
+    assert len(grid.bending_hinges) == edges - 2 * (nx + ny)
+    for model in (sphere, grid):
+        faces = {tuple(np.roll(f, -k)) for f in model.tri_indices for k in range(3)}
+        for x0, x1, x2, x3 in model.bending_hinges:
+            assert (x0, x1, x2) in faces and (x1, x0, x3) in faces
+        q = model.particle_q
+        x = q[model.bending_hinges]
+        e = x[:, 1] - x[:, 0]
+        area = 0.5 * (np.linalg.norm(np.cross(e, x[:, 2] - x[:, 0]), axis=1)
+                      + np.linalg.norm(np.cross(x[:, 3] - x[:, 0], e), axis=1))  # fmt: skip
+        np.testing.assert_allclose(model.bending_stiffness,
+                                   0.5 * np.sum(e * e, axis=1) / area, rtol=1e-14)  # fmt: skip
+
+
+# -- the implicit solvers' Jacobian ----------------------------------------------------------
+def _gauss_newton_by_hand(model, q, p):
+    """K p = -sum over hinges 2 k g (g . p), g the 12-vector of theta's gradient, built
+    here as a dense matrix from the reference's gradients."""
+    _, g, _ = rb.angles_and_gradients(model, q)
+    n3 = 3 * model.particle_count
+    k_matrix = np.zeros((n3, n3))
+    for h, corners in enumerate(model.bending_hinges):
+        rows = (3 * corners[:, None] + np.arange(3)).reshape(-1)
+        gh = g[h].reshape(-1)
+        k_matrix[np.ix_(rows, rows)] -= 2.0 * model.bending_stiffness[h] * np.outer(gh, gh)
+    return k_matrix, (k_matrix @ p.reshape(-1)).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("name", ["sphere-rest-flat", "grid"])
+def test_jacobian_product_is_the_gauss_newton_stiffness(name, simd):
+    """softbody._core.apply_jacobians (alpha_m = alpha_c = 0, alpha_k = 1.7) on a model
+    with only bending equals 1.7 K p for K the Gauss-Newton stiffness -2 k g g^T built
+    densely here, to 64 eps times the magnitudes; the reference's product likewise. K is
+    symmetric and negative semi-definite (p . K p <= 0 for 20 random p, its largest
+    eigenvalue at most round-off), and at a state where every hinge is at its rest angle
+    it is the exact Hessian's negative: the force's central differences along p."""
+    model, q = CASES[name]()
+    rng = np.random.default_rng(13)
+    p = rng.normal(size=q.shape)
+    inputs = jacobians.prepare(model, control_data(model), 0.0, q)
+    out = np.zeros_like(q)
+    _core.apply_jacobians(core_model(model), control_data(model), q, p, 0.0, 0.0, 1.7,
+                          *inputs, out)  # fmt: skip
+    k_matrix, kp = _gauss_newton_by_hand(model, q, p)
+    _, g, _ = rb.angles_and_gradients(model, q)
+    gnorm = np.linalg.norm(g, axis=2)
+    scale = np.zeros(model.particle_count)
+    gp = np.einsum("hak,hak->h", np.abs(g), np.abs(p[model.bending_hinges]))
+    np.add.at(scale, model.bending_hinges.reshape(-1),
+              ((2 * 1.7 * model.bending_stiffness * gp)[:, None] * gnorm).reshape(-1))  # fmt: skip
+    assert np.all(np.abs(out - 1.7 * kp) <= 64 * EPS * scale[:, None])
+    ref_out = jacobians.apply_jacobians(model, control_data(model), q, p, 0.0, 0.0, 1.7, inputs)
+    assert np.all(np.abs(ref_out - 1.7 * kp) <= 64 * EPS * scale[:, None])
+    assert np.abs(kp).max() > 0.0
+    np.testing.assert_array_equal(k_matrix, k_matrix.T)
+    for _ in range(20):
+        x = rng.normal(size=q.size)
+        assert x @ k_matrix @ x <= 0.0
+    assert np.linalg.eigvalsh(k_matrix)[-1] <= 1e-12 * np.abs(k_matrix).max()
+
+    # at rest (theta = theta0: the model's own mesh) K p is d f / dx p exactly
+    rest = _surface(sb.icosphere(2, radius=0.3), sb.Bending(0.02))
+    q0 = rest.particle_q
+    p = rng.normal(size=q0.shape)
+    _, kp0 = _gauss_newton_by_hand(rest, q0, p)
+    h = 1e-6
+    fd = (_core_force(rest, q0 + h * p) - _core_force(rest, q0 - h * p)) / (2 * h)
+    np.testing.assert_allclose(fd, kp0, atol=1e-6 * np.abs(kp0).max())
+
+
+def test_smoother_blocks_hold_the_diagonal_of_the_system(simd):
+    """The implicit Euler step with multigrid on a bent bending-only sheet runs (its
+    smoother blocks are m I + 2 h^2 k g_a g_a^T) and matches the step with the Jacobi
+    preconditioner to the CG tolerance: both solve the same system, M - h^2 K with the
+    Gauss-Newton K."""
+    model, q = CASES["grid"]()
+    states = []
+    for preconditioner in ("jacobi", "multigrid"):
+        sim = sb.Simulator(model, integrator="implicit_euler", dt=1e-3,
+                           implicit_tolerance=1e-12, implicit_max_iterations=2000,
+                           implicit_preconditioner=preconditioner)  # fmt: skip
+        state = model.state()
+        state.particle_q[:] = q
+        sim.run(state, 5)
+        states.append(state.particle_q.copy())
+    moved = np.abs(states[0] - q).max()
+    assert moved > 1e-5
+    np.testing.assert_allclose(states[1], states[0], atol=1e-8 * moved)
+
+
+# -- input -------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: sb.Bending(-1.0), "bending stiffness must be > 0"),
+        (lambda: sb.Bending(0.0), "bending stiffness must be > 0"),
+        (lambda: sb.Bending(float("nan")), "bending stiffness must be finite"),
+        (lambda: sb.Bending("soft"), "bending stiffness must be a number"),
+        (lambda: sb.Bending(1.0, rest_shape="round"), "rest_shape must be 'mesh' or 'flat'"),
+        (lambda: sb.Bending.from_material(-2e9, 0.3, 1e-4), "youngs_modulus must be > 0"),
+        (lambda: sb.Bending.from_material(2e9, 0.7, 1e-4), r"poisson_ratio must lie in \(-1"),
+        (lambda: sb.Bending.from_material(2e9, -1.0, 1e-4), r"poisson_ratio must lie in \(-1"),
+        (lambda: sb.Bending.from_material(2e9, 0.3, 0.0), "thickness must be > 0"),
+        (lambda: sb.Bending.from_material(2e9, 0.3, float("inf")), "thickness must be finite"),
+    ],
+)  # fmt: skip
+def test_bad_bending_input_is_refused(make, message):
+    """A ValueError naming the parameter for each bad value."""
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_builder_refuses_what_is_not_a_bending():
+    """add_soft_body / add_cloth: bending=<a number> is a ValueError that says what to
+    give; a mesh with a zero-area hinge is a MeshError, and the builder is left as it was."""
+    b = sb.ModelBuilder()
+    with pytest.raises(ValueError, match="bending must be a softbody.Bending"):
+        b.add_cloth(sb.rectangle(), mass=1.0, stiffness=1.0, damping=0.0, bending=0.01)
+    with pytest.raises(ValueError, match="bending must be a softbody.Bending"):
+        b.add_soft_body(sb.icosphere(1), mass=1.0, stiffness=1.0, damping=0.0, gas=1.0,
+                        bending=0.01)  # fmt: skip
+    assert b.particle_count == 0 and b.body_count == 0
+
+
+def test_from_material_is_the_plate_formula():
+    """D = E H^3 / (12 (1 - nu^2)): a 0.1 mm PET film (E = 4 GPa, nu = 0.4) has
+    D = 4e9 1e-12 / (12 0.84) = 3.968e-4 N m."""
+    d = sb.Bending.from_material(4e9, 0.4, 1e-4).stiffness
+    assert d == pytest.approx(4e9 * 1e-12 / (12 * 0.84), rel=1e-15)
+    assert sb.Bending.from_material(4e9, 0.4, 1e-4, rest_shape="flat").rest_shape == "flat"
