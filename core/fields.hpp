@@ -159,7 +159,7 @@
     F(bending, rest_angle, bending_rest_angle, f64, (H), finite, "rad",                           \
       "rest dihedral angle theta0 of each hinge, in (-pi, pi]; 0 is flat")                        \
     F(bending, stiffness, bending_stiffness, f64, (H), finite_nonneg, "N m",                      \
-      "hinge stiffness k = D |e0|^2 / A0 of each hinge; its energy is k (theta - theta0)^2")      \
+      "hinge stiffness k = D |e0|^2 / (2 A0) of each hinge; its energy is k (theta - theta0)^2") \
     F(bending, body, bending_body, i64, (H), index(0, B), "",                                     \
       "body of each hinge")
 

@@ -7,11 +7,12 @@
 //     theta = atan2((n1 x n2) . e / |e|, n1 . n2),
 // 0 where the two faces are flat, positive where the surface bends away from its normals
 // (on a convex closed surface wound outward). Its energy is
-//     E = k (theta - theta0)^2,   k = D |e0|^2 / A0   [N m],
+//     E = k (theta - theta0)^2,   k = D |e0|^2 / (2 A0)   [N m],
 // D the bending stiffness [N m] (E H^3 / (12 (1 - nu^2)) for a plate), |e0| the rest edge
 // length and A0 the two triangles' rest areas summed; theta - theta0 is taken in
-// [-pi, pi]. On a mesh of equilateral triangles bent to a cylinder of radius R this is the
-// plate's D / (2 R^2) per unit area (docs/guide/bending.md derives the factor).
+// [-pi, pi]. On a mesh of equilateral triangles (k = D / sqrt(3), Seung and Nelson 1988)
+// bent to a cylinder of radius R this tends to the plate's D / (2 R^2) per unit area
+// (docs/guide/bending.md: the factor, and how it depends on the mesh).
 //
 // The gradient of theta (Bridson, Marino and Fedkiw 2003; Tamstorf and Grinspun 2013):
 //     g2 = -|e| n1 / |n1|^2,   g3 = -|e| n2 / |n2|^2,

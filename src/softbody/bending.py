@@ -3,7 +3,7 @@
 A body's skin resists bending by its bending stiffness D [N m], per unit width the moment
 that bends it to unit curvature. For a plate of Young's modulus E, Poisson ratio nu and
 thickness H, D = E H^3 / (12 (1 - nu^2)). Every interior edge ("hinge") of the mesh gets
-the energy k (theta - theta0)^2 with k = D |e0|^2 / A0 (``core/terms/bending.hpp``;
+the energy k (theta - theta0)^2 with k = D |e0|^2 / (2 A0) (``core/terms/bending.hpp``;
 the guide's bending page derives the factor and says what each solver does).
 
 This is a material law, apart from the older ``bend_stiffness`` of ``add_soft_body`` and
@@ -95,11 +95,11 @@ def dihedral_angles(q: np.ndarray, hinges: np.ndarray) -> np.ndarray:
 
 
 def hinge_stiffness(q: np.ndarray, hinges: np.ndarray, stiffness: float) -> np.ndarray:
-    """k = D |e0|^2 / A0 [N m] (H,) of each hinge (H, 4) at its rest positions q (N, 3)
+    """k = D |e0|^2 / (2 A0) [N m] (H,) of each hinge (H, 4) at rest positions q (N, 3)
     [m], D = ``stiffness`` [N m], A0 the two triangles' areas summed (nan where that is 0)."""
     x0, x1, x2, x3 = (q[hinges[:, k]] for k in range(4))
     e = x1 - x0
     area = 0.5 * (np.linalg.norm(np.cross(e, x2 - x0), axis=1)
                   + np.linalg.norm(np.cross(x3 - x0, e), axis=1))  # fmt: skip
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(area > 0, stiffness * np.einsum("ij,ij->i", e, e) / area, np.nan)
+        return np.where(area > 0, stiffness * np.einsum("ij,ij->i", e, e) / (2.0 * area), np.nan)

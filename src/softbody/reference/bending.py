@@ -7,7 +7,7 @@ angle and energy are
     theta = atan2((n1 x n2) . e / |e|, n1 . n2)                          [rad]
     E     = k (theta - theta0)^2,   theta - theta0 taken in [-pi, pi]     [J]
 
-with k = D |e0|^2 / A0 [N m] (``Model.bending_stiffness``). The gradient of theta is
+with k = D |e0|^2 / (2 A0) [N m] (``Model.bending_stiffness``). The gradient of theta is
 
     g2 = -|e| n1 / |n1|^2,   g3 = -|e| n2 / |n2|^2,
     g1 = -(s2 g2 + s3 g3),   g0 = -(g1 + g2 + g3),   s_k = (x_k - x0) . e / |e|^2,
