@@ -525,3 +525,55 @@ def test_projective_dynamics_steps_bending_explicitly():
     state = model.state()
     sim.run(state, 3000)
     assert -state.particle_q[rows == ny, 2].mean() == pytest.approx(tip, rel=0.01)
+
+
+# -- scene files ---------------------------------------------------------------------------
+def test_scene_bending_table_builds_the_same_model_as_the_library():
+    """A body's ``bending`` table in a scene (here by --set overrides on cloth-wind): with
+    stiffness D, or with youngs_modulus, poisson_ratio and thickness, the model's hinges
+    and their stiffnesses are those of add_cloth(bending=Bending(...)) on the same mesh;
+    rest_shape passes through."""
+    from softbody.scenes import load_scene
+
+    by_d = load_scene("cloth-wind", ["bodies.0.bending.stiffness=0.01"]).model
+    material = load_scene("cloth-wind", [
+        "bodies.0.bending={youngs_modulus=2e9, poisson_ratio=0.3, thickness=1e-4, "
+        "rest_shape='flat'}"])  # fmt: skip
+    mesh = sb.rectangle((1.2, 1.2), (24, 24)).translated(np.array([0.0, 1.0, 0.0]))
+    b = sb.ModelBuilder()
+    b.add_cloth(mesh, mass=0.3, stiffness=120.0, damping=0.1, bending=sb.Bending(0.01))
+    want = b.finalize()
+    np.testing.assert_array_equal(by_d.bending_hinges, want.bending_hinges)
+    np.testing.assert_allclose(by_d.bending_stiffness, want.bending_stiffness, rtol=1e-15)
+    d = 2e9 * 1e-12 / (12 * (1 - 0.09))
+    np.testing.assert_allclose(material.model.bending_stiffness, want.bending_stiffness * d / 0.01,
+                               rtol=1e-14)  # fmt: skip
+    assert np.all(material.model.bending_rest_angle == 0.0)
+    assert load_scene("cloth-wind").model.bending_hinges.shape == (0, 4)
+
+
+@pytest.mark.parametrize(
+    ("override", "expected"),
+    [
+        ("bodies.0.bending.stiffness=-1", "bodies.0.bending.stiffness: must be > 0, got -1"),
+        ("bodies.0.bending={stiffness=0.01, thickness=1e-4}",
+         "bodies.0.bending.stiffness: give stiffness, or youngs_modulus, poisson_ratio and "
+         "thickness, not both"),
+        ("bodies.0.bending={youngs_modulus=2e9}",
+         "bodies.0.bending.stiffness: give stiffness, or all of youngs_modulus, "
+         "poisson_ratio and thickness"),
+        ("bodies.0.bending={stiffness=1, poisson_ratio=0.7}",
+         "bodies.0.bending.poisson_ratio: must be <= 0.5, got 0.7"),
+        ("bodies.0.bending={stiffness=1, rest_shape='round'}",
+         "bodies.0.bending.rest_shape: must be one of 'mesh' or 'flat', got 'round'"),
+        ("bodies.0.bending.stifness=1", "unknown scene key bodies.0.bending.stifness (valid: "
+         "poisson_ratio, rest_shape, stiffness, thickness, youngs_modulus)"),
+    ],
+)  # fmt: skip
+def test_scene_bending_table_is_checked(override, expected):
+    """Each bad ``bending`` table is one line naming the dotted key and the reason."""
+    from softbody.scenes import load_scene
+
+    with pytest.raises(ValueError) as info:
+        load_scene("cloth-wind", [override])
+    assert str(info.value) == expected
