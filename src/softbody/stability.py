@@ -238,6 +238,7 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
         damping_rate,
         float(np.sqrt(w2_pressure)),
         float(np.sqrt(rank_one)),
+        float(np.sqrt(pieces["bending"])),
     )
 
 
