@@ -586,3 +586,67 @@ def test_scene_bending_table_is_checked(override, expected):
     with pytest.raises(ValueError) as info:
         load_scene("cloth-wind", [override])
     assert str(info.value) == expected
+
+
+# -- one step against the reference steps ------------------------------------------------------
+def _step_case():
+    """The sheet of _bent_sheet under gravity (springs 50 N/m and 0.2 N s/m, D = 0.01
+    N m), two corners pinned, started rolled with a random velocity (seed 17, 0.1 m/s):
+    (model, q0, v0)."""
+    b = sb.ModelBuilder(gravity=(0.0, 0.0, -9.81))
+    b.add_cloth(_triangle_grid(8, 8, 0.05), mass=0.1, stiffness=50.0, damping=0.2,
+                bending=sb.Bending(0.01), pinned=[0, 8])  # fmt: skip
+    model = b.finalize()
+    q0 = _rolled(model.particle_q, 0.3, 0.0)
+    v0 = np.random.default_rng(17).normal(0.0, 0.1, q0.shape)
+    v0[[0, 8]] = 0.0
+    return model, q0, v0
+
+
+def test_one_backward_euler_step_matches_the_reference(simd):
+    """One implicit Euler step with bending equals softbody.reference.steps' dense Newton
+    step (M - h C - h^2 K) dv = h (f0 + K h v0), K with the bending's Gauss-Newton part,
+    solved by numpy: CG stops at |r| <= tol |b|, so |dv - dv_ref| <= tol |b| / sigma_min
+    (as test_reference.py's step test)."""
+    from softbody import reference as ref
+    from softbody.reference import steps
+
+    model, q0, v0 = _step_case()
+    dt, tolerance = 5e-3, 1e-12
+    sim = sb.Simulator(model, integrator="implicit_euler", dt=dt, implicit_tolerance=tolerance,
+                       implicit_max_iterations=5000)  # fmt: skip
+    state = model.state()
+    state.particle_q[:], state.particle_qd[:] = q0, v0
+    sim.step(state)
+    expected = steps.backward_euler_step(model, ref.control_arrays(model), 0.0, dt, q0, v0)
+    sigma_min = np.linalg.svd(expected.matrix, compute_uv=False)[-1]
+    bound = tolerance * np.linalg.norm(expected.rhs) / sigma_min
+    bound += 16 * EPS * np.abs(expected.qd).max()
+    assert bound < 1e-8 * np.abs(expected.qd - v0).max()
+    assert np.linalg.norm(state.particle_qd - expected.qd) <= bound
+    # the bending is in it: the same step without bending's force and stiffness differs
+    b = sb.ModelBuilder(gravity=(0.0, 0.0, -9.81))
+    b.add_cloth(_triangle_grid(8, 8, 0.05), mass=0.1, stiffness=50.0, damping=0.2,
+                pinned=[0, 8])  # fmt: skip
+    without = steps.backward_euler_step(b.finalize(), ref.control_arrays(model), 0.0, dt, q0, v0)
+    assert np.linalg.norm(without.qd - expected.qd) > 1e3 * bound
+
+
+def test_one_projective_step_matches_the_reference(simd):
+    """One projective-dynamics step (3 iterations) with bending equals the reference's
+    dense local-global iterations, bending among the forces kept explicit in each
+    iteration, to ULPS eps cond(A) |x| per iteration (test_reference.py's bound)."""
+    from softbody import reference as ref
+    from softbody.reference import steps
+
+    model, q0, v0 = _step_case()
+    dt = 5e-3
+    sim = sb.Simulator(model, integrator="projective", dt=dt, projective_iterations=3)
+    state = model.state()
+    state.particle_q[:], state.particle_qd[:] = q0, v0
+    sim.step(state)
+    x, _ = steps.projective_step(model, ref.control_arrays(model), 0.0, dt, q0, v0, 3)
+    cond = np.linalg.cond(steps.projective_matrix(model, dt))
+    bound = 3 * 16 * EPS * cond * np.abs(x).max()
+    assert bound < 1e-6 * np.abs(x - q0).max()
+    assert np.abs(state.particle_q - x).max() <= bound
