@@ -134,8 +134,10 @@ inline void smoother_blocks(const Model& m, const double* q, double h, double* b
 
 /// The factor on the Gauss-Newton stiffness 2 k g g^T that the stability estimate takes
 /// for the whole Hessian 2 k (g g^T + (theta - theta0) d2theta/dx2): 1 + 2 |theta -
-/// theta0|. The second part's norm stays below 2 |theta - theta0| |g|^2 on the hinges
-/// tests/test_bending.py samples (its largest ratio there is reported with the test).
+/// theta0|, a margin for the second part, which grows with the angle's excess and, on
+/// well-shaped triangles, is of the size of the first (d2theta/dx2 ~ |g|^2). Not a proof:
+/// tests/test_bending.py checks the rows against the whole Hessian's largest eigenvalue
+/// on bent, perturbed and folded surfaces.
 inline double bound_factor(double excess_angle) { return 1.0 + 2.0 * std::abs(excess_angle); }
 
 /// Stiffness bound: Gershgorin on M^-1/2 K M^-1/2 for K the hinges' stiffness, block by
