@@ -285,7 +285,7 @@ def test_bad_bending_input_is_refused(make, message):
 
 def test_builder_refuses_what_is_not_a_bending():
     """add_soft_body / add_cloth: bending=<a number> is a ValueError that says what to
-    give; a mesh with a zero-area hinge is a MeshError, and the builder is left as it was."""
+    give, and the builder is left as it was."""
     b = sb.ModelBuilder()
     with pytest.raises(ValueError, match="bending must be a softbody.Bending"):
         b.add_cloth(sb.rectangle(), mass=1.0, stiffness=1.0, damping=0.0, bending=0.01)

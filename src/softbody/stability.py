@@ -175,9 +175,7 @@ def spectral_bounds(
     zero = np.zeros_like(k)
     size = 3 * n
     return (
-        _largest_eigenvalue(
-            operator(k, zero, 0.0, 1.0, no_gas, no_gas, damped_a, False), size
-        ),
+        _largest_eigenvalue(operator(k, zero, 0.0, 1.0, no_gas, no_gas, damped_a, False), size),
         _largest_eigenvalue(
             operator(zero, transverse, 0.0, 1.0, body_pnet, body_dpdv, undamped_a, True), size
         ),
@@ -185,9 +183,7 @@ def spectral_bounds(
             operator(k, transverse, 0.0, 1.0, body_pnet, body_dpdv, damped_a + undamped_a, True),
             size,
         ),
-        _largest_eigenvalue(
-            operator(k, zero, 1.0, 0.0, no_gas, no_gas, damping_a, False), size
-        ),
+        _largest_eigenvalue(operator(k, zero, 1.0, 0.0, no_gas, no_gas, damping_a, False), size),
     )
 
 

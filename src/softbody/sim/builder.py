@@ -472,8 +472,7 @@ class ModelBuilder:
             if method == VolumeMethod.MONTE_CARLO
             else np.zeros((0, 2))
         )
-        # checked before anything is added, so a refused mesh leaves the builder as it was
-        hinge_data = None if bending is None else self._hinge_data(body, mesh, bending)
+        hinge_data = None if bending is None else self._hinge_data(mesh, bending)
 
         begin = self._append_particles(
             mesh.vertices.copy(), vel, m, pin_mask, body, report.vertex_source
@@ -520,24 +519,14 @@ class ModelBuilder:
         return body
 
     @staticmethod
-    def _hinge_data(
-        body: int, mesh: TriMesh, bending: Bending
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The material bending hinges of ``body``'s validated ``mesh`` (H, 4) (its
+    def _hinge_data(mesh: TriMesh, bending: Bending) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The material bending hinges of a body's validated ``mesh`` (H, 4) (its
         vertex indices), their rest angles [rad] and stiffnesses [N m] (H,) at the mesh's
-        positions."""
+        positions (validation has refused triangles of zero area, so every k is finite)."""
         h = hinges(mesh.faces)
         k = hinge_stiffness(mesh.vertices, h, bending.stiffness)
-        if not np.all(np.isfinite(k)):
-            bad = int(np.flatnonzero(~np.isfinite(k))[0])
-            raise MeshError(
-                f"body {body} mesh: bending needs triangles of nonzero area, but the two "
-                f"beside edge ({h[bad, 0]}, {h[bad, 1]}) have none"
-            )
         rest = (
-            dihedral_angles(mesh.vertices, h)
-            if bending.rest_shape == "mesh"
-            else np.zeros(len(h))
+            dihedral_angles(mesh.vertices, h) if bending.rest_shape == "mesh" else np.zeros(len(h))
         )
         return h, rest, k
 
