@@ -55,21 +55,24 @@ inline Hinge hinge(const Model& m, const double* q, index h) {
     const double e2 = dot(e, e), a1 = dot(n1, n1), a2 = dot(n2, n2);
     Hinge out;
     if (!(e2 > 0.0 && a1 > 0.0 && a2 > 0.0)) return out;
-    const double length = std::sqrt(e2);
-    out.theta = std::atan2(dot(cross(n1, n2), e) / length, dot(n1, n2));
+    const double length = std::sqrt(e2), inv_length = 1.0 / length;
+    out.theta = std::atan2(dot(cross(n1, n2), e) * inv_length, dot(n1, n2));
     out.g[2] = (-length / a1) * n1;
     out.g[3] = (-length / a2) * n2;
-    const double s2 = dot(a, e) / e2, s3 = dot(b, e) / e2;
+    const double inv_e2 = inv_length * inv_length;
+    const double s2 = dot(a, e) * inv_e2, s3 = dot(b, e) * inv_e2;
     out.g[1] = -(s2 * out.g[2] + s3 * out.g[3]);
     out.g[0] = -(out.g[1] + out.g[2] + out.g[3]);
     out.live = true;
     return out;
 }
 
-/// theta - theta0 of hinge h taken in [-pi, pi] [rad].
+/// theta - theta0 of hinge h taken in [-pi, pi] [rad]: both lie in [-pi, pi], so one
+/// turn added or taken away suffices (softbody.reference.bending.excess alike).
 inline double excess(const Model& m, index h, double theta) {
-    constexpr double kTwoPi = 6.283185307179586;
-    return std::remainder(theta - m.bending.rest_angle[h], kTwoPi);
+    constexpr double kPi = 3.141592653589793, kTwoPi = 6.283185307179586;
+    const double d = theta - m.bending.rest_angle[h];
+    return d > kPi ? d - kTwoPi : (d < -kPi ? d + kTwoPi : d);
 }
 
 /// Accumulate every hinge's bending force -dE/dx into f (N, 3) [N] at q (N, 3).
