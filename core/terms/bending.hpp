@@ -24,10 +24,11 @@
 // add_smoother_blocks with the Gauss-Newton stiffness K = -2 k g g^T per hinge (g the
 // 12-vector of the four gradients), the exact Hessian less its part 2 k (theta - theta0)
 // d2theta/dx2, which is indefinite: -K is positive semi-definite, and exact where every
-// hinge is at its rest angle. It is evaluated from the linearisation's point, so prepare
-// has nothing to store. bound_rows: the stability estimate's Gershgorin rows. No
-// projection: the dihedral angle is not a quadratic constraint, and projective dynamics
-// steps this force explicitly inside its iterations, as it does the gas. No damping.
+// hinge is at its rest angle; prepare stores the gradients at the linearisation's point
+// (Linearization::bending_gradient). add_bound_rows: the stability estimate's Gershgorin
+// rows. No projection: the dihedral angle is not a quadratic constraint, and projective
+// dynamics steps this force explicitly inside its iterations, as it does the gas. No
+// damping.
 #pragma once
 
 #include <cmath>
@@ -46,7 +47,9 @@ struct Hinge {
     bool live = false;
 };
 
-/// The angle and its gradient of hinge h at q (N, 3).
+/// The angle and its gradient of hinge h at q (N, 3); kAngle false leaves theta 0 (the
+/// Jacobian needs the gradient only, and the atan2 is a good part of the cost).
+template <bool kAngle = true>
 inline Hinge hinge(const Model& m, const double* q, index h) {
     const index* c = m.bending.hinges + 4 * h;
     const V3 x0 = load(q, c[0]);
@@ -56,7 +59,7 @@ inline Hinge hinge(const Model& m, const double* q, index h) {
     Hinge out;
     if (!(e2 > 0.0 && a1 > 0.0 && a2 > 0.0)) return out;
     const double length = std::sqrt(e2), inv_length = 1.0 / length;
-    out.theta = std::atan2(dot(cross(n1, n2), e) * inv_length, dot(n1, n2));
+    if (kAngle) out.theta = std::atan2(dot(cross(n1, n2), e) * inv_length, dot(n1, n2));
     out.g[2] = (-length / a1) * n1;
     out.g[3] = (-length / a2) * n2;
     const double inv_e2 = inv_length * inv_length;
@@ -100,12 +103,32 @@ inline double energies(const Model& m, const double* q, double* body_energy) {
     return total;
 }
 
-/// out += alpha_k K p for p (N, 3), K = -2 k g g^T per hinge (Gauss-Newton) at q (N, 3).
-inline void jacobian_product(const Model& m, const double* q, double alpha_k, const double* p,
-                             double* out) {
+/// Every hinge's gradient of theta at q (N, 3) into gradient (H, 4, 3) [1/m] (0 where the
+/// angle is undefined): what jacobian_product and smoother_blocks read, once per step.
+inline void gradients(const Model& m, const double* q, double* gradient) {
+    for (index h = 0; h < m.bending.count; ++h) {
+        const Hinge g = hinge<false>(m, q, h);
+        for (int a = 0; a < 4; ++a) store(gradient, 4 * h + a, g.g[a]);
+    }
+}
+
+/// Hinge h's gradients: from `gradient` (H, 4, 3) when given, else computed at q (N, 3).
+inline Hinge stored_or_computed(const Model& m, const double* q, const double* gradient,
+                                index h) {
+    if (gradient == nullptr) return hinge<false>(m, q, h);
+    Hinge g;
+    for (int a = 0; a < 4; ++a) g.g[a] = load(gradient, 4 * h + a);
+    g.live = true;  // a dead hinge's stored gradient is 0: it adds nothing
+    return g;
+}
+
+/// out += alpha_k K p for p (N, 3), K = -2 k g g^T per hinge (Gauss-Newton) at q (N, 3),
+/// g from `gradient` (H, 4, 3) (gradients) or, where null, computed at q.
+inline void jacobian_product(const Model& m, const double* q, const double* gradient,
+                             double alpha_k, const double* p, double* out) {
     if (alpha_k == 0.0) return;
     for (index h = 0; h < m.bending.count; ++h) {
-        const Hinge g = hinge(m, q, h);
+        const Hinge g = stored_or_computed(m, q, gradient, h);
         if (!g.live) continue;
         const index* c = m.bending.hinges + 4 * h;
         double gp = 0.0;
@@ -116,10 +139,11 @@ inline void jacobian_product(const Model& m, const double* q, double alpha_k, co
 }
 
 /// The hinges' share of the diagonal blocks (N, 3, 3) of M - h^2 K: h^2 2 k g_a g_a^T at
-/// each corner a, at q (N, 3); h [s].
-inline void smoother_blocks(const Model& m, const double* q, double h, double* block) {
+/// each corner a, at q (N, 3) (g from `gradient` as in jacobian_product); h [s].
+inline void smoother_blocks(const Model& m, const double* q, const double* gradient, double h,
+                            double* block) {
     for (index k = 0; k < m.bending.count; ++k) {
-        const Hinge g = hinge(m, q, k);
+        const Hinge g = stored_or_computed(m, q, gradient, k);
         if (!g.live) continue;
         const double w = 2.0 * h * h * m.bending.stiffness[k];
         const index* c = m.bending.hinges + 4 * k;
@@ -164,22 +188,25 @@ inline void add_bound_rows(const Model& m, const double* q, double* rows) {
     }
 }
 
-/// The registered term (terms/registry.hpp): its forms for the solvers. The Jacobian is
-/// evaluated at the linearisation's point l.q each time (four cross products a hinge), so
-/// the term keeps nothing between prepare and the products.
+/// The registered term (terms/registry.hpp): its forms for the solvers. prepare stores the
+/// gradients at the linearisation's point where the solver gives room for them
+/// (l.bending_gradient); the products compute them at l.q where it does not.
 struct Term : TermBase {
     static constexpr const char* kName = "bending";
     static constexpr bool kEnergy = true;
     static bool active(const Model& m, const Control&) { return m.bending.count > 0; }
     static void force(const Eval& e, double* f) { bending::force(e.m, e.q, f); }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
+    static void prepare(const Eval& e, const Linearization& l) {
+        if (l.bending_gradient != nullptr) gradients(e.m, l.q, l.bending_gradient);
+    }
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double, double alpha_k, const double* p, double* out) {
-        bending::jacobian_product(m, l.q, alpha_k, p, out);
+        bending::jacobian_product(m, l.q, l.bending_gradient, alpha_k, p, out);
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {
-        smoother_blocks(m, l.q, s.h, s.block);
+        smoother_blocks(m, l.q, l.bending_gradient, s.h, s.block);
     }
 };
 
