@@ -428,7 +428,7 @@ def test_cantilever_tip_deflection_is_euler_bernoulli():
     (w / L about 2%). The discrete clamp: the hinges on the last pinned row stand for the
     curvature of a strip s / 2 either side of it (s the row spacing), so the plate is
     clamped half a row before that row, L_eff = L + s / 2; with it the deflection is
-    within 6% at a = 2 cm and 1 cm (1.040 and 1.036 of w measured: the rest is the
+    within 6% at a = 2 cm and 1 cm (1.040 and 1.035 of w measured: the rest is the
     plate's sides, free to curve across), and without it the error halves with a."""
     rho, g, d = 0.2, 9.81, 0.1
     plain = []
