@@ -25,7 +25,8 @@
     X(V, vents, count, vent_body)                 \
     X(O, orifices, count, orifice_bodies)         \
     X(I, inflators, count, inflator_body)         \
-    X(Q, inflators, table_count, inflator_time)
+    X(Q, inflators, table_count, inflator_time)   \
+    X(H, bending, count, bending_hinges)
 
 #define SOFTBODY_FIELDS_PARTICLES(F)                                                              \
     F(particles, mass, particle_mass, f64, (N), none, "kg",                                       \
@@ -198,6 +199,17 @@
     F(inflators, mass_flow, inflator_mass_flow, f64, (Q), finite_nonneg, "kg/s",                  \
       "mass-flow table values, piecewise linear in time")
 
+#define SOFTBODY_FIELDS_BENDING(F)                                                                \
+    F(bending, hinges, bending_hinges, i64, (H, 4), index(0, N), "",                              \
+      "particles of each hinge (interior edge): its edge x0, x1, then the corners x2 of the "     \
+      "triangle (x0, x1, x2) and x3 of (x1, x0, x3); core/terms/bending.hpp")                     \
+    F(bending, rest_angle, bending_rest_angle, f64, (H), finite, "rad",                           \
+      "rest dihedral angle theta0 of each hinge, in (-pi, pi]; 0 is flat")                        \
+    F(bending, stiffness, bending_stiffness, f64, (H), finite_nonneg, "N m",                      \
+      "hinge stiffness k = D |e0|^2 / (2 A0) of each hinge; its energy is k (theta - theta0)^2") \
+    F(bending, body, bending_body, i64, (H), index(0, B), "",                                     \
+      "body of each hinge")
+
 // The parts: P(struct, member of Model, its fields, members it holds besides them).
 #define SOFTBODY_MODEL_PARTS(P)                                                   \
     P(Particles, particles, SOFTBODY_FIELDS_PARTICLES, index count = 0;)          \
@@ -214,4 +226,5 @@
     P(Colliders, colliders, SOFTBODY_FIELDS_COLLIDERS, index count = 0;)          \
     P(Vents, vents, SOFTBODY_FIELDS_VENTS, index count = 0;)                      \
     P(Orifices, orifices, SOFTBODY_FIELDS_ORIFICES, index count = 0;)             \
-    P(Inflators, inflators, SOFTBODY_FIELDS_INFLATORS, index count = 0; index table_count = 0;)
+    P(Inflators, inflators, SOFTBODY_FIELDS_INFLATORS, index count = 0; index table_count = 0;) \
+    P(Bending, bending, SOFTBODY_FIELDS_BENDING, index count = 0;)

@@ -115,6 +115,11 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
     for (index i = 0; i < m.particles.count; ++i)
         out.pressure_rows = std::max(out.pressure_rows, w.pressure_row[i]);
     out.gas_rank_one = gas::rank_one_bound(m, w.body_dpdv, w.volume_gradient);
+    // the bending hinges' rows, in the pressure's scratch (read above)
+    std::fill(w.pressure_row, w.pressure_row + m.particles.count, 0.0);
+    bending::add_bound_rows(m, q, w.pressure_row);
+    for (index i = 0; i < m.particles.count; ++i)
+        out.bending = std::max(out.bending, w.pressure_row[i]);
     return out;
 }
 

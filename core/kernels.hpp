@@ -26,12 +26,13 @@ struct TermEnergies {
 /// term's own. Per part (springs::BoundPart: damped, transverse, whole, damping) the
 /// largest row bound of the springs and of the attachments, over row sums both add to
 /// [1/s^2] (damping: [1/s]); the gas's local pressure rows and its rank-one term [1/s^2];
-/// the range of c / k [s] over springs and attachments with k > 0.
+/// the bending hinges' rows [1/s^2]; the range of c / k [s] over springs and attachments with k > 0.
 struct StiffnessBounds {
     double springs[4] = {0.0, 0.0, 0.0, 0.0};
     double attachments[4] = {0.0, 0.0, 0.0, 0.0};
     double pressure_rows = 0.0;  // max_i of the pressure term's rows
     double gas_rank_one = 0.0;   // max over bodies of |P'(V)| sum_i |g_i|^2 / m_i
+    double bending = 0.0;        // max_i of the bending hinges' rows
     // c / k [s]; +inf and -inf where no spring or attachment has k > 0
     double ratio_min = std::numeric_limits<double>::infinity();
     double ratio_max = -std::numeric_limits<double>::infinity();

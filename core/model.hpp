@@ -239,6 +239,7 @@ struct ImplicitBuffers {
     double* spring_b = nullptr;  // (S,) transverse stiffness [N/m]
     double* body_dpdv = nullptr; // (B,) dP/dV [Pa/m^3]
     double* body_pnet = nullptr; // (B,) P - P_ambient [Pa]
+    double* bending_gradient = nullptr;  // (H, 4, 3) each hinge's d theta / dx [1/m]
     double* cg_diag = nullptr;   // (N,) Jacobi preconditioner [kg]
     double* cg_r = nullptr;      // (N, 3) residual
     double* cg_z = nullptr;      // (N, 3) preconditioned residual
@@ -296,6 +297,8 @@ struct Linearization {
     const double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2]
     double* body_dpdv = nullptr;  // (B,) dP/dV [Pa/m^3]
     double* body_pnet = nullptr;  // (B,) P - P_ambient [Pa]
+    // (H, 4, 3) each hinge's d theta / dx [1/m], prepare's; null: each product computes it
+    double* bending_gradient = nullptr;
 };
 
 /// The multigrid smoother's diagonal blocks and the per-entry spring coefficients

@@ -4,9 +4,9 @@ that table.
 
 Reference: the table itself. Every field it declares is a field of the Python
 ``softbody.Model`` of the declared type and shape (in the counts N, S, A, T, B, M, K, P,
-C of the model), on models that have every part (the every-term model, the surface
-contacts' two balls, a scene with colliders); and a field's declared check refuses a
-value that breaks it, naming the field.
+C, H of the model), on models that have every part (the every-term model, the surface
+contacts' two balls, a scene with colliders, a ball and a cloth with material bending);
+and a field's declared check refuses a value that breaks it, naming the field.
 """
 
 from __future__ import annotations
@@ -32,13 +32,26 @@ def _counts(model: sb.Model) -> dict[str, int]:
         "K": len(model.schedule_time), "P": model.pin_count, "C": model.collider_count,
         "V": len(model.vent_body), "O": len(model.orifice_bodies),
         "I": len(model.inflator_body), "Q": len(model.inflator_time),
+        "H": len(model.bending_hinges),
     }  # fmt: skip
+
+
+def _bending_model() -> sb.Model:
+    """A ball and a cloth, each with material bending."""
+    b = sb.ModelBuilder()
+    b.add_soft_body(sb.icosphere(1), mass=1.0, stiffness=100.0, damping=0.1, gas=10.0,
+                    bending=sb.Bending(0.01))  # fmt: skip
+    b.add_cloth(sb.rectangle((1.0, 1.0), (3, 3), center=(0.0, 2.0, 0.0)), mass=0.1,
+                stiffness=50.0, damping=0.1,
+                bending=sb.Bending(0.001, rest_shape="flat"))  # fmt: skip
+    return b.finalize()
 
 
 def _models():
     yield "every-term", build_case("every-term", "midpoint")[0]
     yield "surface-two-balls", build_case("surface-two-balls", "midpoint")[0]
     yield "bouncing-balls", load_scene("bouncing-balls").model
+    yield "bending", _bending_model()
 
 
 def test_python_fields_are_generated_from_the_table():
@@ -102,12 +115,23 @@ def test_model_fields_have_the_declared_type_and_shape(name, model):
         ("wind", lambda m: np.array([0.0, np.inf, 0.0]), "wind holds inf at 1; it must be finite"),
         ("soft_contact_mode", lambda m: 3, "soft_contact_mode holds 3"),
         ("gravity", lambda m: np.zeros(2), r"gravity must have shape \(3,\)"),
+        ("bending_stiffness", lambda m: -m.bending_stiffness,
+         "bending_stiffness holds -0.0[0-9]+ at 0; it must be finite and >= 0"),
+        ("bending_rest_angle", lambda m: np.full_like(m.bending_rest_angle, np.nan),
+         "bending_rest_angle holds nan at 0; it must be finite"),
+        ("bending_hinges", lambda m: m.bending_hinges + m.particle_count,
+         "bending_hinges holds"),
+        ("bending_body", lambda m: np.full_like(m.bending_body, m.body_count),
+         "bending_body holds"),
     ],
 )  # fmt: skip
 def test_a_field_that_breaks_its_declared_check_is_refused(field, value, message):
     """Each kind of declared check (index, range, enumeration, finite and >= 0, finite,
     shape) refuses a bad value with a ValueError naming the field."""
-    model = build_case("every-term", "midpoint")[0]
+    if field.startswith("bending"):
+        model = _bending_model()
+    else:
+        model = build_case("every-term", "midpoint")[0]
     bad = dataclasses.replace(model, **{field: value(model)})
     with pytest.raises(ValueError, match=message):
         _core.Model(bad)

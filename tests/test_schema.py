@@ -114,7 +114,7 @@ def test_walking_an_override_into_a_number_is_an_error():
         ),
         ("colliders.0.radius=1", "colliders.0.radius", "center, container, friction"),
         ("colliders.0.motion.pivot2=1", "colliders.0.motion.pivot2", "angular_velocity, pivot"),
-        ('bodies.0.kind="cloth"', "bodies.0.gas", "bend_damping, bend_stiffness, color"),
+        ('bodies.0.kind="cloth"', "bodies.0.gas", "bend_damping, bend_stiffness, bending, color"),
     ],
 )
 def test_unknown_key_lists_the_keys_of_that_variant(override, key, valid):

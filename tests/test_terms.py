@@ -27,7 +27,7 @@ import softbody as sb
 from softbody import _core, core
 from softbody import reference as ref
 from softbody.core import core_model
-from softbody.reference import attachments, external, gas, gravity, springs
+from softbody.reference import attachments, bending, external, gas, gravity, springs
 from softbody.reference import volume as rvolume
 from softbody.sim.control import control_data
 from softbody.stability import stiffest_mode
@@ -42,8 +42,9 @@ ULPS = 16.0
 def _gas_laws() -> tuple[sb.Model, sb.Control]:
     """Three closed bodies of the exact volume, one per gas law, each with an ambient
     pressure (the isothermal one with a schedule and masses by area, so a spring's two
-    ends differ); a user's spring between two bodies, a
-    free particle on a spring with an attachment, a body's particle attached, a grab."""
+    ends differ; the fixed-pressure one with material bending); a user's spring between
+    two bodies, a free particle on a spring with an attachment, a body's particle attached,
+    a grab."""
     b = sb.ModelBuilder(gravity=(0.0, -9.81, 0.0))
     b.add_soft_body(sb.icosphere(2, radius=0.3), mass=1.0, stiffness=400.0, damping=0.5,
                     gas=sb.Gas.isothermal(40.0, ambient_pressure=20.0,
@@ -51,7 +52,8 @@ def _gas_laws() -> tuple[sb.Model, sb.Control]:
                     bend_stiffness=20.0, mass_distribution="area")  # fmt: skip
     b.add_soft_body(sb.icosphere(1, radius=0.25, center=(0.8, 0.1, 0.0)), mass=0.5,
                     stiffness=300.0, damping=0.3,
-                    gas=sb.Gas.fixed_pressure(300.0, ambient_pressure=120.0))  # fmt: skip
+                    gas=sb.Gas.fixed_pressure(300.0, ambient_pressure=120.0),
+                    bending=sb.Bending(0.05))  # fmt: skip
     b.add_soft_body(sb.icosphere(2, radius=0.25, center=(0.0, 0.9, 0.0)), mass=0.5,
                     stiffness=250.0, damping=0.2,
                     gas=sb.Gas.adiabatic(35.0, gamma=1.4, reference_volume=0.1,
@@ -70,12 +72,14 @@ def _gas_laws() -> tuple[sb.Model, sb.Control]:
 
 
 def _cloth() -> tuple[sb.Model, sb.Control | None]:
-    """An open surface with a fixed-pressure gust (a schedule) and pinned corners, and a
-    pure damper (k = 0, c > 0) between two free particles."""
+    """An open surface with a fixed-pressure gust (a schedule), pinned corners and
+    material bending (a 0.2 mm film of E = 2 GPa), and a pure damper (k = 0, c > 0)
+    between two free particles."""
     b = sb.ModelBuilder(gravity=(0.0, -9.81, 0.0))
     b.add_cloth(sb.rectangle((1.0, 0.8), (10, 8)), mass=0.3, stiffness=200.0, damping=0.2,
                 pressure=sb.Gas.fixed_pressure(2.0, schedule=[(0.0, 0.0), (0.1, 4.0)]),
-                pinned=[0, 10], bend_stiffness=5.0)  # fmt: skip
+                pinned=[0, 10], bend_stiffness=5.0,
+                bending=sb.Bending.from_material(2e9, 0.3, 2e-4))  # fmt: skip
     i = b.add_particle((0.0, 1.0, 0.0), mass=0.1)
     j = b.add_particle((0.5, 1.0, 0.0), mass=0.2)
     b.add_spring(i, j, stiffness=0.0, damping=2.0)
@@ -157,6 +161,14 @@ def _reference_energies(model, data, t, q, volume):
     size = np.where(model.body_closed == 1, np.abs(parts) + np.abs(value)
                     + model.body_ambient_pressure * np.abs(volume), 0.0)  # fmt: skip
     out["gas"] = (e.sum(), e, size.sum(), size)
+    # bending: k (theta - theta0)^2, theta rounded at about eps (|theta| + 1) (an atan2 of
+    # products of differences): k |theta - theta0| (|theta| + 1) each
+    theta, _, _ = bending.angles_and_gradients(model, q)
+    e = bending.energies(model, q)
+    size = e + model.bending_stiffness * np.abs(bending.excess(model, theta)) * (np.abs(theta) + 1)
+    owner = model.bending_body
+    out["bending"] = (e.sum(), _per_body(e, owner, bodies), size.sum(),
+                      _per_body(size, owner, bodies))  # fmt: skip
     return out
 
 
@@ -181,7 +193,10 @@ def test_core_energies_match_the_reference(name, simd):
         _close(got_total, total, total_size, f"{term} total")
         _close(got_bodies, bodies, body_size, f"{term} per body")
         # every model has every term it was built with; the cloth, open, holds no gas
-        # and has no attachment
+        # and has no attachment; material bending only where a body has it
+        if term == "bending":
+            assert (abs(total) > 0.0) == (model.bending_hinges.shape[0] > 0), term
+            continue
         assert (abs(total) > 0.0) == (name != "cloth" or term in ("gravity", "springs")), term
     g = int(data.grab_particle)
     grab_size = data.grab_stiffness * (np.linalg.norm(data.grab_target) + np.linalg.norm(q[g])) ** 2
@@ -197,8 +212,8 @@ def test_core_energies_match_the_reference(name, simd):
 
 @pytest.mark.parametrize("name", list(MODELS))
 def test_diagnostics_energies_compose_the_terms(name):
-    """softbody.energies (kinetic 1/2 m v^2; gravitational; spring = springs and
-    attachments; gas) and its per-body splits equal the reference's composition, the one
+    """softbody.energies (kinetic 1/2 m v^2; gravitational; spring = springs,
+    attachments and bending; gas) and its per-body splits equal the reference's composition, the one
     diagnostics made before the energies moved into the core, to round-off."""
     model, control, data, t, q, qd = _inputs(name)
     state = model.state()
@@ -212,7 +227,7 @@ def test_diagnostics_energies_compose_the_terms(name):
            _per_body(kin, model.particle_body, model.body_count), "kinetic per body")  # fmt: skip
     sums = [
         ("gravitational", "body_gravitational", ("gravity",)),
-        ("spring", "body_spring", ("springs", "attachments")),
+        ("spring", "body_spring", ("springs", "attachments", "bending")),
         ("gas", "body_gas", ("gas",)),
     ]
     for total_name, body_name, terms in sums:
@@ -246,7 +261,8 @@ def _check_derivative(function, q, direction, expected, h, value_scale, size, wh
 
 @pytest.mark.parametrize("name", ["every-term", "gas-laws"])
 def test_each_force_is_minus_the_gradient_of_the_core_energy(name):
-    """For gravity, springs, attachments, the grab spring and each closed body's gas of
+    """For gravity, springs, attachments, the grab spring, bending (where a body has it)
+    and each closed body's gas of
     the exact volume (its own share, body by body): -dE/dx . p from central differences
     of the core's energy along random p equals f(q, v = 0) . p of the term's force (the
     reference's, which test_reference.py holds equal to the core's). And the sum: the
@@ -271,6 +287,8 @@ def test_each_force_is_minus_the_gradient_of_the_core_energy(name):
         ("attachments", energy("attachments"), attachments.force(model, data, q, zero)),
         ("grab", energy("grab"), external.grab_force(data, q, zero)),
     ]
+    if model.bending_hinges.shape[0]:
+        cases.append(("bending", energy("bending"), bending.force(model, q)))
     exact = (model.body_volume_method == rvolume.EXACT) & (model.body_closed == 1)
     for b in np.flatnonzero(exact):
         f = np.where((model.particle_body == b)[:, None], pressure_force, 0.0)
@@ -292,7 +310,8 @@ def test_each_force_is_minus_the_gradient_of_the_core_energy(name):
 
     def total(x):
         out = _core.eval_energies(cm, data, t, np.ascontiguousarray(x))
-        return sum(out[k][0] for k in ("gravity", "springs", "attachments", "gas", "grab"))
+        return sum(out[k][0] for k in ("gravity", "springs", "attachments", "gas", "grab",
+                                       "bending"))  # fmt: skip
 
     size = np.sum(np.abs(force * direction))
     _check_derivative(total, q, direction, -np.sum(force * direction), 1e-4,
@@ -380,6 +399,16 @@ def _numpy_bounds(model, q):
         gradient += grad
     out.update(pressure_rows=rows.max(initial=0.0), gas_rank_one=rank_one, body_pnet=pnet,
                body_dpdv=dpdv, volume_gradient=gradient, volume=volume)  # fmt: skip
+    # bending: per hinge w |g_a| / sqrt(m_a) sum_b |g_b| / sqrt(m_b) on each corner's row,
+    # w = 2 k (1 + 2 |theta - theta0|)
+    theta, g, _ = bending.angles_and_gradients(model, q)
+    hinge = model.bending_hinges
+    w = 2.0 * model.bending_stiffness * (1.0 + 2.0 * np.abs(bending.excess(model, theta)))
+    scaled = np.linalg.norm(g, axis=2) * np.sqrt(inv[hinge])  # (H, 4)
+    rows = np.zeros(n)
+    np.add.at(rows, hinge.reshape(-1),
+              (w[:, None] * scaled * scaled.sum(axis=1, keepdims=True)).reshape(-1))  # fmt: skip
+    out["bending"] = rows.max(initial=0.0)
     return out
 
 
@@ -405,7 +434,7 @@ def test_bound_pieces_match_the_numpy_formulas(name, simd):
     """softbody._core.stiffness_bounds at a deformed state, piece by piece, against the
     NumPy formulas (``_numpy_bounds``): the springs' and attachments' row bounds of each
     part, c / k range and pure dampers, the pressure rows, the rank-one term, P - P_a,
-    P'(V) and dV/dx. Tolerances from round-off: sums of positive terms to ULPS eps
+    P'(V) and dV/dx, the bending rows. Tolerances from round-off: sums of positive terms to ULPS eps
     relative; sqrt(k |1 - L0/L|) carries |1 - L0/L|'s absolute round-off eps divided by
     2 sqrt(|1 - L0/L|); the gas's pieces carry its volume's relative round-off (times
     gamma, or 2 for P' = -nRT / V^2), enlarged by P / |P - P_a| where P - P_a cancels."""
@@ -448,6 +477,10 @@ def test_bound_pieces_match_the_numpy_formulas(name, simd):
            want["pressure_rows"] * pressure_relative, "pressure rows")  # fmt: skip
     _close(got["gas_rank_one"], want["gas_rank_one"],
            want["gas_rank_one"] * np.max(slope_relative, initial=1.0), "rank one")  # fmt: skip
+    # the gradients' round-off relative to |g| grows as a hinge's triangles thin; these
+    # meshes' are near equilateral, so a few ULPS each, summed over a row's few hinges
+    assert got["bending"] == pytest.approx(want["bending"], rel=1e-12, abs=0.0)
+    assert (got["bending"] > 0.0) == (model.bending_hinges.shape[0] > 0)
     # every piece is there to be checked (the cloth has no attachment, and its gas no
     # rank-one term: an open surface's pressure does not change with its volume)
     for piece in (*got["springs"], got["pressure_rows"]):
@@ -461,9 +494,10 @@ def test_stiffest_mode_composes_the_term_bounds(name):
     """stiffest_mode without the spectral bounds is the Gershgorin composition of the
     NumPy pieces (softbody.stability's docstring): omega_damped^2 the larger of the
     springs' and attachments' axial rows, the undamped part their transverse rows plus
-    the pressure's (rows and rank-one, added by Weyl), omega^2 the smaller of damped +
-    undamped and whole + pressure, beta the c / k range (inf with a pure damper), all
-    to round-off, at the model's rest and at a deformed state."""
+    the pressure's (rows and rank-one, added by Weyl) and the bending rows, omega^2 the
+    smaller of damped + undamped and whole + pressure + bending, beta the c / k range
+    (inf with a pure damper), all to round-off, at the model's rest and at a deformed
+    state."""
     model, _, _, _, q, _ = _inputs(name)
     for x in (model.particle_q, q):
         mode = stiffest_mode(model, x, spectral=False)
@@ -471,10 +505,11 @@ def test_stiffest_mode_composes_the_term_bounds(name):
         damped, transverse, whole, rate = (max(s, a) for s, a in zip(
             want["springs"], want["attachments"], strict=True))  # fmt: skip
         pressure = want["pressure_rows"] + want["gas_rank_one"]
-        total = min(damped + transverse + pressure, whole + pressure)
+        undamped = transverse + pressure + want["bending"]
+        total = min(damped + undamped, whole + pressure + want["bending"])
         rel = 1e-12  # the pieces' round-off (test above) is far below this
         assert mode.omega_damped == pytest.approx(np.sqrt(damped), rel=rel)
-        assert mode.omega_undamped == pytest.approx(np.sqrt(transverse + pressure), rel=rel)
+        assert mode.omega_undamped == pytest.approx(np.sqrt(undamped), rel=rel)
         assert mode.omega == pytest.approx(np.sqrt(total), rel=rel)
         assert mode.damping_rate == pytest.approx(rate, rel=rel)
         assert mode.omega_pressure == pytest.approx(np.sqrt(pressure), rel=rel)

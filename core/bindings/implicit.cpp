@@ -141,12 +141,14 @@ public:
         const size_t s = static_cast<size_t>(m.springs.count), b = static_cast<size_t>(m.bodies.count);
         per_spring_ = {std::vector<double>(3 * s), std::vector<double>(s), std::vector<double>(s)};
         per_body_ = {std::vector<double>(b), std::vector<double>(b)};
+        per_hinge_.assign(12 * static_cast<size_t>(m.bending.count), 0.0);
         diag_.assign(static_cast<size_t>(m.particles.count), 0.0);
         w_.spring_u = per_spring_[0].data();
         w_.spring_a = per_spring_[1].data();
         w_.spring_b = per_spring_[2].data();
         w_.body_dpdv = per_body_[0].data();
         w_.body_pnet = per_body_[1].data();
+        w_.bending_gradient = m.bending.count > 0 ? per_hinge_.data() : nullptr;
         w_.cg_diag = diag_.data();
         w_.contacts_acted = &flags_[0];
         w_.cg_stats = &flags_[1];
@@ -220,6 +222,7 @@ private:
     Buffers buffers_;
     SolverThreads threads_;
     std::vector<std::vector<double>> per_spring_, per_body_;
+    std::vector<double> per_hinge_;  // (H, 4, 3) the bending gradients at the step's start
     std::vector<double> diag_;
     Index flags_[4] = {0, 0, 0, 0};  // contacts acted, then the CG statistics
     softbody::ImplicitBuffers w_;

@@ -31,6 +31,7 @@ inline Linearization at_start(const ImplicitBuffers& w) {
     l.volume_gradient = w.gas.volume_gradient;
     l.body_dpdv = w.body_dpdv;
     l.body_pnet = w.body_pnet;
+    l.bending_gradient = w.bending_gradient;
     return l;
 }
 

@@ -6,6 +6,7 @@
 #pragma once
 
 #include "terms/attachments.hpp"
+#include "terms/bending.hpp"
 #include "terms/drag.hpp"
 #include "terms/external.hpp"
 #include "terms/flows.hpp"
@@ -35,6 +36,7 @@ using Terms = TermList<
     external::Term,     // per-particle forces from Control
     external::GrabTerm, // a grabbed particle pulled to a target
     drag::Term,         // air drag on faces
+    bending::Term,      // discrete-shell bending on interior edges
     flows::VentTerm,    // gas out of (or into) a body through vents
     flows::OrificeTerm, // gas between two bodies
     flows::InflatorTerm,// gas delivered by inflators

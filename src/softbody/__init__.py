@@ -4,6 +4,7 @@ Closed triangle meshes with mass-carrying vertices, damped springs on the edges 
 ideal gas inside whose pressure pushes every face outward along its normal.
 """
 
+from softbody.bending import Bending
 from softbody.collision import (
     ColliderBox,
     ColliderPlane,
@@ -61,6 +62,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "GAS_CONSTANT",
+    "Bending",
     "ColliderBox",
     "ColliderPlane",
     "ColliderSphere",

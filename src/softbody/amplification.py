@@ -60,6 +60,9 @@ class StiffestMode:
     omega_gas: float = 0.0
     """Part of that from the rank-one term dP/dV g g^T alone, the gas's resistance to a
     change of volume, against the masses [rad/s]."""
+    omega_bending: float = 0.0
+    """Part of the undamped bound from material bending alone (its Gershgorin rows,
+    ``softbody.stability``), against the masses [rad/s]; 0 without bending."""
 
 
 def amplification_matrix(integrator: Integrator, h: float, omega: float, zeta: float) -> np.ndarray:

@@ -13,13 +13,17 @@ separately and added (Weyl's inequality), split by whether spring damping acts o
   the same way with k |1 - L0/L|; the local pressure term (P - P_a) d2V/dx2, for a face
   (i, j, l) a block coupling i to j of norm |P - P_a| |x_l - x_i| / 6 (Gershgorin by
   rows); and the rank-one term -P'(V) g g^T with g = dV/dx (the breathing mode), whose
-  one nonzero eigenvalue |P'(V)| sum_i |g_i|^2 / m_i adds to the bound.
+  one nonzero eigenvalue |P'(V)| sum_i |g_i|^2 / m_i adds to the bound; and the material
+  bending hinges' stiffness, per hinge 2 k g g^T (g the gradient of its dihedral angle:
+  the Gauss-Newton stiffness) times 1 + 2 |theta - theta0| for the Hessian's other part,
+  block rows by Gershgorin.
 
 Each term computes its own pieces of these bounds in its file of the compiled core
-(``core/terms/springs.hpp``, ``attachments.hpp``, ``gas.hpp``: ``bound_weights``,
-``add_root_sums``, ``row_bounds``, ``damping_ratios``; ``bound_slopes``,
-``add_pressure_rows``, ``rank_one_bound``), returned by ``softbody._core.stiffness_bounds``;
-:func:`stiffest_mode` adds and compares them.
+(``core/terms/springs.hpp``, ``attachments.hpp``, ``gas.hpp``, ``bending.hpp``:
+``bound_weights``, ``add_root_sums``, ``row_bounds``, ``damping_ratios``;
+``bound_slopes``, ``add_pressure_rows``, ``rank_one_bound``; ``add_bound_rows``),
+returned by ``softbody._core.stiffness_bounds``; :func:`stiffest_mode` adds and compares
+them.
 
 Gershgorin bounds hold for any spring directions but overestimate: on a triangle mesh
 the largest eigenvalue of the spring matrix is about half their bound (a flat triangular
@@ -118,7 +122,9 @@ def spectral_bounds(
     damped stiffness (axial springs and attachments), the undamped stiffness (transverse
     springs k |1 - L0/L| (I - u u^T), attachments alike, and the pressure terms), the
     whole stiffness, and the damping matrix: (omega_damped^2, omega_undamped^2,
-    omega^2 [1/s^2], damping rate [1/s]). Stiffness here is -df/dx. The pressure terms
+    omega^2 [1/s^2], damping rate [1/s]). Stiffness here is -df/dx. Material bending
+    (its Gauss-Newton stiffness, which is exact at the rest angles) is in the undamped and
+    whole parts. The pressure terms
     use body_pnet (B,) = P - P_ambient [Pa], body_dpdv (B,) [Pa/m^3] and
     volume_gradient (N, 3) = dV/dx [m^2]; products come from the implicit integrator's
     matrix-free ``apply_jacobians``. Pinned particles (inverse mass 0) drop out."""
@@ -150,14 +156,14 @@ def spectral_bounds(
     out = np.zeros((n, 3))
     no_gas = np.zeros(model.body_count)
 
-    def operator(axial, side, alpha_c, alpha_k, pnet, dpdv, anchored):
+    def operator(axial, side, alpha_c, alpha_k, pnet, dpdv, anchored, bending):
         # spring blocks (axial - side) u u^T + side I, as apply_jacobians builds them
         def matvec(y):
             p = scale * y.reshape(n, 3)
             # attachments are added below, as the blocks at this call's anchors
             _core.apply_jacobians(
                 core, control, q, p, 0.0, alpha_c, alpha_k, u, axial, side,
-                volume_gradient, dpdv, pnet, out, attachments=False,
+                volume_gradient, dpdv, pnet, out, attachments=False, bending=bending,
             )  # fmt: skip
             r = -out
             if len(a):
@@ -169,14 +175,15 @@ def spectral_bounds(
     zero = np.zeros_like(k)
     size = 3 * n
     return (
-        _largest_eigenvalue(operator(k, zero, 0.0, 1.0, no_gas, no_gas, damped_a), size),
+        _largest_eigenvalue(operator(k, zero, 0.0, 1.0, no_gas, no_gas, damped_a, False), size),
         _largest_eigenvalue(
-            operator(zero, transverse, 0.0, 1.0, body_pnet, body_dpdv, undamped_a), size
+            operator(zero, transverse, 0.0, 1.0, body_pnet, body_dpdv, undamped_a, True), size
         ),
         _largest_eigenvalue(
-            operator(k, transverse, 0.0, 1.0, body_pnet, body_dpdv, damped_a + undamped_a), size
+            operator(k, transverse, 0.0, 1.0, body_pnet, body_dpdv, damped_a + undamped_a, True),
+            size,
         ),
-        _largest_eigenvalue(operator(k, zero, 1.0, 0.0, no_gas, no_gas, damping_a), size),
+        _largest_eigenvalue(operator(k, zero, 1.0, 0.0, no_gas, no_gas, damping_a, False), size),
     )
 
 
@@ -204,10 +211,11 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
     body_pnet, body_dpdv = pieces["body_pnet"], pieces["body_dpdv"]
     volume_gradient = pieces["volume_gradient"]
     rank_one = pieces["gas_rank_one"]
-    # Weyl: the largest eigenvalue of a sum is at most the sum of the largest eigenvalues
+    # Weyl: the largest eigenvalue of a sum is at most the sum of the largest eigenvalues;
+    # material bending is undamped
     w2_pressure = pieces["pressure_rows"] + rank_one
-    w2_undamped = w2_transverse + w2_pressure
-    w2_total = min(w2_damped + w2_undamped, w2_springs + w2_pressure)
+    w2_undamped = w2_transverse + w2_pressure + pieces["bending"]
+    w2_total = min(w2_damped + w2_undamped, w2_springs + w2_pressure + pieces["bending"])
     if spectral and model.particle_count > 0:
         bounds = spectral_bounds(model, q, body_pnet, body_dpdv, volume_gradient)
         s_damped, s_undamped, s_total, s_rate = (SPECTRAL_MARGIN * max(x, 0.0) for x in bounds)
@@ -226,6 +234,7 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
         damping_rate,
         float(np.sqrt(w2_pressure)),
         float(np.sqrt(rank_one)),
+        float(np.sqrt(pieces["bending"])),
     )
 
 

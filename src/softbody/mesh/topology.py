@@ -114,3 +114,24 @@ def vertex_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     out = np.zeros(len(v))
     np.add.at(out, f.reshape(-1), np.repeat(area / 3.0, 3))
     return out
+
+
+def hinges(faces: np.ndarray) -> np.ndarray:
+    """The hinges of a consistently wound surface: each interior edge with the corners
+    opposite it, (H, 4) int64 rows (x0, x1, x2, x3) such that (x0, x1, x2) is a face and
+    (x1, x0, x3) the other, both as wound (the discrete-shell bending energy's hinges,
+    ``core/terms/bending.hpp``). Edges not shared by exactly two faces (a boundary, or a
+    non-manifold edge) give none. Rows follow the sorted edges (``unique_edges``' order).
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return np.zeros((0, 4), dtype=np.int64)
+    _, counts, order = edge_half_edge_groups(f)
+    start = np.cumsum(counts) - counts
+    two = start[counts == 2]
+    first, second = order[two], order[two + 1]
+    tri, corner = first // 3, first % 3
+    x0, x1, x2 = f[tri, corner], f[tri, (corner + 1) % 3], f[tri, (corner + 2) % 3]
+    other = f[second // 3]
+    x3 = other[np.arange(len(other)), (second % 3 + 2) % 3]
+    return np.stack([x0, x1, x2, x3], axis=1)

@@ -3,7 +3,8 @@
     out = alpha_m M p + alpha_c C p + alpha_k K p,    C = df/dv, K = df/dx,
 
 with M the (diagonal) particle masses and C, K summed over the springs, the attachments
-(optional: the stability estimate adds its own), the grab spring and the gas. K drops the
+(optional: the stability estimate adds its own), the grab spring, the gas and the bending
+hinges (their Gauss-Newton K, :mod:`softbody.reference.bending`). K drops the
 compressive geometric stiffness of springs and attachments (see
 :mod:`softbody.reference.springs`), so it is df/dx exactly where every spring is at or
 beyond its rest length. Gravity, external forces and terms without a Jacobian add
@@ -16,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from softbody.reference import attachments, external, gas, springs
+from softbody.reference import attachments, bending, external, gas, springs
 from softbody.reference.forces import gas_state
 from softbody.sim.control import ControlData
 from softbody.sim.model import Model
@@ -54,6 +55,7 @@ def apply_jacobians(
     inputs: JacobianInputs,
     *,
     with_attachments: bool = True,
+    with_bending: bool = True,
 ) -> np.ndarray:
     """(alpha_m M + alpha_c C + alpha_k K) p [N] for p (N, 3) at q (N, 3), shape (N, 3)."""
     out = alpha_m * model.particle_mass[:, None] * p
@@ -66,6 +68,8 @@ def apply_jacobians(
     out += gas.jacobian_product(
         model, q, inputs.volume_gradient, gas.PressureSlopes(*inputs[4:]), alpha_k, p
     )
+    if with_bending:
+        out += bending.jacobian_product(model, q, p, alpha_k)
     return out
 
 

@@ -24,6 +24,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from softbody import limits
+from softbody.bending import Bending
 from softbody.collision.colliders import (
     ColliderBox,
     ColliderPlane,
@@ -264,6 +265,17 @@ def _mesh(spec: schema.BaseModel, where: str, base: Path | None) -> TriMesh:
     return mesh.reordered() if spec.reorder else mesh
 
 
+def _bending(spec: schema.MaterialBending | None) -> Bending | None:
+    """A body's ``bending`` table as a :class:`softbody.Bending` (None: none)."""
+    if spec is None:
+        return None
+    if spec.stiffness is not None:
+        return Bending(spec.stiffness, rest_shape=spec.rest_shape)
+    return Bending.from_material(
+        spec.youngs_modulus, spec.poisson_ratio, spec.thickness, rest_shape=spec.rest_shape
+    )
+
+
 def _gas(spec, *, cloth: bool) -> Gas:
     """A validated gas (a number or one of the law tables) as a :class:`Gas`."""
     if isinstance(spec, int | float):
@@ -411,6 +423,7 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
         mesh = mesh.translated(np.array(body.position))
         common = {key: getattr(body, key) for key in body.BUILDER_ARGUMENTS}
         common["pinned"] = _pins(body.pin, mesh, f"{where}.pin")
+        common["bending"] = _bending(body.bending)
         if isinstance(body, schema.Cloth):
             builder.add_cloth(mesh, pressure=_gas(body.pressure, cloth=True), **common)
         else:

@@ -535,6 +535,42 @@ class Pin(Table):
     boundary: Flag = Field(False, description="the mesh's open boundary")
 
 
+class MaterialBending(Table):
+    """Material bending of the skin (``softbody.Bending``): the discrete-shell energy on
+    every interior edge. Give the bending stiffness D, or the material it comes from
+    (D = E H^3 / (12 (1 - nu^2)))."""
+
+    stiffness: Real | None = Field(None, gt=0, description="bending stiffness D [N m]")
+    youngs_modulus: Real | None = Field(
+        None, gt=0, description="Young's modulus E [Pa] (with poisson_ratio and thickness)"
+    )
+    poisson_ratio: Real | None = Field(
+        None, gt=-1, le=0.5, description="Poisson ratio nu [1], in (-1, 0.5]"
+    )
+    thickness: Real | None = Field(None, gt=0, description="thickness H [m]")
+    rest_shape: Literal["mesh", "flat"] = Field(
+        "mesh", description="angles that cost nothing: the mesh's own, or flat (0)"
+    )
+
+    @model_validator(mode="after")
+    def _one_way(self) -> MaterialBending:
+        material = (self.youngs_modulus, self.poisson_ratio, self.thickness)
+        if self.stiffness is not None:
+            if any(v is not None for v in material):
+                raise _error(
+                    "field",
+                    "give stiffness, or youngs_modulus, poisson_ratio and thickness, not both",
+                    field="stiffness",
+                )
+        elif any(v is None for v in material):
+            raise _error(
+                "field",
+                "give stiffness, or all of youngs_modulus, poisson_ratio and thickness",
+                field="stiffness",
+            )
+        return self
+
+
 class _BodyBase(Table):
     #: Keys passed as they are to ModelBuilder.add_soft_body / add_cloth, under the same
     #: names (a new builder argument of a body is one field here and its name in this list)
@@ -553,6 +589,9 @@ class _BodyBase(Table):
     damping: Real = Field(0.0, ge=0, description="edge spring damping [N s/m]")
     bend_stiffness: Real = Field(0.0, ge=0, description="bending spring stiffness [N/m]")
     bend_damping: Real = Field(0.0, ge=0, description="bending spring damping [N s/m]")
+    bending: MaterialBending | None = Field(
+        None, description="material bending (D [N m], or E, nu and H); none by default"
+    )
     velocity: Vec3 = Field((0.0, 0.0, 0.0), description="initial velocity [m/s]")
     pin: Pin | None = None
     color: Color | None = Field(None, description="colour '#rrggbb' (default: the palette)")

@@ -11,10 +11,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from softbody import _core, limits
+from softbody.bending import Bending, dihedral_angles, hinge_stiffness
 from softbody.collision.colliders import Collider, SoftContactMode, collider_arrays
 from softbody.errors import MeshError
 from softbody.gas import Gas, GasLaw
-from softbody.mesh.topology import bending_pairs, unique_edges, vertex_areas
+from softbody.mesh.topology import bending_pairs, hinges, unique_edges, vertex_areas
 from softbody.mesh.tri_mesh import TriMesh
 from softbody.mesh.validate import validate_mesh_report
 from softbody.sim.model import Model
@@ -106,6 +107,8 @@ class ModelBuilder:
         self._particle_count = 0
         self._springs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._attachments: list[tuple[int, np.ndarray, float, float, float]] = []
+        # per body with material bending: hinges (H, 4), rest angles, stiffnesses, body
+        self._hinges: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
         self._bodies: list[_Body] = []
         self._colliders: list[Collider] = []
         self._soft_contact = ("none", 0.5, 0.1, None)
@@ -240,6 +243,7 @@ class ModelBuilder:
         pinned: Sequence[int] | np.ndarray | None = None,
         bend_stiffness: float = 0.0,
         bend_damping: float = 0.0,
+        bending: Bending | None = None,
         mass_distribution: Literal["uniform", "area"] = "uniform",
         velocity: ArrayLike = (0.0, 0.0, 0.0),
         monte_carlo_samples: int = 4096,
@@ -273,6 +277,12 @@ class ModelBuilder:
             Mesh vertex indices held in place (kinematic).
         bend_stiffness, bend_damping : float
             Springs across each pair of adjacent triangles [N/m], [N s/m]; 0 adds none.
+            Their resistance to bending depends on the mesh; ``bending`` is the material's.
+        bending : Bending, optional
+            Material bending of the skin: the discrete-shell energy on every interior
+            edge, from a bending stiffness D [N m] (``Bending(D)`` or
+            ``Bending.from_material(E, nu, H)``, :class:`softbody.Bending`); none by
+            default.
         mass_distribution : {"uniform", "area"}
             Equal particle masses, or proportional to each vertex's share of the area.
         velocity : (3,) array of float
@@ -305,6 +315,7 @@ class ModelBuilder:
             pinned=pinned,
             bend_stiffness=bend_stiffness,
             bend_damping=bend_damping,
+            bending=bending,
             mass_distribution=mass_distribution,
             velocity=velocity,
             monte_carlo_samples=monte_carlo_samples,
@@ -324,6 +335,7 @@ class ModelBuilder:
         pinned: Sequence[int] | np.ndarray | None = None,
         bend_stiffness: float = 0.0,
         bend_damping: float = 0.0,
+        bending: Bending | None = None,
         mass_distribution: Literal["uniform", "area"] = "uniform",
         velocity: ArrayLike = (0.0, 0.0, 0.0),
         drag_coefficient: float = 0.0,
@@ -353,6 +365,7 @@ class ModelBuilder:
             pinned=pinned,
             bend_stiffness=bend_stiffness,
             bend_damping=bend_damping,
+            bending=bending,
             mass_distribution=mass_distribution,
             velocity=velocity,
             monte_carlo_samples=0,
@@ -374,6 +387,7 @@ class ModelBuilder:
         pinned,
         bend_stiffness,
         bend_damping,
+        bending,
         mass_distribution,
         velocity,
         monte_carlo_samples,
@@ -422,6 +436,11 @@ class ModelBuilder:
         kb = _number("bend_stiffness", bend_stiffness)
         cb = _number("bend_damping", bend_damping)
         cd = _number("drag_coefficient", drag_coefficient)
+        if bending is not None and not isinstance(bending, Bending):
+            raise ValueError(
+                "bending must be a softbody.Bending (Bending(D) or Bending.from_material(E, nu, "
+                f"H)), got {type(bending).__name__}"
+            )
         shape = VolumeMethod.parse(contact_shape)
         if shape not in (
             VolumeMethod.BOUNDING_BOX,
@@ -457,6 +476,7 @@ class ModelBuilder:
             if method == VolumeMethod.MONTE_CARLO
             else np.zeros((0, 2))
         )
+        hinge_data = None if bending is None else self._hinge_data(mesh, bending)
 
         begin = self._append_particles(
             mesh.vertices.copy(), vel, m, pin_mask, body, report.vertex_source
@@ -482,6 +502,9 @@ class ModelBuilder:
                     np.full(len(bend), body),
                 )
             )
+        if hinge_data is not None:
+            h, rest, kh = hinge_data
+            self._hinges.append((h + begin, rest, kh, np.full(len(h), body, dtype=np.int64)))
         self._bodies.append(
             _Body(
                 begin,
@@ -498,6 +521,18 @@ class ModelBuilder:
             )
         )
         return body
+
+    @staticmethod
+    def _hinge_data(mesh: TriMesh, bending: Bending) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The material bending hinges of a body's validated ``mesh`` (H, 4) (its
+        vertex indices), their rest angles [rad] and stiffnesses [N m] (H,) at the mesh's
+        positions (validation has refused triangles of zero area, so every k is finite)."""
+        h = hinges(mesh.faces)
+        k = hinge_stiffness(mesh.vertices, h, bending.stiffness)
+        rest = (
+            dihedral_angles(mesh.vertices, h) if bending.rest_shape == "mesh" else np.zeros(len(h))
+        )
+        return h, rest, k
 
     # -- contacts ------------------------------------------------------------------------
     def add_collider(self, collider: Collider) -> int:
@@ -696,6 +731,16 @@ class ModelBuilder:
         measured = np.linalg.norm(q[idx[:, 1]] - q[idx[:, 0]], axis=1)
         rest = np.where(np.isnan(rest), measured, rest)
 
+        if self._hinges:
+            hinge_idx = np.vstack([h[0] for h in self._hinges]).astype(np.int64)
+            hinge_rest = np.concatenate([h[1] for h in self._hinges])
+            hinge_k = np.concatenate([h[2] for h in self._hinges])
+            hinge_body = np.concatenate([h[3] for h in self._hinges])
+        else:
+            hinge_idx = np.zeros((0, 4), dtype=np.int64)
+            hinge_rest = hinge_k = np.zeros(0)
+            hinge_body = np.zeros(0, dtype=np.int64)
+
         att = self._attachments
         att_particle = np.array([a[0] for a in att], dtype=np.int64)
         att_anchor = np.array([a[1] for a in att], dtype=np.float64).reshape(-1, 3)
@@ -858,4 +903,8 @@ class ModelBuilder:
             body_drag_coefficient=np.array([b.drag_coefficient for b in bodies], dtype=np.float64),
             air_density=float(self.air_density),
             wind=self.wind.copy(),
+            bending_hinges=hinge_idx,
+            bending_rest_angle=hinge_rest,
+            bending_stiffness=hinge_k,
+            bending_body=hinge_body,
         )
