@@ -198,7 +198,7 @@ def test_unchoked_vent_matches_the_orifice_ode():
     """A rigid isothermal vessel just above the ambient pressure vents subsonically:
     the pressure follows dP/dt = -(R T / (M V)) mdot(P), mdot the subsonic orifice law
     (core/terms/flows.hpp), solved independently here by SciPy (solve_ivp, rtol 1e-12).
-    The pressure stays below r = 0.995's taper until the end checked."""
+    The pressure stays below the taper (r = 0.9999) until the end checked."""
     area, cd, t_gas = 1e-5, 0.62, 300.0
 
     def build(b):
@@ -223,7 +223,7 @@ def test_unchoked_vent_matches_the_orifice_ode():
     sim.run(state, 100)
     solution = solve_ivp(rate, (0, state.time), [p0], rtol=1e-12, atol=1e-6)
     p_end = sb.body_pressure(model, state)[0]
-    assert P_AMBIENT / p_end < 0.995
+    assert P_AMBIENT / p_end < 0.9999
     np.testing.assert_allclose(p_end, solution.y[0, -1], rtol=1e-8)
 
 
@@ -470,11 +470,12 @@ def test_symplectic_euler_fused_pass_steps_the_gas_as_the_general_step():
     np.testing.assert_array_equal(fused.body_gas_temperature, general.body_gas_temperature)
 
 
-@pytest.mark.parametrize("pressure", [5e5, 1.5e5, 1.003e5, 0.6e5])
+@pytest.mark.parametrize("pressure", [5e5, 1.5e5, 1.0003e5, 1.00005e5, 0.6e5])
 def test_core_flows_match_the_reference_orifice_law(pressure):
     """body_gas_flows (the core's vent law) against softbody.reference.flows: choked
-    (5 bar into 1), subsonic (1.5), in the linear taper (r = 0.997) and backflow from the
-    ambient at its temperature (0.6 bar inside), to round-off."""
+    (5 bar into 1), subsonic (1.5 bar and 30 Pa above the ambient), in the linear taper
+    (5 Pa above) and backflow from the ambient at its temperature (0.6 bar inside), to
+    round-off."""
     from softbody.reference.flows import orifice_mass_flow
 
     def build(b):
@@ -485,21 +486,23 @@ def test_core_flows_match_the_reference_orifice_law(pressure):
     state = model.state()
     _fill(model, state, [pressure])
     flows = sb.body_gas_flows(model, state)
+    # near r = 1 the law reads 1 - r: round-off in the pressures grows by 1 / (1 - r)
+    rtol = max(1e-12, 1e-14 / abs(1 - P_AMBIENT / pressure))
     if pressure > P_AMBIENT:
         expected = orifice_mass_flow(0.7, 3e-5, pressure, 350.0, P_AMBIENT, GAMMA, AIR_MOLAR_MASS)
-        np.testing.assert_allclose(flows.mass_outflow, [expected], rtol=1e-12)
+        np.testing.assert_allclose(flows.mass_outflow, [expected], rtol=rtol)
         np.testing.assert_array_equal(flows.inflow, [0.0])
     else:
         expected = orifice_mass_flow(0.7, 3e-5, P_AMBIENT, 293.15, pressure, GAMMA, AIR_MOLAR_MASS)
-        np.testing.assert_allclose(flows.mass_inflow, [expected], rtol=1e-12)
+        np.testing.assert_allclose(flows.mass_inflow, [expected], rtol=rtol)
         np.testing.assert_allclose(flows.inflow_temperature, [293.15], rtol=1e-14)
         np.testing.assert_array_equal(flows.outflow, [0.0])
 
 
 def test_the_orifice_law_is_continuous_and_falls_to_zero_at_equal_pressure():
     """The orifice law (reference): the subsonic branch meets the choked flow at the
-    critical ratio r_c = (2 / (g + 1))^(g / (g - 1)) and the linear taper at r = 0.995
-    (continuous, to 1e-12), the flow falls monotonically in r and is exactly 0 at r = 1
+    critical ratio r_c = (2 / (g + 1))^(g / (g - 1)) and the linear taper at r = 0.9999
+    (continuous), the flow falls monotonically in r and is exactly 0 at r = 1
     with a finite slope there (no chattering between two chambers at equal pressure)."""
     from softbody.reference.flows import LINEAR, orifice_mass_flow
 
@@ -508,10 +511,12 @@ def test_the_orifice_law_is_continuous_and_falls_to_zero_at_equal_pressure():
 
     critical = (2 / (GAMMA + 1)) ** (GAMMA / (GAMMA - 1))
     for r in (critical, LINEAR):
-        np.testing.assert_allclose(flow(r * (1 - 1e-13)), flow(r * (1 + 1e-13)), rtol=1e-10)
+        # either side of the joint, 2e-13 apart in r: the flow's relative slope there is at
+        # most 1 / (1 - r) = 1e4, so a continuous law differs by under 1e-8 (a jump: more)
+        np.testing.assert_allclose(flow(r * (1 - 1e-13)), flow(r * (1 + 1e-13)), rtol=1e-8)
     r = np.linspace(0.0, 1.0, 2001)
     values = flow(r)
     assert np.all(np.diff(values) <= 1e-15 * values[0])
     assert values[-1] == 0.0
-    slope = (values[-2] - values[-1]) / (r[-1] - r[-2])
-    np.testing.assert_allclose(slope, flow(LINEAR) / (1 - LINEAR), rtol=1e-9)
+    slope = flow(1.0 - 1e-6) / 1e-6  # inside the taper: the chord to r = 1
+    np.testing.assert_allclose(slope, flow(LINEAR) / (1 - LINEAR), rtol=1e-8)

@@ -10,9 +10,10 @@
 //     mdot = C_d A P_u sqrt(g / (R_s T_u)) (2 / (g + 1))^((g + 1) / (2 (g - 1)))
 //   subsonic:
 //     mdot = C_d A P_u sqrt(2 g / ((g - 1) R_s T_u) (r^(2/g) - r^((g+1)/g)))
-// whose slope in P_d is infinite at r = 1; above r = kLinear it tapers linearly to 0 at
-// r = 1 (continuous, finite slope), so two chambers near equal pressure exchange gas
-// smoothly. A fabric leak is mdot = c A_body |P - P_a| (the usual porosity model), both ways.
+// whose slope in P_d is infinite at r = 1; above r = kLinear = 0.9999 (a difference of
+// 10 Pa at 1 bar) it tapers linearly to 0 at r = 1 (continuous, finite slope: the
+// laminar flow of a small difference), so two chambers near equal pressure exchange gas
+// smoothly, while differences of tens of pascals, a balloon's, follow the orifice law. A fabric leak is mdot = c A_body |P - P_a| (the usual porosity model), both ways.
 //
 // The limiter: a flow path never moves, in one step h, more than 1 / k of the gas that
 // would bring its two sides to equal pressure (k the paths the upstream body's gas can
@@ -31,7 +32,7 @@
 namespace softbody::SOFTBODY_KERNELS::flows {
 
 using gas::kGasConstant;
-constexpr double kLinear = 0.995;             // the subsonic law tapers linearly above this r
+constexpr double kLinear = 0.9999;            // the subsonic law tapers linearly above this r
 
 /// Mass flow [kg/s] of the orifice law from upstream (p_u [Pa], t_u [K]) to downstream
 /// p_d <= p_u through area [m^2] with discharge coefficient cd; gamma, molar mass [kg/mol].

@@ -8,7 +8,7 @@ r = P_d / P_u, gamma g, R_s = R / M [J/(kg K)], area A [m^2], discharge coeffici
         mdot = C_d A P_u sqrt(g / (R_s T_u)) (2 / (g + 1))^((g + 1) / (2 (g - 1)))
     subsonic:
         mdot = C_d A P_u sqrt(2 g / ((g - 1) R_s T_u) (r^(2/g) - r^((g+1)/g)))
-    above r = 0.995: linear in (1 - r) from its value there to 0 at r = 1      [kg/s]
+    above r = 0.9999: linear in (1 - r) from its value there to 0 at r = 1     [kg/s]
 
 A fabric leak is mdot = c A_body |P - P_a|. The flows move gas, not particles: their force
 is zero, and what they do is to the gas state (``softbody.body_gas_flows``).
@@ -21,7 +21,7 @@ import numpy as np
 from softbody.gas import GAS_CONSTANT
 
 #: Above this pressure ratio the subsonic law tapers linearly to 0 at r = 1.
-LINEAR = 0.995
+LINEAR = 0.9999
 
 
 def orifice_mass_flow(cd, area, p_u, t_u, p_d, gamma, molar_mass):
