@@ -21,7 +21,8 @@
     X(M, volumes, mc_count, mc_samples)           \
     X(K, gases, schedule_count, schedule_time)    \
     X(P, pins, count, pin_particle)               \
-    X(C, colliders, count, collider_kind)
+    X(C, colliders, count, collider_kind)         \
+    X(Tm, membranes, count, membrane_indices)
 
 #define SOFTBODY_FIELDS_PARTICLES(F)                                                              \
     F(particles, mass, particle_mass, f64, (N), none, "kg",                                       \
@@ -151,6 +152,25 @@
     F(colliders, motion_frequency, collider_motion_frequency, f64, (C), none, "Hz",               \
       "frequency of oscillating colliders")
 
+#define SOFTBODY_FIELDS_MEMBRANES(F)                                                              \
+    F(membranes, indices, membrane_indices, i64, (Tm, 3), index(0, N), "",                       \
+      "particle indices of each membrane triangle (core/terms/membrane.hpp)")                   \
+    F(membranes, material, membrane_material, i64, (Tm), index(0, MembraneMaterial::kCount), "", \
+      "MembraneMaterial of each membrane triangle")                                             \
+    F(membranes, params, membrane_params, f64, (Tm, 2), finite, "Pa or 1",                       \
+      "material parameters of each membrane triangle; (mu, 0) neo-Hookean, (c10, c01) "          \
+      "Mooney-Rivlin [Pa], (E [Pa], nu) St Venant-Kirchhoff")                                    \
+    F(membranes, thickness, membrane_thickness, f64, (Tm), finite_nonneg, "m",                   \
+      "rest thickness H of each membrane triangle")                                             \
+    F(membranes, rest_area, membrane_rest_area, f64, (Tm), finite_nonneg, "m^2",                 \
+      "rest area A0 of each membrane triangle")                                                 \
+    F(membranes, rest_inverse, membrane_rest_inverse, f64, (Tm, 2, 2), finite, "1/m",            \
+      "inverse rest edge matrix Dm^-1 of each membrane triangle in its 2D rest frame")          \
+    F(membranes, damping, membrane_damping, f64, (Tm), finite_nonneg, "s",                       \
+      "strain-rate damping time beta of each membrane triangle; 0 for none")                    \
+    F(membranes, body, membrane_body, i64, (Tm), index(-1, B), "",                               \
+      "body of each membrane triangle")
+
 // The parts: P(struct, member of Model, its fields, members it holds besides them).
 #define SOFTBODY_MODEL_PARTS(P)                                                   \
     P(Particles, particles, SOFTBODY_FIELDS_PARTICLES, index count = 0;)          \
@@ -164,4 +184,5 @@
     P(Pins, pins, SOFTBODY_FIELDS_PINS, index count = 0;)                         \
     P(Drag, drag, SOFTBODY_FIELDS_DRAG, )                                         \
     P(SoftContacts, soft_contacts, SOFTBODY_FIELDS_SOFT_CONTACTS, )               \
-    P(Colliders, colliders, SOFTBODY_FIELDS_COLLIDERS, index count = 0;)
+    P(Colliders, colliders, SOFTBODY_FIELDS_COLLIDERS, index count = 0;)         \
+    P(Membranes, membranes, SOFTBODY_FIELDS_MEMBRANES, index count = 0;)

@@ -103,6 +103,8 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
     attachments::row_bounds(m, w.attachment_weight, w.root_sum, out.attachments);
     springs::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
     attachments::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
+    membrane::bound_rows(m, q, w.membrane_row, out.membrane);
+    membrane::damping_ratios(m, out.ratio_min, out.ratio_max);
     std::fill(w.volume_gradient, w.volume_gradient + 3 * m.particles.count, 0.0);
     gas::bound_slopes(m, q, w.body_pnet, w.body_dpdv, w.volume_gradient);
     std::fill(w.pressure_row, w.pressure_row + m.particles.count, 0.0);

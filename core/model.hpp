@@ -213,6 +213,7 @@ struct ImplicitBuffers {
     double* spring_b = nullptr;  // (S,) transverse stiffness [N/m]
     double* body_dpdv = nullptr; // (B,) dP/dV [Pa/m^3]
     double* body_pnet = nullptr; // (B,) P - P_ambient [Pa]
+    double* membrane_hessian = nullptr;  // (Tm, 42) membrane blocks (Linearization)
     double* cg_diag = nullptr;   // (N,) Jacobi preconditioner [kg]
     double* cg_r = nullptr;      // (N, 3) residual
     double* cg_z = nullptr;      // (N, 3) preconditioned residual
@@ -259,6 +260,10 @@ struct ProjectiveBuffers {
     ContactBuffers contact;
 };
 
+/// Doubles per membrane triangle in Linearization::membrane_hessian: two symmetric 6 x 6
+/// blocks by their upper triangles (terms/membrane.hpp).
+constexpr int kMembraneBlock = 42;
+
 /// The implicit solvers' linearisation at a point q (N, 3): what `prepare` writes and
 /// `jacobian_product` / `add_smoother_blocks` read. The Python API's apply_jacobians passes
 /// the same arrays in.
@@ -270,6 +275,9 @@ struct Linearization {
     const double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2]
     double* body_dpdv = nullptr;  // (B,) dP/dV [Pa/m^3]
     double* body_pnet = nullptr;  // (B,) P - P_ambient [Pa]
+    // (Tm, 42) each membrane triangle's clamped stiffness and damping blocks in F
+    // (terms/membrane.hpp); null: the product computes them at q as it goes
+    double* membrane_hessian = nullptr;
 };
 
 /// The multigrid smoother's diagonal blocks and the per-entry spring coefficients

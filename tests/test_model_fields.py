@@ -30,6 +30,7 @@ def _counts(model: sb.Model) -> dict[str, int]:
         "N": model.particle_count, "S": model.spring_count, "A": model.attachment_count,
         "T": model.tri_count, "B": model.body_count, "M": len(model.mc_samples),
         "K": len(model.schedule_time), "P": model.pin_count, "C": model.collider_count,
+        "Tm": model.membrane_count,
     }  # fmt: skip
 
 

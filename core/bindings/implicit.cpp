@@ -141,6 +141,9 @@ public:
         const size_t s = static_cast<size_t>(m.springs.count), b = static_cast<size_t>(m.bodies.count);
         per_spring_ = {std::vector<double>(3 * s), std::vector<double>(s), std::vector<double>(s)};
         per_body_ = {std::vector<double>(b), std::vector<double>(b)};
+        membrane_.assign(static_cast<size_t>(softbody::kMembraneBlock) *
+                             static_cast<size_t>(m.membranes.count), 0.0);
+        w_.membrane_hessian = membrane_.data();
         diag_.assign(static_cast<size_t>(m.particles.count), 0.0);
         w_.spring_u = per_spring_[0].data();
         w_.spring_a = per_spring_[1].data();
@@ -219,7 +222,7 @@ private:
     Buffers buffers_;
     SolverThreads threads_;
     std::vector<std::vector<double>> per_spring_, per_body_;
-    std::vector<double> diag_;
+    std::vector<double> diag_, membrane_;
     Index flags_[4] = {0, 0, 0, 0};  // contacts acted, then the CG statistics
     softbody::ImplicitBuffers w_;
 };

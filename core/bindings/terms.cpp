@@ -80,7 +80,7 @@ int term_position(const std::string& name) {
 void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, ConstF64 p,
                      double alpha_m, double alpha_c, double alpha_k, ConstF64 u, ConstF64 a,
                      ConstF64 b, ConstF64 gradient, ConstF64 dpdv, ConstF64 pnet, F64 out,
-                     bool attachments) {
+                     bool attachments, bool membrane) {
     const softbody::Model& m = core.model();
     const Index n = m.particles.count, s = m.springs.count, nb_ = m.bodies.count;
     check_shape(q, "q", {n, 3});
@@ -102,7 +102,9 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
     l.volume_gradient = gradient.data();
     l.body_dpdv = const_cast<double*>(dpdv.data());
     l.body_pnet = const_cast<double*>(pnet.data());
-    const unsigned skip = attachments ? 0u : 1u << term_position("attachments");
+    // the membrane's blocks are computed at q as the product goes (membrane_hessian null)
+    const unsigned skip = (attachments ? 0u : 1u << term_position("attachments")) |
+                          (membrane ? 0u : 1u << term_position("membrane"));
     nb::gil_scoped_release release;
     softbody::kernels().apply_jacobians(m, c.view, l, p.data(), alpha_m, alpha_c, alpha_k, skip,
                                         out.data());
@@ -247,12 +249,13 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     const size_t n = static_cast<size_t>(m.particles.count), nb_ = static_cast<size_t>(m.bodies.count);
     std::vector<double> spring_weight(4 * static_cast<size_t>(m.springs.count)),
         attachment_weight(4 * static_cast<size_t>(m.attachments.count)), root_sum(4 * n),
-        pressure_row(n), pnet(nb_), dpdv(nb_), gradient(3 * n);
+        pressure_row(n), membrane_row(2 * n), pnet(nb_), dpdv(nb_), gradient(3 * n);
     softbody::BoundBuffers w;
     w.spring_weight = spring_weight.data();
     w.attachment_weight = attachment_weight.data();
     w.root_sum = root_sum.data();
     w.pressure_row = pressure_row.data();
+    w.membrane_row = membrane_row.data();
     w.body_pnet = pnet.data();
     w.body_dpdv = dpdv.data();
     w.volume_gradient = gradient.data();
@@ -265,6 +268,7 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     nb::dict out;
     out["springs"] = parts(b.springs);
     out["attachments"] = parts(b.attachments);
+    out["membrane"] = parts(b.membrane);
     out["pressure_rows"] = b.pressure_rows;
     out["gas_rank_one"] = b.gas_rank_one;
     out["damping_ratio"] = nb::make_tuple(b.ratio_min, b.ratio_max);
@@ -298,7 +302,7 @@ void bind_terms(nb::module_& mod) {
     mod.def("stiffness_bounds", &stiffness_bounds, nb::arg("model"), nb::arg("control"),
             nb::arg("q").noconvert(),
             "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'springs', "
-            "'attachments' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
+            "'attachments', 'membrane' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
             "'pressure_rows', 'gas_rank_one' [1/s^2], 'damping_ratio' (min, max c / k [s]), "
             "'pure_dampers', and the gas at its largest scheduled value: 'body_pnet' (B,) "
             "[Pa], 'body_dpdv' (B,) [Pa/m^3], 'volume_gradient' (N, 3) [m^2].");
@@ -311,8 +315,9 @@ void bind_terms(nb::module_& mod) {
             nb::arg("spring_a").noconvert(), nb::arg("spring_b").noconvert(),
             nb::arg("volume_gradient").noconvert(), nb::arg("body_dpdv").noconvert(),
             nb::arg("body_pnet").noconvert(), nb::arg("out").noconvert(),
-            nb::arg("attachments") = true,
-            "out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p (C = df/dv, K = df/dx).");
+            nb::arg("attachments") = true, nb::arg("membrane") = true,
+            "out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p (C = df/dv, K = df/dx); "
+            "attachments / membrane false leave those terms out.");
     mod.def("soft_contacts", &soft_contacts, nb::arg("model"), nb::arg("q").noconvert(),
             nb::arg("qd").noconvert(), nb::arg("hash_capacity") = nb::none(),
             "One pass of the model's soft-soft contacts on q, qd (N, 3) in place; returns "

@@ -30,6 +30,7 @@ inline Linearization at_start(const ImplicitBuffers& w) {
     l.volume_gradient = w.gas.volume_gradient;
     l.body_dpdv = w.body_dpdv;
     l.body_pnet = w.body_pnet;
+    l.membrane_hessian = w.membrane_hessian;
     return l;
 }
 
@@ -172,7 +173,8 @@ inline void prepare(const Model& m, const Control& c, double t, double h,
     if (mg != nullptr) prepare_blocks(m, c, h, w, *mg);
 }
 
-/// Jacobi's diagonal: mass + h (damping) + h^2 (axial stiffness) of each particle's springs.
+/// Jacobi's diagonal: mass + h (damping) + h^2 (axial stiffness) of each particle's springs,
+/// and the mean of the membrane's diagonal there.
 inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) {
     for (index i = 0; i < m.particles.count; ++i) w.cg_diag[i] = m.particles.mass[i];
     for (index s = 0; s < m.springs.count; ++s) {
@@ -180,6 +182,7 @@ inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) 
         w.cg_diag[m.springs.indices[2 * s]] += d;
         w.cg_diag[m.springs.indices[2 * s + 1]] += d;
     }
+    membrane::add_jacobi_diagonal(m, h, w.q0, w.membrane_hessian, w.cg_diag);
 }
 
 /// One backward Euler step, or with bdf2 one BDF2 step, from w.q0, w.v0 with w.f = f(x0, v0)

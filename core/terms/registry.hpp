@@ -10,6 +10,7 @@
 #include "terms/external.hpp"
 #include "terms/gas.hpp"
 #include "terms/gravity.hpp"
+#include "terms/membrane.hpp"
 #include "terms/springs.hpp"
 #include "terms/term.hpp"
 
@@ -33,7 +34,8 @@ using Terms = TermList<
     attachments::Term,  // springs to anchor points Control moves
     external::Term,     // per-particle forces from Control
     external::GrabTerm, // a grabbed particle pulled to a target
-    drag::Term>;        // air drag on faces
+    drag::Term,         // air drag on faces
+    membrane::Term>;    // triangle membranes: hyperelastic sheets
 
 /// Each term's traits (terms/term.hpp) in registry order (softbody._core.term_table).
 inline const TermTraits* term_traits() {

@@ -33,6 +33,15 @@ ball bounces lower and settles more softly than under converged backward Euler; 
 iterations converge to it. The springs are implicit whatever the step; the pressure and
 the other forces are explicit within each iteration, which limits the step to about
 1 / omega_gas, the gas's volume mode (``ProjectiveSolver.step_limit``).
+
+Membranes (``core/terms/membrane.hpp``) join by a quasi-Newton splitting rather than a
+projection: the matrix holds W_t G_t^T G_t per membrane triangle (G_t the map from its
+corners to its deformation gradient, a scalar 3 x 3 block g_a . g_b per coordinate;
+W_t = A0 H 2 (G_s + lam_s) (1 + beta / h), which bounds the triangle's small-strain
+stiffness and damping from above), and each iteration's right-hand side adds
+W_t G_t^T G_t x + f_membrane(x, (x - x0) / h) at the iterate. A fixed point is again
+backward Euler with the true material (any membrane model, not an as-rigid-as-possible
+stand-in), and the iteration contracts while the material's tangent stays below W_t.
 """
 
 from __future__ import annotations
@@ -96,7 +105,30 @@ def system_matrix(model, dt: float) -> sp.csc_matrix:
     np.add.at(diag, a[free[a]], att[free[a]])
     rows = np.concatenate([rows, np.arange(n)])
     cols = np.concatenate([cols, np.arange(n)])
-    return sp.csc_matrix((np.concatenate([off, diag]), (rows, cols)), shape=(n, n))
+    values = np.concatenate([off, diag])
+    if model.membrane_count:
+        r, c, v = _membrane_entries(model, dt, free)
+        rows, cols, values = (np.concatenate(x) for x in ((rows, r), (cols, c), (values, v)))
+    return sp.csc_matrix((values, (rows, cols)), shape=(n, n))
+
+
+def _membrane_entries(model, dt: float, free: np.ndarray):
+    """The membranes' W_t (g_a . g_b) entries (rows, cols, values) between free corners
+    (module docstring; core/terms/membrane.hpp: projective_weight)."""
+    from softbody.membrane import small_strain_moduli
+
+    pairs = zip(model.membrane_material, model.membrane_params, strict=True)
+    moduli = np.array([small_strain_moduli(m, p0, p1) for m, (p0, p1) in pairs])
+    weight = (model.membrane_rest_area * model.membrane_thickness * 2.0 * moduli.sum(axis=1)
+              * (1.0 + model.membrane_damping / dt))  # fmt: skip
+    inv = model.membrane_rest_inverse  # rows g_1, g_2; g_0 = -(g_1 + g_2)
+    g = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], axis=1)  # (Tm, 3, 2)
+    block = weight[:, None, None] * np.einsum("tac,tbc->tab", g, g)  # (Tm, 3, 3)
+    tri = model.membrane_indices
+    r = np.repeat(tri, 3, axis=1).ravel()
+    c = np.tile(tri, (1, 3)).ravel()
+    keep = free[r] & free[c]
+    return r[keep], c[keep], block.ravel()[keep]
 
 
 def build_projective(model, dt: float) -> Projective:
