@@ -88,6 +88,8 @@ def _membrane_layers(spec, face_count: int, collapsed: int) -> list[tuple[Membra
     if isinstance(spec, Membrane):
         spec = [(spec, None)]
     try:
+        if isinstance(spec, str | bytes):
+            raise TypeError
         items = list(spec)
     except TypeError:
         raise TypeError(
