@@ -477,3 +477,22 @@ def test_density_gives_the_mass_and_layers_add():
     assert model.body_mass[0] == pytest.approx(expected, rel=1e-14)
     np.testing.assert_array_equal(model.membrane_indices[80:], model.tri_indices[faces])
     np.testing.assert_allclose(area.sum(), 4 * np.pi * 0.3**2, rtol=0.05)
+
+
+def test_implicit_preconditioners_converge_on_a_membrane_only_body():
+    """Contract of the implicit solvers' CG: on a membrane-only balloon (no springs, so the
+    spring-Laplacian hierarchy has nothing to coarsen and the multigrid preconditioner is
+    block Gauss-Seidel on the true diagonal blocks, the membrane's included) every step at
+    1/60 s converges within the iteration cap, and the block smoother needs fewer
+    iterations than Jacobi (measured at 642 particles: 30 against 44 per step)."""
+    model = _balloon(NEO, subdivisions=3, gas=sb.Gas.fixed_pressure(900.0))
+    iterations = {}
+    for preconditioner in ("multigrid", "jacobi"):
+        sim = sb.Simulator(model, integrator="implicit_euler", dt=1 / 60,
+                           implicit_preconditioner=preconditioner)  # fmt: skip
+        state = model.state()
+        sim.run(state, 12)
+        mean, most = sim.solver_iterations
+        assert most < sim.implicit_max_iterations
+        iterations[preconditioner] = mean
+    assert iterations["multigrid"] < iterations["jacobi"]

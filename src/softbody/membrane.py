@@ -149,6 +149,26 @@ def small_strain_moduli(material: MembraneMaterial, p0: float, p1: float) -> tup
     return p0 / (2.0 * (1.0 + p1)), p0 * p1 / (1.0 - p1 * p1)
 
 
+def scalar_blocks(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The membranes as weighted graph Laplacians, for the solvers' matrices: per membrane
+    triangle and pair of corners (a, b) the entry W_t g_a . g_b, W_t = A0 H 2 (G_s + lam_s)
+    [N/m] (the largest eigenvalue of the small-strain stiffness in F, so W_t G_t^T G_t
+    bounds the triangle's stiffness at rest from above) and its damping beta W_t [N s/m].
+    Returns (rows, cols (9 Tm,) int64, stiffness, damping (9 Tm,)); every triangle's 3 x 3
+    block is positive semi-definite with zero row sums (g_0 + g_1 + g_2 = 0)."""
+    pairs = zip(model.membrane_material, model.membrane_params, strict=True)
+    moduli = np.array([small_strain_moduli(m, p0, p1) for m, (p0, p1) in pairs]).reshape(-1, 2)
+    weight = model.membrane_rest_area * model.membrane_thickness * 2.0 * moduli.sum(axis=1)
+    inv = model.membrane_rest_inverse  # rows g_1, g_2; g_0 = -(g_1 + g_2)
+    g = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], axis=1)  # (Tm, 3, 2)
+    block = weight[:, None, None] * np.einsum("tac,tbc->tab", g, g)  # (Tm, 3, 3)
+    tri = model.membrane_indices
+    rows = np.repeat(tri, 3, axis=1).ravel()
+    cols = np.tile(tri, (1, 3)).ravel()
+    damping = (model.membrane_damping[:, None, None] * block).ravel()
+    return rows, cols, block.ravel(), damping
+
+
 def energy_density(material, p0, p1, c: np.ndarray) -> np.ndarray:
     """W(C) [Pa] for C (..., 2, 2) and parameters p0, p1 (scalars or arrays that
     broadcast against C's leading shape); material one value or an array alike."""

@@ -113,22 +113,13 @@ def system_matrix(model, dt: float) -> sp.csc_matrix:
 
 
 def _membrane_entries(model, dt: float, free: np.ndarray):
-    """The membranes' W_t (g_a . g_b) entries (rows, cols, values) between free corners
-    (module docstring; core/terms/membrane.hpp: projective_weight)."""
-    from softbody.membrane import small_strain_moduli
+    """The membranes' W_t (1 + beta / dt) g_a . g_b entries (rows, cols, values) between
+    free corners (module docstring; core/terms/membrane.hpp: projective_weight)."""
+    from softbody.membrane import scalar_blocks
 
-    pairs = zip(model.membrane_material, model.membrane_params, strict=True)
-    moduli = np.array([small_strain_moduli(m, p0, p1) for m, (p0, p1) in pairs])
-    weight = (model.membrane_rest_area * model.membrane_thickness * 2.0 * moduli.sum(axis=1)
-              * (1.0 + model.membrane_damping / dt))  # fmt: skip
-    inv = model.membrane_rest_inverse  # rows g_1, g_2; g_0 = -(g_1 + g_2)
-    g = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], axis=1)  # (Tm, 3, 2)
-    block = weight[:, None, None] * np.einsum("tac,tbc->tab", g, g)  # (Tm, 3, 3)
-    tri = model.membrane_indices
-    r = np.repeat(tri, 3, axis=1).ravel()
-    c = np.tile(tri, (1, 3)).ravel()
-    keep = free[r] & free[c]
-    return r[keep], c[keep], block.ravel()[keep]
+    rows, cols, stiffness, damping = scalar_blocks(model)
+    keep = free[rows] & free[cols]
+    return rows[keep], cols[keep], (stiffness + damping / dt)[keep]
 
 
 def build_projective(model, dt: float) -> Projective:
