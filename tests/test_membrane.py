@@ -496,3 +496,82 @@ def test_implicit_preconditioners_converge_on_a_membrane_only_body():
         assert most < sim.implicit_max_iterations
         iterations[preconditioner] = mean
     assert iterations["multigrid"] < iterations["jacobi"]
+
+
+# -- scenes ------------------------------------------------------------------------------
+SCENE = """
+name = "membranes"
+[simulation]
+integrator = "implicit_euler"
+dt = 0.001
+duration = 0.01
+gravity = [0.0, 0.0, 0.0]
+[[bodies]]
+mesh = { shape = "icosphere", subdivisions = 2, radius = 0.2 }
+density = 1000.0
+gas = { law = "fixed_pressure", pressure = 900.0 }
+membrane = { model = "neo_hookean", shear_modulus = 2e5, thickness = 1e-3, damping = 0.002 }
+[[bodies]]
+mesh = { shape = "icosphere", subdivisions = 1, radius = 0.2 }
+position = [1.0, 0.0, 0.0]
+mass = 0.05
+stiffness = 20.0
+gas = 20.0
+membrane = [{ model = "stvk", youngs_modulus = 1e6, poisson_ratio = 0.3, thickness = 1e-3 },
+            { model = "mooney_rivlin", c10 = 1e5, c01 = 2e4, thickness = 1e-4, faces = [0, 1, 2] }]
+"""
+
+
+def test_scene_membrane_tables_build_the_builders_layers(tmp_path):
+    """Contract of the scene schema: a ``membrane`` table (or an array of them, layers
+    with optional ``faces``) builds the same model as ModelBuilder with those Membranes;
+    ``density`` gives the mass; a body with a membrane needs no stiffness."""
+    from softbody.scenes import load_scene
+
+    path = tmp_path / "membranes.toml"
+    path.write_text(SCENE)
+    model = load_scene(str(path)).model
+    b = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+    b.add_soft_body(sb.icosphere(2, radius=0.2), density=1000.0,
+                    gas=sb.Gas.fixed_pressure(900.0), membrane=NEO)  # fmt: skip
+    b.add_soft_body(sb.icosphere(1, radius=0.2, center=(1.0, 0.0, 0.0)), mass=0.05,
+                    stiffness=20.0, gas=20.0,
+                    membrane=[(sb.Membrane.stvk(1e6, 0.3, 1e-3), None),
+                              (sb.Membrane.mooney_rivlin(1e5, 2e4, 1e-4), [0, 1, 2])],
+                    )  # fmt: skip
+    want = b.finalize()
+    for name in ("membrane_indices", "membrane_material", "membrane_params",
+                 "membrane_thickness", "membrane_damping", "membrane_body", "body_mass",
+                 "spring_indices"):  # fmt: skip
+        np.testing.assert_array_equal(getattr(model, name), getattr(want, name), err_msg=name)
+    np.testing.assert_allclose(model.membrane_rest_inverse, want.membrane_rest_inverse,
+                               rtol=1e-12, atol=1e-12)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ('bodies.0.membrane.model="rubber"',
+         r"bodies.0.membrane.model: unknown value 'rubber' \(valid: neo_hookean, "
+         r"mooney_rivlin, stvk\)"),
+        ("bodies.0.membrane.colour=1", "unknown scene key bodies.0.membrane.colour"),
+        ("bodies.1.membrane.0.poisson_ratio=0.5",
+         "bodies.1.membrane.0.poisson_ratio: must be < 0.5, got 0.5"),
+        ("bodies.0.membrane.thickness=0", "bodies.0.membrane.thickness: must be > 0, got 0"),
+        ("bodies.0.membrane.shear_modulus=-1", "bodies.0.membrane.shear_modulus: must be >= 0"),
+        ("bodies.0.mass=1", "bodies.0.mass: give exactly one of mass or density"),
+        ("bodies.1.membrane.1.faces=[99]", r"bodies.1.membrane.1.faces must lie in \[0, 79\]"),
+        ("bodies.0.membrane={thickness=1}", "bodies.0.membrane.model: required, not given"),
+        ("bodies.1.membrane=3", "bodies.1.membrane: must be a table, got 3"),
+    ],
+)  # fmt: skip
+def test_scene_membrane_errors_name_the_key(tmp_path, override, message):
+    """Contract of the scene schema: a bad membrane key is a one-line error naming the
+    dotted key and the reason, as for every other key (unknown keys refused)."""
+    from softbody.scenes import load_scene
+
+    path = tmp_path / "membranes.toml"
+    path.write_text(SCENE)
+    with pytest.raises(ValueError, match=message) as info:
+        load_scene(str(path), [override])
+    assert "\n" not in str(info.value)
