@@ -575,3 +575,28 @@ def test_scene_membrane_errors_name_the_key(tmp_path, override, message):
     with pytest.raises(ValueError, match=message) as info:
         load_scene(str(path), [override])
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("membrane_material", lambda m: np.full_like(m.membrane_material, 3),
+         "membrane_material holds 3"),
+        ("membrane_indices", lambda m: np.full_like(m.membrane_indices, m.particle_count),
+         "membrane_indices holds"),
+        ("membrane_thickness", lambda m: np.full_like(m.membrane_thickness, -1.0),
+         "membrane_thickness holds -1.0+ at 0; it must be finite and >= 0"),
+        ("membrane_params", lambda m: np.full_like(m.membrane_params, np.nan),
+         "membrane_params holds nan at 0; it must be finite"),
+    ],
+)  # fmt: skip
+def test_the_core_refuses_broken_membrane_fields(field, value, message):
+    """Contract of core/fields.hpp's declared checks: a Model whose membrane arrays break
+    them (a material the core does not know, a particle index out of range, a negative
+    thickness, a non-finite parameter) is refused with a ValueError naming the field."""
+    import dataclasses
+
+    model = _balloon(NEO, subdivisions=1)
+    bad = dataclasses.replace(model, **{field: value(model)})
+    with pytest.raises(ValueError, match=message):
+        _core.Model(bad)

@@ -38,6 +38,11 @@ def _models():
     yield "every-term", build_case("every-term", "midpoint")[0]
     yield "surface-two-balls", build_case("surface-two-balls", "midpoint")[0]
     yield "bouncing-balls", load_scene("bouncing-balls").model
+    builder = sb.ModelBuilder()
+    builder.add_soft_body(sb.icosphere(1), mass=0.1, gas=10.0,
+                          membrane=[(sb.Membrane.neo_hookean(1e5, 1e-3), None),
+                                    (sb.Membrane.stvk(1e6, 0.3, 1e-4), [0, 5])])  # fmt: skip
+    yield "membranes", builder.finalize()
 
 
 def test_python_fields_are_generated_from_the_table():
