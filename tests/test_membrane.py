@@ -616,3 +616,22 @@ def test_a_fixed_gas_amount_holds_the_balloon_past_the_peak():
     sb.Simulator(model, integrator="implicit_euler", dt=1e-3).run(state, 1500)
     s = (sb.body_volume(model, state)[0] / volume) ** (1 / 3)
     assert abs(s / 2.0 - 1) <= 1e-3
+
+
+@pytest.mark.parametrize("name", list(MATERIALS))
+@pytest.mark.parametrize("scale", [0.8, 1.3])
+def test_jacobian_product_matches_the_reference_clamped_hessian(name, scale):
+    """Reference: softbody.reference.membrane.jacobian_product, which builds each
+    triangle's F-Hessian by central differences of the NumPy Piola stress and clamps it
+    with numpy.linalg.eigh. The core's (analytic Hessian, Jacobi eigensolver) alpha_c C p
+    + alpha_k K p equals it at a compressed (0.8, where the clamping acts) and a stretched
+    (1.3) perturbed state, to 1e-7 of |K p| (the differences' error, about 1e-10 of the
+    stress, amplified by the clamping's sensitivity near zero eigenvalues)."""
+    model = _balloon(MATERIALS[name], subdivisions=1)
+    q, _ = _perturbed(model, scale=scale, noise=0.02)
+    p = np.random.default_rng(9).normal(size=q.shape)
+    for alpha_c, alpha_k in ((0.0, 1.0), (1.0, 0.0), (-0.01, -1e-4)):
+        got = _jacobian_product(model, q, p, alpha_c=alpha_c, alpha_k=alpha_k)
+        want = ref.membrane.jacobian_product(model, q, p, alpha_c, alpha_k)
+        assert np.abs(want).max() > 0
+        assert np.abs(got - want).max() <= 1e-7 * np.abs(want).max()

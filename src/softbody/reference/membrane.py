@@ -104,3 +104,59 @@ def force(model: Model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
 
 #: This term's force for softbody.reference.forces (by its name in the core's registry).
 TERMS = {"membrane": lambda model, control, t, q, qd, gas: force(model, q, qd)}
+
+
+# -- the implicit solvers' product -------------------------------------------------------
+def _piola(model: Model, f: np.ndarray) -> np.ndarray:
+    """The elastic first Piola stress P = 2 F dW/dC (Tm, 3, 2) [Pa] at F (Tm, 3, 2)."""
+    c = np.einsum("tkb,tkc->tbc", f, f)
+    return 2.0 * np.einsum("tkb,tbc->tkc", f, stress(model, c))
+
+
+def f_hessians(model: Model, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per membrane triangle at q (N, 3): the elastic Hessian A0 H d2W/dF2 (Tm, 6, 6) in
+    vec(F) = [column 0; column 1], by central differences of the Piola stress (step 1e-6
+    of |F|: error about 1e-10 of the stress's scale), symmetrised; and the damping block
+    A0 H beta L^T C0 L (Tm, 6, 6), L: Fdot -> sym(F^T Fdot), exactly."""
+    f = deformation(model, q)
+    scale = (model.membrane_rest_area * model.membrane_thickness)[:, None, None]
+    step = 1e-6 * np.abs(f).max(axis=(1, 2))[:, None, None]
+    shear, lame = _moduli(model)
+    count = model.membrane_count
+    hf, hd = np.zeros((count, 6, 6)), np.zeros((count, 6, 6))
+    for col in range(6):
+        unit = np.zeros((3, 2))
+        unit[col % 3, col // 3] = 1.0
+        dp = (_piola(model, f + step * unit) - _piola(model, f - step * unit)) / (2.0 * step)
+        hf[:, :, col] = (scale * dp).transpose(0, 2, 1).reshape(count, 6)
+        gdot = 0.5 * (np.einsum("kb,tkc->tbc", unit, f) + np.einsum("tkb,kc->tbc", f, unit))
+        tr = gdot[:, 0, 0] + gdot[:, 1, 1]
+        s = (2.0 * shear)[:, None, None] * gdot + (lame * tr)[:, None, None] * np.eye(2)
+        dv = model.membrane_damping[:, None, None] * np.einsum("tkb,tbc->tkc", f, s)
+        hd[:, :, col] = (scale * dv).transpose(0, 2, 1).reshape(count, 6)
+    return 0.5 * (hf + hf.transpose(0, 2, 1)), 0.5 * (hd + hd.transpose(0, 2, 1))
+
+
+def clamped(h: np.ndarray) -> np.ndarray:
+    """Symmetric matrices h (..., 6, 6) with their negative eigenvalues set to 0."""
+    w, v = np.linalg.eigh(h)
+    return np.einsum("...ik,...k,...jk->...ij", v, np.maximum(w, 0.0), v)
+
+
+def jacobian_product(
+    model: Model, q: np.ndarray, p: np.ndarray, alpha_c: float, alpha_k: float
+) -> np.ndarray:
+    """(alpha_c C + alpha_k K) p [N] of the membranes, shape (N, 3), at q for p (N, 3):
+    per triangle -G^T (alpha_k H_F+ + alpha_c D_F) G p, H_F+ the elastic F-Hessian with its
+    negative eigenvalues clamped (so -K is positive semi-definite), G: corners -> vec(F)."""
+    if not model.membrane_count:
+        return np.zeros_like(p, dtype=np.float64)
+    hf, hd = f_hessians(model, q)
+    block = alpha_k * clamped(hf) + alpha_c * hd
+    dfp = deformation(model, p)  # G p as (Tm, 3, 2)
+    x = dfp.transpose(0, 2, 1).reshape(-1, 6)
+    y = np.einsum("tij,tj->ti", block, x).reshape(-1, 2, 3).transpose(0, 2, 1)  # (Tm, 3, 2)
+    corner = -np.einsum("tkc,tac->tak", y, gradients(model))
+    out = np.zeros_like(p, dtype=np.float64)
+    np.add.at(out, model.membrane_indices.reshape(-1), corner.reshape(-1, 3))
+    return out
