@@ -197,6 +197,13 @@ struct MultigridView {
     double* x = nullptr;           // (sum n_l, 3) level solutions
     double* b = nullptr;           // (sum n_l, 3) level right-hand sides
     double* r = nullptr;           // (sum n_l, 3) level residuals
+    // each particle's membrane neighbours, sorted, and each membrane triangle's corner pairs'
+    // entries (-1 on its diagonal); membrane_coef (E, 3, 3) scratch: -A_ij of each entry
+    index membrane_entry_count = 0;            // E
+    const index* membrane_ptr = nullptr;       // (N + 1,)
+    const index* membrane_neighbor = nullptr;  // (E,)
+    const index* membrane_slot = nullptr;      // (Tm, 3, 3)
+    double* membrane_coef = nullptr;           // (E, 3, 3)
 };
 
 /// Scratch and history of the implicit schemes, owned by softbody::ImplicitSolver.
@@ -288,6 +295,10 @@ struct SmootherBlocks {
     const index* entry_spring = nullptr; // (2 S,)
     double* entry_coef = nullptr;        // (2 S, 5) u (3,), alpha, beta
     double* block = nullptr;             // (N, 3, 3) set to M, then each term adds its share
+    // the membranes' off-diagonal blocks: -A_ij per entry (MultigridView's membrane_*)
+    index membrane_entry_count = 0;
+    const index* membrane_slot = nullptr;  // (Tm, 3, 3) entry of each corner pair, -1 on a = b
+    double* membrane_coef = nullptr;       // (E, 3, 3)
 };
 
 /// A registered term's name and traits (terms/term.hpp), for the bindings and Python.

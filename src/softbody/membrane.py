@@ -149,16 +149,23 @@ def small_strain_moduli(material: MembraneMaterial, p0: float, p1: float) -> tup
     return p0 / (2.0 * (1.0 + p1)), p0 * p1 / (1.0 - p1 * p1)
 
 
-def scalar_blocks(model) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def scalar_blocks(
+    model, *, mean: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The membranes as weighted graph Laplacians, for the solvers' matrices: per membrane
     triangle and pair of corners (a, b) the entry W_t g_a . g_b, W_t = A0 H 2 (G_s + lam_s)
     [N/m] (the largest eigenvalue of the small-strain stiffness in F, so W_t G_t^T G_t
-    bounds the triangle's stiffness at rest from above) and its damping beta W_t [N s/m].
-    Returns (rows, cols (9 Tm,) int64, stiffness, damping (9 Tm,)); every triangle's 3 x 3
-    block is positive semi-definite with zero row sums (g_0 + g_1 + g_2 = 0)."""
+    bounds the triangle's stiffness at rest from above: projective dynamics), or with
+    ``mean`` A0 H (3 G_s + lam_s) / 2, the mean of its eigenvalues over the four in-plane
+    deformations (2 (G_s + lam_s), 2 G_s twice, 0 for rotation: the multigrid hierarchy,
+    where a typical stiffness coarsens better than the largest); and its damping beta W_t
+    [N s/m]. Returns (rows, cols (9 Tm,) int64, stiffness, damping (9 Tm,)); every
+    triangle's 3 x 3 block is positive semi-definite with zero row sums (sum g_a = 0)."""
     pairs = zip(model.membrane_material, model.membrane_params, strict=True)
     moduli = np.array([small_strain_moduli(m, p0, p1) for m, (p0, p1) in pairs]).reshape(-1, 2)
-    weight = model.membrane_rest_area * model.membrane_thickness * 2.0 * moduli.sum(axis=1)
+    shear, lame = moduli.T
+    modulus = 0.5 * (3.0 * shear + lame) if mean else 2.0 * (shear + lame)
+    weight = model.membrane_rest_area * model.membrane_thickness * modulus
     inv = model.membrane_rest_inverse  # rows g_1, g_2; g_0 = -(g_1 + g_2)
     g = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], axis=1)  # (Tm, 3, 2)
     block = weight[:, None, None] * np.einsum("tac,tbc->tab", g, g)  # (Tm, 3, 3)
