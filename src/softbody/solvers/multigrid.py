@@ -15,7 +15,8 @@ the small-strain stiffness over in-plane deformations (``softbody.membrane.scala
 the largest, 2 (G_s + lam_s), needed 20-50% more iterations, a tenth of it more still),
 so a membrane-only body coarsens along its triangles; the finest level's smoother holds
 their true blocks, diagonal and between neighbours (``membrane_entries``;
-core/terms/membrane.hpp). A bounds every spring's true stiffness block from above (axial k, transverse k max(0, 1 - L0/L) <= k), so A^-1 captures the stiff part and
+core/terms/membrane.hpp). A bounds every spring's true stiffness block from above
+(axial k, transverse k max(0, 1 - L0/L) <= k), so A^-1 captures the stiff part and
 CG is left with a spectrum of width about 1/strain, not omega_max dt.
 
 A is constant for a given dt, so its hierarchy is built once per simulator: smoothed
