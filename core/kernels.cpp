@@ -89,6 +89,10 @@ unsigned active_terms(const Model& m, const Control& c) {
     return mask;
 }
 
+void membrane_blocks(const Model& m, const double* q, double* out) {
+    membrane::prepare(m, q, out);
+}
+
 // The estimate's Gershgorin bounds, term by term: the spring-like terms' row sums first
 // (a particle's row holds its springs and its attachments), then each term's rows.
 StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double* q,
@@ -125,7 +129,8 @@ const KernelTable& kernel_table() {
                                    projective_solve, eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
-                                   eval_energies, active_terms, stiffness_bounds};
+                                   eval_energies, active_terms, membrane_blocks,
+                                   stiffness_bounds};
     return table;
 }
 

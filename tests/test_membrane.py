@@ -636,3 +636,25 @@ def test_jacobian_product_matches_the_reference_clamped_hessian(name, scale):
         want = ref.membrane.jacobian_product(model, q, p, alpha_c, alpha_k)
         assert np.abs(want).max() > 0
         assert np.abs(got - want).max() <= 1e-7 * np.abs(want).max()
+
+
+def test_precomputed_membrane_blocks_give_the_same_product():
+    """Contract of softbody._core.membrane_blocks (what the stability estimate's Lanczos
+    runs pass to every product, so the per-triangle eigensolves run once): the product
+    with those blocks equals the one computing them as it goes, bit for bit, and a block
+    array of the wrong shape is refused naming it."""
+    model = _balloon(MATERIALS["stvk"], subdivisions=1)
+    q, _ = _perturbed(model, scale=0.9, noise=0.02)
+    data = control_data(model)
+    inputs = jacobians.prepare(model, data, 0.0, q)
+    p = np.random.default_rng(2).normal(size=q.shape)
+    blocks = _core.membrane_blocks(core_model(model), q)
+    assert blocks.shape == (model.membrane_count, 42)
+    plain, given = np.zeros_like(q), np.zeros_like(q)
+    _core.apply_jacobians(core_model(model), data, q, p, 0.0, 0.3, 1.0, *inputs, plain)
+    _core.apply_jacobians(core_model(model), data, q, p, 0.0, 0.3, 1.0, *inputs, given,
+                          membrane_hessian=blocks)  # fmt: skip
+    np.testing.assert_array_equal(given, plain)
+    with pytest.raises(ValueError, match="membrane_hessian"):
+        _core.apply_jacobians(core_model(model), data, q, p, 0.0, 0.3, 1.0, *inputs, given,
+                              membrane_hessian=np.zeros((3, 42)))  # fmt: skip

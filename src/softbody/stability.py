@@ -153,10 +153,12 @@ def spectral_bounds(
     damping_a = model.attachment_damping[:, None, None] * axial_block
     core = core_model(model)
     control = control_data(model)
+    # the membranes' blocks at q, once for every product (an eigensolve per triangle)
+    membrane = _core.membrane_blocks(core, q) if model.membrane_count else None
     out = np.zeros((n, 3))
     no_gas = np.zeros(model.body_count)
 
-    def operator(axial, side, alpha_c, alpha_k, pnet, dpdv, anchored, membrane=True):
+    def operator(axial, side, alpha_c, alpha_k, pnet, dpdv, anchored, with_membrane=True):
         # spring blocks (axial - side) u u^T + side I, as apply_jacobians builds them; the
         # membranes' clamped stiffness and damping (damped: not in the undamped operator)
         def matvec(y):
@@ -164,7 +166,8 @@ def spectral_bounds(
             # attachments are added below, as the blocks at this call's anchors
             _core.apply_jacobians(
                 core, control, q, p, 0.0, alpha_c, alpha_k, u, axial, side,
-                volume_gradient, dpdv, pnet, out, attachments=False, membrane=membrane,
+                volume_gradient, dpdv, pnet, out, attachments=False, membrane=with_membrane,
+                membrane_hessian=membrane,
             )  # fmt: skip
             r = -out
             if len(a):
