@@ -771,3 +771,17 @@ def test_pressurised_tube_has_laplaces_hoop_and_axial_tension():
     assert abs((hoop - 1) / (lt - 1) - 1) <= 1e-4
     assert abs((axial - 1) / (lz - 1) - 1) <= 1e-4
     assert 3.9 < (hoop - 1) / (axial - 1) < 4.3
+
+
+def test_the_term_is_registered_and_acts_only_with_membranes():
+    """Contract of the term registry: "membrane" is registered, with an energy and a
+    projection and no vertex-major (lane) or fused form; it acts only in a model with
+    membrane triangles, so a membrane-free model keeps the fused symplectic pass."""
+    table = {t["name"]: t for t in sb.core.terms()}
+    traits = table["membrane"]
+    assert traits["energy"] and traits["projected"]
+    assert not (traits["lane"] or traits["fused"] or traits["external"])
+    b = sb.ModelBuilder()
+    b.add_soft_body(sb.icosphere(1), mass=0.1, stiffness=10.0, gas=5.0)
+    assert "membrane" not in sb.diagnostics.active_terms(b.finalize())
+    assert "membrane" in sb.diagnostics.active_terms(_balloon(NEO, subdivisions=1))
