@@ -19,6 +19,8 @@
     X(STATIC, 0) X(ROTATION, 1) X(TRANSLATION, 2) X(OSCILLATION, 3)
 // soft-soft contacts (ModelBuilder.set_soft_contact's mode)
 #define SOFTBODY_ENUM_SOFT_CONTACT_MODE(X) X(NONE, 0) X(BOUNDING, 1) X(SURFACE, 2)
+// membrane materials (softbody.MembraneMaterial; core/terms/membrane.hpp)
+#define SOFTBODY_ENUM_MEMBRANE_MATERIAL(X) X(NEO_HOOKEAN, 0) X(MOONEY_RIVLIN, 1) X(STVK, 2)
 #define SOFTBODY_ENUM_STATUS(X)                                                              \
     X(OK, 0) X(NONFINITE, 1) X(RUNAWAY, 2) X(BAD_VOLUME, 3) X(SHRUNK, 4) X(EXPLODED, 5)    \
     X(NEED_HASH, 6) X(STOPPED, 7) X(BAD_GAS, 8)
@@ -30,7 +32,8 @@
     X(VolumeMethod, "VolumeMethod", SOFTBODY_ENUM_VOLUME_METHOD) \
     X(ColliderKind, "ColliderKind", SOFTBODY_ENUM_COLLIDER_KIND) \
     X(MotionKind, "MotionKind", SOFTBODY_ENUM_MOTION_KIND)       \
-    X(SoftContactMode, "SoftContactMode", SOFTBODY_ENUM_SOFT_CONTACT_MODE)
+    X(SoftContactMode, "SoftContactMode", SOFTBODY_ENUM_SOFT_CONTACT_MODE) \
+    X(MembraneMaterial, "MembraneMaterial", SOFTBODY_ENUM_MEMBRANE_MATERIAL)
 
 namespace softbody {
 

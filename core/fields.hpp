@@ -26,7 +26,8 @@
     X(O, orifices, count, orifice_bodies)         \
     X(I, inflators, count, inflator_body)         \
     X(Q, inflators, table_count, inflator_time)   \
-    X(H, bending, count, bending_hinges)
+    X(H, bending, count, bending_hinges)          \
+    X(Tm, membranes, count, membrane_indices)
 
 #define SOFTBODY_FIELDS_PARTICLES(F)                                                              \
     F(particles, mass, particle_mass, f64, (N), none, "kg",                                       \
@@ -210,6 +211,25 @@
     F(bending, body, bending_body, i64, (H), index(0, B), "",                                     \
       "body of each hinge")
 
+#define SOFTBODY_FIELDS_MEMBRANES(F)                                                              \
+    F(membranes, indices, membrane_indices, i64, (Tm, 3), index(0, N), "",                       \
+      "particle indices of each membrane triangle (core/terms/membrane.hpp)")                   \
+    F(membranes, material, membrane_material, i64, (Tm), index(0, MembraneMaterial::kCount), "", \
+      "MembraneMaterial of each membrane triangle")                                             \
+    F(membranes, params, membrane_params, f64, (Tm, 2), finite, "Pa or 1",                       \
+      "material parameters of each membrane triangle; (mu, 0) neo-Hookean, (c10, c01) "          \
+      "Mooney-Rivlin [Pa], (E [Pa], nu) St Venant-Kirchhoff")                                    \
+    F(membranes, thickness, membrane_thickness, f64, (Tm), finite_nonneg, "m",                   \
+      "rest thickness H of each membrane triangle")                                             \
+    F(membranes, rest_area, membrane_rest_area, f64, (Tm), finite_nonneg, "m^2",                 \
+      "rest area A0 of each membrane triangle")                                                 \
+    F(membranes, rest_inverse, membrane_rest_inverse, f64, (Tm, 2, 2), finite, "1/m",            \
+      "inverse rest edge matrix Dm^-1 of each membrane triangle in its 2D rest frame")          \
+    F(membranes, damping, membrane_damping, f64, (Tm), finite_nonneg, "s",                       \
+      "strain-rate damping time beta of each membrane triangle; 0 for none")                    \
+    F(membranes, body, membrane_body, i64, (Tm), index(-1, B), "",                               \
+      "body of each membrane triangle")
+
 // The parts: P(struct, member of Model, its fields, members it holds besides them).
 #define SOFTBODY_MODEL_PARTS(P)                                                   \
     P(Particles, particles, SOFTBODY_FIELDS_PARTICLES, index count = 0;)          \
@@ -227,4 +247,5 @@
     P(Vents, vents, SOFTBODY_FIELDS_VENTS, index count = 0;)                      \
     P(Orifices, orifices, SOFTBODY_FIELDS_ORIFICES, index count = 0;)             \
     P(Inflators, inflators, SOFTBODY_FIELDS_INFLATORS, index count = 0; index table_count = 0;) \
-    P(Bending, bending, SOFTBODY_FIELDS_BENDING, index count = 0;)
+    P(Bending, bending, SOFTBODY_FIELDS_BENDING, index count = 0;) \
+    P(Membranes, membranes, SOFTBODY_FIELDS_MEMBRANES, index count = 0;)

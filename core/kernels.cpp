@@ -94,6 +94,10 @@ unsigned active_terms(const Model& m, const Control& c) {
     return mask;
 }
 
+void membrane_blocks(const Model& m, const double* q, double* out) {
+    membrane::prepare(m, q, out);
+}
+
 // The estimate's Gershgorin bounds, term by term: the spring-like terms' row sums first
 // (a particle's row holds its springs and its attachments), then each term's rows.
 StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double* q,
@@ -108,6 +112,8 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
     attachments::row_bounds(m, w.attachment_weight, w.root_sum, out.attachments);
     springs::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
     attachments::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
+    membrane::bound_rows(m, q, w.membrane_row, out.membrane);
+    membrane::damping_ratios(m, out.ratio_min, out.ratio_max);
     std::fill(w.volume_gradient, w.volume_gradient + 3 * m.particles.count, 0.0);
     gas::bound_slopes(m, q, w.body_pnet, w.body_dpdv, w.volume_gradient);
     std::fill(w.pressure_row, w.pressure_row + m.particles.count, 0.0);
@@ -133,7 +139,8 @@ const KernelTable& kernel_table() {
                                    projective_solve, eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
-                                   eval_energies, eval_flows, active_terms, stiffness_bounds};
+                                   eval_energies, eval_flows, active_terms, membrane_blocks,
+                                   stiffness_bounds};
     return table;
 }
 

@@ -30,6 +30,7 @@ struct TermEnergies {
 struct StiffnessBounds {
     double springs[4] = {0.0, 0.0, 0.0, 0.0};
     double attachments[4] = {0.0, 0.0, 0.0, 0.0};
+    double membrane[4] = {0.0, 0.0, 0.0, 0.0};  // its own Gershgorin rows (membrane.hpp)
     double pressure_rows = 0.0;  // max_i of the pressure term's rows
     double gas_rank_one = 0.0;   // max over bodies of |P'(V)| sum_i |g_i|^2 / m_i
     double bending = 0.0;        // max_i of the bending hinges' rows
@@ -45,6 +46,7 @@ struct BoundBuffers {
     double* attachment_weight = nullptr;  // (A, 4) scratch
     double* root_sum = nullptr;           // (N, 4) scratch
     double* pressure_row = nullptr;       // (N,) scratch
+    double* membrane_row = nullptr;       // (N, 2) scratch
     double* body_pnet = nullptr;          // (B,) out: P - P_a at the largest scheduled gas [Pa]
     double* body_dpdv = nullptr;          // (B,) out: P'(V) [Pa/m^3]
     double* volume_gradient = nullptr;    // (N, 3) out: exact dV/dx [m^2], 0 off bodies
@@ -109,6 +111,9 @@ struct KernelTable {
     /// Bit k set: registered term k acts in a call with model m and control c.
     unsigned (*active_terms)(const Model& m, const Control& c);
     /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors.
+    /// Every membrane triangle's clamped stiffness and damping blocks at q into out
+    /// (Tm, kMembraneBlock): what Linearization::membrane_hessian holds.
+    void (*membrane_blocks)(const Model&, const double* q, double* out);
     StiffnessBounds (*stiffness_bounds)(const Model&, const Control&, const double* q,
                                         const BoundBuffers& w);
 };

@@ -223,6 +223,13 @@ struct MultigridView {
     double* x = nullptr;           // (sum n_l, 3) level solutions
     double* b = nullptr;           // (sum n_l, 3) level right-hand sides
     double* r = nullptr;           // (sum n_l, 3) level residuals
+    // each particle's membrane neighbours, sorted, and each membrane triangle's corner pairs'
+    // entries (-1 on its diagonal); membrane_coef (E, 3, 3) scratch: -A_ij of each entry
+    index membrane_entry_count = 0;            // E
+    const index* membrane_ptr = nullptr;       // (N + 1,)
+    const index* membrane_neighbor = nullptr;  // (E,)
+    const index* membrane_slot = nullptr;      // (Tm, 3, 3)
+    double* membrane_coef = nullptr;           // (E, 3, 3)
 };
 
 /// Scratch and history of the implicit schemes, owned by softbody::ImplicitSolver.
@@ -240,6 +247,7 @@ struct ImplicitBuffers {
     double* body_dpdv = nullptr; // (B,) dP/dV [Pa/m^3]
     double* body_pnet = nullptr; // (B,) P - P_ambient [Pa]
     double* bending_gradient = nullptr;  // (H, 4, 3) each hinge's d theta / dx [1/m]
+    double* membrane_hessian = nullptr;  // (Tm, 42) membrane blocks (Linearization)
     double* cg_diag = nullptr;   // (N,) Jacobi preconditioner [kg]
     double* cg_r = nullptr;      // (N, 3) residual
     double* cg_z = nullptr;      // (N, 3) preconditioned residual
@@ -286,6 +294,10 @@ struct ProjectiveBuffers {
     ContactBuffers contact;
 };
 
+/// Doubles per membrane triangle in Linearization::membrane_hessian: two symmetric 6 x 6
+/// blocks by their upper triangles (terms/membrane.hpp).
+constexpr int kMembraneBlock = 42;
+
 /// The implicit solvers' linearisation at a point q (N, 3): what `prepare` writes and
 /// `jacobian_product` / `add_smoother_blocks` read. The Python API's apply_jacobians passes
 /// the same arrays in.
@@ -299,6 +311,9 @@ struct Linearization {
     double* body_pnet = nullptr;  // (B,) P - P_ambient [Pa]
     // (H, 4, 3) each hinge's d theta / dx [1/m], prepare's; null: each product computes it
     double* bending_gradient = nullptr;
+    // (Tm, 42) each membrane triangle's clamped stiffness and damping blocks in F
+    // (terms/membrane.hpp); null: the product computes them at q as it goes
+    double* membrane_hessian = nullptr;
 };
 
 /// The multigrid smoother's diagonal blocks and the per-entry spring coefficients
@@ -309,6 +324,10 @@ struct SmootherBlocks {
     const index* entry_spring = nullptr; // (2 S,)
     double* entry_coef = nullptr;        // (2 S, 5) u (3,), alpha, beta
     double* block = nullptr;             // (N, 3, 3) set to M, then each term adds its share
+    // the membranes' off-diagonal blocks: -A_ij per entry (MultigridView's membrane_*)
+    index membrane_entry_count = 0;
+    const index* membrane_slot = nullptr;  // (Tm, 3, 3) entry of each corner pair, -1 on a = b
+    double* membrane_coef = nullptr;       // (E, 3, 3)
 };
 
 /// A registered term's name and traits (terms/term.hpp), for the bindings and Python.

@@ -15,6 +15,7 @@ from softbody.collision import ColliderKind, SoftContactMode
 from softbody.collision.colliders import MotionKind
 from softbody.gas import GasLaw
 from softbody.integrators import Integrator
+from softbody.membrane import MembraneMaterial
 from softbody.solvers.base import Status
 from softbody.volume import VolumeMethod
 
@@ -25,6 +26,7 @@ PYTHON = {
     "ColliderKind": ColliderKind,
     "MotionKind": MotionKind,
     "SoftContactMode": SoftContactMode,
+    "MembraneMaterial": MembraneMaterial,
     "Status": Status,
 }
 

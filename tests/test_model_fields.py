@@ -33,6 +33,7 @@ def _counts(model: sb.Model) -> dict[str, int]:
         "V": len(model.vent_body), "O": len(model.orifice_bodies),
         "I": len(model.inflator_body), "Q": len(model.inflator_time),
         "H": len(model.bending_hinges),
+        "Tm": model.membrane_count,
     }  # fmt: skip
 
 
@@ -52,6 +53,11 @@ def _models():
     yield "surface-two-balls", build_case("surface-two-balls", "midpoint")[0]
     yield "bouncing-balls", load_scene("bouncing-balls").model
     yield "bending", _bending_model()
+    builder = sb.ModelBuilder()
+    builder.add_soft_body(sb.icosphere(1), mass=0.1, gas=10.0,
+                          membrane=[(sb.Membrane.neo_hookean(1e5, 1e-3), None),
+                                    (sb.Membrane.stvk(1e6, 0.3, 1e-4), [0, 5])])  # fmt: skip
+    yield "membranes", builder.finalize()
 
 
 def test_python_fields_are_generated_from_the_table():

@@ -152,7 +152,11 @@ def test_json_schema_has_units_defaults_and_bounds(capsys):
     assert radius["exclusiveMinimum"] == 0 and "[m]" in radius["description"]
     fps = defs["Render"]["properties"]["fps"]
     assert fps["minimum"] == 0.01 and fps["maximum"] == 1000
-    assert defs["SoftBody"]["properties"]["mass"]["exclusiveMinimum"] == 0
+    mass = defs["SoftBody"]["properties"]["mass"]  # optional: a membrane's density instead
+    assert any(o.get("exclusiveMinimum") == 0 for o in mass["anyOf"]) and "[kg]" in str(mass)
+    layer = defs["NeoHookean"]["properties"]
+    assert "[Pa]" in layer["shear_modulus"]["description"]
+    assert layer["thickness"]["exclusiveMinimum"] == 0
     assert all(d.get("additionalProperties") is False for d in defs.values() if "properties" in d)
     assert schema["required"] == ["bodies"]
 

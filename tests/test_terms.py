@@ -27,7 +27,7 @@ import softbody as sb
 from softbody import _core, core
 from softbody import reference as ref
 from softbody.core import core_model
-from softbody.reference import attachments, bending, external, gas, gravity, springs
+from softbody.reference import attachments, bending, external, gas, gravity, membrane, springs
 from softbody.reference import volume as rvolume
 from softbody.sim.control import control_data
 from softbody.stability import stiffest_mode
@@ -86,7 +86,38 @@ def _cloth() -> tuple[sb.Model, sb.Control | None]:
     return b.finalize(), None
 
 
-MODELS = {"every-term": every_term_model, "gas-laws": _gas_laws, "cloth": _cloth}
+def _membranes() -> tuple[sb.Model, sb.Control]:
+    """Membrane bodies, one per material: a neo-Hookean balloon without springs, a
+    Mooney-Rivlin one with edge springs beside it, a StVK one with a damped neo-Hookean
+    layer on half its faces, and a StVK cloth; an attachment and a grab."""
+    b = sb.ModelBuilder(gravity=(0.0, -9.81, 0.0))
+    b.add_soft_body(sb.icosphere(2, radius=0.3), mass=0.2, gas=sb.Gas.isothermal(40.0),
+                    membrane=sb.Membrane.neo_hookean(2e5, 1e-3))  # fmt: skip
+    b.add_soft_body(sb.icosphere(1, radius=0.25, center=(0.8, 0.0, 0.0)), mass=0.2,
+                    stiffness=50.0, damping=0.1, gas=sb.Gas.fixed_pressure(300.0),
+                    membrane=sb.Membrane.mooney_rivlin(1e5, 3e4, 5e-4))  # fmt: skip
+    half = np.arange(0, 80, 2)
+    b.add_soft_body(sb.icosphere(1, radius=0.25, center=(0.0, 0.9, 0.0)),
+                    gas=sb.Gas.adiabatic(35.0, ambient_pressure=8.0), density=1000.0,
+                    membrane=[(sb.Membrane.stvk(1e6, 0.3, 2e-4), None),
+                              (sb.Membrane.neo_hookean(5e5, 1e-4, damping=0.01), half)],
+                    )  # fmt: skip
+    b.add_cloth(sb.rectangle((1.0, 0.8), (6, 5)), mass=0.1, pinned=[0, 6],
+                membrane=sb.Membrane.stvk(5e5, 0.4, 3e-4))  # fmt: skip
+    b.add_attachment(5, anchor=(0.0, 1.0, 0.0), stiffness=40.0, damping=0.5)
+    model = b.finalize()
+    control = model.control()
+    control.grab_particle = 50
+    control.grab_target = np.array([0.5, 0.9, 0.0])
+    control.grab_stiffness = 30.0
+    return model, control
+
+
+MODELS = {"every-term": every_term_model, "gas-laws": _gas_laws, "cloth": _cloth,
+          "membranes": _membranes}  # fmt: skip
+#: The models whose stiffness bounds the NumPy formulas below cover (springs, attachments,
+#: gas); the membrane's bound is tested in test_membrane.py.
+BOUND_MODELS = ["every-term", "gas-laws", "cloth"]
 _BUILT: dict = {}
 
 
@@ -169,6 +200,20 @@ def _reference_energies(model, data, t, q, volume):
     owner = model.bending_body
     out["bending"] = (e.sum(), _per_body(e, owner, bodies), size.sum(),
                       _per_body(size, owner, bodies))  # fmt: skip
+    # membranes: A0 H W(C), W's terms (each of size |parameter| times the invariants,
+    # which cancel to W) rounded at their own size
+    f = membrane.deformation(model, q)
+    c = np.einsum("tkb,tkc->tbc", f, f)
+    tr = c[:, 0, 0] + c[:, 1, 1]
+    det = c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] ** 2
+    p0, p1 = np.abs(model.membrane_params).T
+    size = model.membrane_rest_area * model.membrane_thickness * (p0 + p1) * (
+        (tr + 2.0) ** 2 + 1.0 / det + det + tr / det + 3.0
+    )
+    e = membrane.energies(model, q)
+    owner = model.membrane_body
+    out["membrane"] = (e.sum(), _per_body(e, owner, bodies), size.sum(),
+                       _per_body(size, owner, bodies))  # fmt: skip
     return out
 
 
@@ -193,11 +238,15 @@ def test_core_energies_match_the_reference(name, simd):
         _close(got_total, total, total_size, f"{term} total")
         _close(got_bodies, bodies, body_size, f"{term} per body")
         # every model has every term it was built with; the cloth, open, holds no gas
-        # and has no attachment; material bending only where a body has it
+        # and has no attachment; material bending only where a body has it, membranes
+        # only in the membranes' model
         if term == "bending":
             assert (abs(total) > 0.0) == (model.bending_hinges.shape[0] > 0), term
             continue
-        assert (abs(total) > 0.0) == (name != "cloth" or term in ("gravity", "springs")), term
+        present = {"cloth": ("gravity", "springs")}.get(name, tuple(expected))
+        if name != "membranes":
+            present = tuple(k for k in present if k != "membrane")
+        assert (abs(total) > 0.0) == (term in present), term
     g = int(data.grab_particle)
     grab_size = data.grab_stiffness * (np.linalg.norm(data.grab_target) + np.linalg.norm(q[g])) ** 2
     grab_total, grab_bodies = energies["grab"]
@@ -213,8 +262,8 @@ def test_core_energies_match_the_reference(name, simd):
 @pytest.mark.parametrize("name", list(MODELS))
 def test_diagnostics_energies_compose_the_terms(name):
     """softbody.energies (kinetic 1/2 m v^2; gravitational; spring = springs,
-    attachments and bending; gas) and its per-body splits equal the reference's composition, the one
-    diagnostics made before the energies moved into the core, to round-off."""
+    attachments, bending and membranes; gas) and its per-body splits equal the reference's
+    composition, the one diagnostics made before the energies moved into the core, to round-off."""
     model, control, data, t, q, qd = _inputs(name)
     state = model.state()
     state.particle_q[:], state.particle_qd[:], state.time = q, qd, t
@@ -227,7 +276,7 @@ def test_diagnostics_energies_compose_the_terms(name):
            _per_body(kin, model.particle_body, model.body_count), "kinetic per body")  # fmt: skip
     sums = [
         ("gravitational", "body_gravitational", ("gravity",)),
-        ("spring", "body_spring", ("springs", "attachments", "bending")),
+        ("spring", "body_spring", ("springs", "attachments", "bending", "membrane")),
         ("gas", "body_gas", ("gas",)),
     ]
     for total_name, body_name, terms in sums:
@@ -259,10 +308,10 @@ def _check_derivative(function, q, direction, expected, h, value_scale, size, wh
     assert allowed < 1e-4 * size  # a test that can fail: sharper than what it checks
 
 
-@pytest.mark.parametrize("name", ["every-term", "gas-laws"])
+@pytest.mark.parametrize("name", ["every-term", "gas-laws", "membranes"])
 def test_each_force_is_minus_the_gradient_of_the_core_energy(name):
-    """For gravity, springs, attachments, the grab spring, bending (where a body has it)
-    and each closed body's gas of
+    """For gravity, springs, attachments, the grab spring, bending and the membranes (where
+    there are any) and each closed body's gas of
     the exact volume (its own share, body by body): -dE/dx . p from central differences
     of the core's energy along random p equals f(q, v = 0) . p of the term's force (the
     reference's, which test_reference.py holds equal to the core's). And the sum: the
@@ -289,6 +338,8 @@ def test_each_force_is_minus_the_gradient_of_the_core_energy(name):
     ]
     if model.bending_hinges.shape[0]:
         cases.append(("bending", energy("bending"), bending.force(model, q)))
+    if model.membrane_count:
+        cases.append(("membrane", energy("membrane"), membrane.force(model, q, zero)))
     exact = (model.body_volume_method == rvolume.EXACT) & (model.body_closed == 1)
     for b in np.flatnonzero(exact):
         f = np.where((model.particle_body == b)[:, None], pressure_force, 0.0)
@@ -311,7 +362,7 @@ def test_each_force_is_minus_the_gradient_of_the_core_energy(name):
     def total(x):
         out = _core.eval_energies(cm, data, t, np.ascontiguousarray(x))
         return sum(out[k][0] for k in ("gravity", "springs", "attachments", "gas", "grab",
-                                       "bending"))  # fmt: skip
+                                       "bending", "membrane"))  # fmt: skip
 
     size = np.sum(np.abs(force * direction))
     _check_derivative(total, q, direction, -np.sum(force * direction), 1e-4,
@@ -429,7 +480,7 @@ def _relative_volume_error(model, q, volume):
     return out
 
 
-@pytest.mark.parametrize("name", list(MODELS))
+@pytest.mark.parametrize("name", BOUND_MODELS)
 def test_bound_pieces_match_the_numpy_formulas(name, simd):
     """softbody._core.stiffness_bounds at a deformed state, piece by piece, against the
     NumPy formulas (``_numpy_bounds``): the springs' and attachments' row bounds of each
@@ -489,7 +540,7 @@ def test_bound_pieces_match_the_numpy_formulas(name, simd):
     assert (got["gas_rank_one"] > 0.0) == (name != "cloth")
 
 
-@pytest.mark.parametrize("name", list(MODELS))
+@pytest.mark.parametrize("name", BOUND_MODELS)
 def test_stiffest_mode_composes_the_term_bounds(name):
     """stiffest_mode without the spectral bounds is the Gershgorin composition of the
     NumPy pieces (softbody.stability's docstring): omega_damped^2 the larger of the

@@ -81,6 +81,28 @@ public:
         v.x = scratch_[3].data();
         v.b = scratch_[4].data();
         v.r = scratch_[5].data();
+        // the membranes' entries: CSR over particles, neighbours in range, slots in range
+        v.membrane_ptr = i64(mg, "membrane_ptr", {n + 1});
+        const ConstI64 neighbor = keep(attribute<ConstI64>(mg, "membrane_neighbor", {-1}));
+        const Index e_count = static_cast<Index>(neighbor.shape(0));
+        if (v.membrane_ptr[0] != 0 || v.membrane_ptr[n] != e_count)
+            fail("multigrid membrane_ptr must run from 0 to the membrane entry count");
+        for (Index i = 0; i < n; ++i)
+            if (v.membrane_ptr[i] > v.membrane_ptr[i + 1])
+                fail("multigrid membrane_ptr must not decrease");
+        v.membrane_neighbor = neighbor.data();
+        check_indices(v.membrane_neighbor, e_count, 0, n, "multigrid membrane_neighbor");
+        v.membrane_slot = i64(mg, "membrane_slot", {m.membranes.count, 3, 3});
+        check_indices(v.membrane_slot, 9 * m.membranes.count, -1, e_count,
+                      "multigrid membrane_slot");
+        for (Index t = 0; t < m.membranes.count; ++t)
+            for (int a = 0; a < 3; ++a)
+                for (int b = 0; b < 3; ++b)
+                    if ((v.membrane_slot[9 * t + 3 * a + b] < 0) != (a == b))
+                        fail("multigrid membrane_slot must be -1 exactly on each diagonal");
+        v.membrane_entry_count = e_count;
+        membrane_coef_.assign(static_cast<size_t>(9 * e_count), 0.0);
+        v.membrane_coef = membrane_coef_.data();
     }
 
     softbody::MultigridView view;
@@ -116,6 +138,7 @@ private:
 
     Index total_ = 0;
     std::vector<std::vector<double>> scratch_;
+    std::vector<double> membrane_coef_;
     std::vector<ConstF64> keep_f_;
     std::vector<ConstI64> keep_i_;
 };
@@ -142,6 +165,9 @@ public:
         per_spring_ = {std::vector<double>(3 * s), std::vector<double>(s), std::vector<double>(s)};
         per_body_ = {std::vector<double>(b), std::vector<double>(b)};
         per_hinge_.assign(12 * static_cast<size_t>(m.bending.count), 0.0);
+        membrane_.assign(static_cast<size_t>(softbody::kMembraneBlock) *
+                             static_cast<size_t>(m.membranes.count), 0.0);
+        w_.membrane_hessian = membrane_.data();
         diag_.assign(static_cast<size_t>(m.particles.count), 0.0);
         w_.spring_u = per_spring_[0].data();
         w_.spring_a = per_spring_[1].data();
@@ -223,7 +249,7 @@ private:
     SolverThreads threads_;
     std::vector<std::vector<double>> per_spring_, per_body_;
     std::vector<double> per_hinge_;  // (H, 4, 3) the bending gradients at the step's start
-    std::vector<double> diag_;
+    std::vector<double> diag_, membrane_;
     Index flags_[4] = {0, 0, 0, 0};  // contacts acted, then the CG statistics
     softbody::ImplicitBuffers w_;
 };

@@ -80,7 +80,8 @@ int term_position(const std::string& name) {
 void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, ConstF64 p,
                      double alpha_m, double alpha_c, double alpha_k, ConstF64 u, ConstF64 a,
                      ConstF64 b, ConstF64 gradient, ConstF64 dpdv, ConstF64 pnet, F64 out,
-                     bool attachments, bool bending) {
+                     bool attachments, bool bending, bool membrane,
+                     std::optional<ConstF64> membrane_hessian) {
     const softbody::Model& m = core.model();
     const Index n = m.particles.count, s = m.springs.count, nb_ = m.bodies.count;
     check_shape(q, "q", {n, 3});
@@ -102,11 +103,33 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
     l.volume_gradient = gradient.data();
     l.body_dpdv = const_cast<double*>(dpdv.data());
     l.body_pnet = const_cast<double*>(pnet.data());
+    // the membrane's blocks from membrane_blocks(q), or computed at q as the product goes
+    if (membrane_hessian) {
+        check_shape(*membrane_hessian, "membrane_hessian",
+                    {m.membranes.count, softbody::kMembraneBlock});
+        l.membrane_hessian = const_cast<double*>(membrane_hessian->data());
+    }
     const unsigned skip = (attachments ? 0u : 1u << term_position("attachments")) |
-                          (bending ? 0u : 1u << term_position("bending"));
+                          (bending ? 0u : 1u << term_position("bending")) |
+                          (membrane ? 0u : 1u << term_position("membrane"));
     nb::gil_scoped_release release;
     softbody::kernels().apply_jacobians(m, c.view, l, p.data(), alpha_m, alpha_c, alpha_k, skip,
                                         out.data());
+}
+
+/// Every membrane triangle's blocks at q (Linearization::membrane_hessian).
+nb::ndarray<nb::numpy, double> membrane_blocks(const CoreModel& core, ConstF64 q) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particles.count, 3});
+    const size_t rows = static_cast<size_t>(m.membranes.count);
+    auto* owned = new std::vector<double>(rows * softbody::kMembraneBlock);
+    {
+        nb::gil_scoped_release release;
+        softbody::kernels().membrane_blocks(m, q.data(), owned->data());
+    }
+    size_t shape[2] = {rows, static_cast<size_t>(softbody::kMembraneBlock)};
+    nb::capsule owner(owned, [](void* p) noexcept { delete static_cast<std::vector<double>*>(p); });
+    return nb::ndarray<nb::numpy, double>(owned->data(), 2, shape, owner);
 }
 
 /// Volumes of bodies given by plain arrays (before a Model exists, or by another method).
@@ -269,12 +292,13 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     const size_t n = static_cast<size_t>(m.particles.count), nb_ = static_cast<size_t>(m.bodies.count);
     std::vector<double> spring_weight(4 * static_cast<size_t>(m.springs.count)),
         attachment_weight(4 * static_cast<size_t>(m.attachments.count)), root_sum(4 * n),
-        pressure_row(n), pnet(nb_), dpdv(nb_), gradient(3 * n);
+        pressure_row(n), membrane_row(2 * n), pnet(nb_), dpdv(nb_), gradient(3 * n);
     softbody::BoundBuffers w;
     w.spring_weight = spring_weight.data();
     w.attachment_weight = attachment_weight.data();
     w.root_sum = root_sum.data();
     w.pressure_row = pressure_row.data();
+    w.membrane_row = membrane_row.data();
     w.body_pnet = pnet.data();
     w.body_dpdv = dpdv.data();
     w.volume_gradient = gradient.data();
@@ -287,6 +311,7 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     nb::dict out;
     out["springs"] = parts(b.springs);
     out["attachments"] = parts(b.attachments);
+    out["membrane"] = parts(b.membrane);
     out["pressure_rows"] = b.pressure_rows;
     out["gas_rank_one"] = b.gas_rank_one;
     out["bending"] = b.bending;
@@ -321,7 +346,7 @@ void bind_terms(nb::module_& mod) {
     mod.def("stiffness_bounds", &stiffness_bounds, nb::arg("model"), nb::arg("control"),
             nb::arg("q").noconvert(),
             "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'springs', "
-            "'attachments' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
+            "'attachments', 'membrane' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
             "'pressure_rows', 'gas_rank_one', 'bending' [1/s^2], 'damping_ratio' (min, max c / k [s]), "
             "'pure_dampers', and the gas at its largest scheduled value: 'body_pnet' (B,) "
             "[Pa], 'body_dpdv' (B,) [Pa/m^3], 'volume_gradient' (N, 3) [m^2].");
@@ -334,9 +359,16 @@ void bind_terms(nb::module_& mod) {
             nb::arg("spring_a").noconvert(), nb::arg("spring_b").noconvert(),
             nb::arg("volume_gradient").noconvert(), nb::arg("body_dpdv").noconvert(),
             nb::arg("body_pnet").noconvert(), nb::arg("out").noconvert(),
-            nb::arg("attachments") = true, nb::arg("bending") = true,
+            nb::arg("attachments") = true, nb::arg("bending") = true, nb::arg("membrane") = true,
+            nb::arg("membrane_hessian").noconvert() = nb::none(),
             "out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p (C = df/dv, K = df/dx); "
-            "attachments=False or bending=False leaves that term out.");
+            "attachments, bending or membrane false leave those terms out; membrane_hessian "
+            "(Tm, 42): the membrane's blocks at q from membrane_blocks (default: computed "
+            "as the product goes).");
+    mod.def("membrane_blocks", &membrane_blocks, nb::arg("model"), nb::arg("q").noconvert(),
+            "Every membrane triangle's clamped stiffness and damping blocks in F at q (N, 3), "
+            "(Tm, 42): two symmetric 6 x 6 blocks by their upper triangles "
+            "(core/terms/membrane.hpp), for apply_jacobians' membrane_hessian.");
     mod.def("soft_contacts", &soft_contacts, nb::arg("model"), nb::arg("q").noconvert(),
             nb::arg("qd").noconvert(), nb::arg("hash_capacity") = nb::none(),
             "One pass of the model's soft-soft contacts on q, qd (N, 3) in place; returns "

@@ -32,6 +32,7 @@ inline Linearization at_start(const ImplicitBuffers& w) {
     l.body_dpdv = w.body_dpdv;
     l.body_pnet = w.body_pnet;
     l.bending_gradient = w.bending_gradient;
+    l.membrane_hessian = w.membrane_hessian;
     return l;
 }
 
@@ -77,6 +78,9 @@ inline void prepare_blocks(const Model& m, const Control& c, double h, const Imp
     blocks.entry_spring = mg.vertex_spring;
     blocks.entry_coef = mg.entry_coef;
     blocks.block = mg.block;
+    blocks.membrane_entry_count = mg.membrane_entry_count;
+    blocks.membrane_slot = mg.membrane_slot;
+    blocks.membrane_coef = mg.membrane_coef;
     forms::smoother_blocks(m, c, at_start(w), blocks);
     for (index i = 0; i < m.particles.count; ++i) invert_3x3(mg.block + 9 * i, mg.block_inv + 9 * i);
 }
@@ -102,6 +106,28 @@ inline index first_later_entry(const MultigridView& mg, index i) {
     index e = mg.vertex_spring_ptr[i];
     const index end = mg.vertex_spring_ptr[i + 1];
     while (e < end && mg.vertex_neighbor[e] < i) ++e;
+    return e;
+}
+
+/// s += the membrane entries first..last-1 of their blocks (-A_ij) times x_j; s unchanged
+/// (bit for bit) when there are none.
+inline void add_membrane_entries(const MultigridView& mg, const double* x, index first,
+                                 index last, V3& s) {
+    for (index e = first; e < last; ++e) {
+        const index j = mg.membrane_neighbor[e];
+        const double* c = mg.membrane_coef + 9 * e;
+        const double xj0 = x[3 * j], xj1 = x[3 * j + 1], xj2 = x[3 * j + 2];
+        s.x += c[0] * xj0 + c[1] * xj1 + c[2] * xj2;
+        s.y += c[3] * xj0 + c[4] * xj1 + c[5] * xj2;
+        s.z += c[6] * xj0 + c[7] * xj1 + c[8] * xj2;
+    }
+}
+
+/// Particle i's first membrane entry to a particle j > i.
+inline index first_later_membrane(const MultigridView& mg, index i) {
+    index e = mg.membrane_ptr[i];
+    const index end = mg.membrane_ptr[i + 1];
+    while (e < end && mg.membrane_neighbor[e] < i) ++e;
     return e;
 }
 
@@ -133,7 +159,9 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
             store(mg.x, i, {0.0, 0.0, 0.0});
             continue;
         }
-        solve_row(mg, i, entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], first_later_entry(mg, i)), r);
+        V3 s = entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], first_later_entry(mg, i));
+        add_membrane_entries(mg, mg.x, mg.membrane_ptr[i], first_later_membrane(mg, i), s);
+        solve_row(mg, i, s, r);
     }
     // its residual: row i's equation held when x_i was set, with x_j = 0 for j > i, so what
     // is left is those springs' blocks times their new x_j
@@ -142,7 +170,9 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
             store(mg.r, i, {0.0, 0.0, 0.0});
             continue;
         }
-        store(mg.r, i, entries_sum(mg, mg.x, first_later_entry(mg, i), mg.vertex_spring_ptr[i + 1]));
+        V3 s = entries_sum(mg, mg.x, first_later_entry(mg, i), mg.vertex_spring_ptr[i + 1]);
+        add_membrane_entries(mg, mg.x, first_later_membrane(mg, i), mg.membrane_ptr[i + 1], s);
+        store(mg.r, i, s);
     }
     if (mg.level_count > 0) {  // coarse correction with the Laplacian hierarchy
         multigrid::restrict_to(mg, 0, mg.r);
@@ -160,8 +190,9 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
         if (inv_mass[i] == 0.0) store(mg.x, i, {0.0, 0.0, 0.0});
     for (index i = n - 1; i >= 0; --i) {  // backward sweep; pinned rows stay 0
         if (inv_mass[i] == 0.0) continue;
-        solve_row(mg, i, entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]),
-                  r);
+        V3 s = entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]);
+        add_membrane_entries(mg, mg.x, mg.membrane_ptr[i], mg.membrane_ptr[i + 1], s);
+        solve_row(mg, i, s, r);
     }
     for (index k = 0; k < 3 * n; ++k) z[k] = mg.x[k];
 }
@@ -174,7 +205,8 @@ inline void prepare(const Model& m, const Control& c, double t, double h,
     if (mg != nullptr) prepare_blocks(m, c, h, w, *mg);
 }
 
-/// Jacobi's diagonal: mass + h (damping) + h^2 (axial stiffness) of each particle's springs.
+/// Jacobi's diagonal: mass + h (damping) + h^2 (axial stiffness) of each particle's springs,
+/// and the mean of the membrane's diagonal there.
 inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) {
     for (index i = 0; i < m.particles.count; ++i) w.cg_diag[i] = m.particles.mass[i];
     for (index s = 0; s < m.springs.count; ++s) {
@@ -182,6 +214,7 @@ inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) 
         w.cg_diag[m.springs.indices[2 * s]] += d;
         w.cg_diag[m.springs.indices[2 * s + 1]] += d;
     }
+    membrane::add_jacobi_diagonal(m, h, w.q0, w.membrane_hessian, w.cg_diag);
 }
 
 /// One backward Euler step, or with bdf2 one BDF2 step, from w.q0, w.v0 with w.f = f(x0, v0)

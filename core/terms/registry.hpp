@@ -12,6 +12,7 @@
 #include "terms/flows.hpp"
 #include "terms/gas.hpp"
 #include "terms/gravity.hpp"
+#include "terms/membrane.hpp"
 #include "terms/springs.hpp"
 #include "terms/term.hpp"
 
@@ -37,6 +38,7 @@ using Terms = TermList<
     external::GrabTerm, // a grabbed particle pulled to a target
     drag::Term,         // air drag on faces
     bending::Term,      // discrete-shell bending on interior edges
+    membrane::Term,     // triangle membranes: hyperelastic sheets
     flows::VentTerm,    // gas out of (or into) a body through vents
     flows::OrificeTerm, // gas between two bodies
     flows::InflatorTerm,// gas delivered by inflators

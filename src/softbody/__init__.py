@@ -28,6 +28,7 @@ from softbody.diagnostics import (
 from softbody.errors import MeshError, MeshWarning, SimulationError, StabilityWarning
 from softbody.gas import GAS_CONSTANT, Gas, GasLaw
 from softbody.integrators import Integrator
+from softbody.membrane import Membrane, MembraneMaterial
 from softbody.mesh import (
     MeshReport,
     TriMesh,
@@ -71,6 +72,8 @@ __all__ = [
     "Gas",
     "GasLaw",
     "Integrator",
+    "Membrane",
+    "MembraneMaterial",
     "MeshError",
     "MeshReport",
     "MeshWarning",

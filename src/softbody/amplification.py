@@ -47,12 +47,13 @@ class StiffestMode:
     zeta: float
     """Damping ratio of that mode if its damped part is at its bound (0 = undamped)."""
     omega_damped: float
-    """Bound on the part spring damping acts on: axial springs, attachments [rad/s]."""
+    """Bound on the part spring damping acts on: axial springs, attachments, membranes
+    [rad/s]."""
     omega_undamped: float
     """Bound on the rest: transverse (stretched) springs, pressure [rad/s]."""
     damping_per_stiffness: tuple[float, float]
-    """Smallest and largest c / k over damped springs and attachments [s]; the largest is
-    inf where a damper has no stiffness."""
+    """Smallest and largest c / k over damped springs and attachments, and membranes'
+    damping times beta [s]; the largest is inf where a damper has no stiffness."""
     damping_rate: float
     """Bound on the largest eigenvalue of M^-1 C, C the damping matrix [1/s]."""
     omega_pressure: float

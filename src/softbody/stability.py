@@ -18,6 +18,12 @@ separately and added (Weyl's inequality), split by whether spring damping acts o
   the Gauss-Newton stiffness) times 1 + 2 |theta - theta0| for the Hessian's other part,
   block rows by Gershgorin.
 
+Membranes (``core/terms/membrane.hpp``) count as damped: their damping is beta times their
+stiffness near rest, so their beta joins the range of c / k. Their stiffness is bounded by
+Gershgorin on 3 x 3 blocks, a triangle's block (a, b) of norm at most |H_F| |g_a| |g_b|
+(|H_F| the spectral radius of its F-Hessian at the given positions, so at their stretch),
+and added to the springs' bounds (Weyl); their damping rate likewise.
+
 Each term computes its own pieces of these bounds in its file of the compiled core
 (``core/terms/springs.hpp``, ``attachments.hpp``, ``gas.hpp``, ``bending.hpp``:
 ``bound_weights``, ``add_root_sums``, ``row_bounds``, ``damping_ratios``;
@@ -153,17 +159,21 @@ def spectral_bounds(
     damping_a = model.attachment_damping[:, None, None] * axial_block
     core = core_model(model)
     control = control_data(model)
+    # the membranes' blocks at q, once for every product (an eigensolve per triangle)
+    membrane = _core.membrane_blocks(core, q) if model.membrane_count else None
     out = np.zeros((n, 3))
     no_gas = np.zeros(model.body_count)
 
-    def operator(axial, side, alpha_c, alpha_k, pnet, dpdv, anchored, bending):
-        # spring blocks (axial - side) u u^T + side I, as apply_jacobians builds them
+    def operator(axial, side, alpha_c, alpha_k, pnet, dpdv, anchored, bending, with_membrane=True):
+        # spring blocks (axial - side) u u^T + side I, as apply_jacobians builds them; the
+        # membranes' clamped stiffness and damping (damped: not in the undamped operator)
         def matvec(y):
             p = scale * y.reshape(n, 3)
             # attachments are added below, as the blocks at this call's anchors
             _core.apply_jacobians(
                 core, control, q, p, 0.0, alpha_c, alpha_k, u, axial, side,
                 volume_gradient, dpdv, pnet, out, attachments=False, bending=bending,
+                membrane=with_membrane, membrane_hessian=membrane,
             )  # fmt: skip
             r = -out
             if len(a):
@@ -177,7 +187,8 @@ def spectral_bounds(
     return (
         _largest_eigenvalue(operator(k, zero, 0.0, 1.0, no_gas, no_gas, damped_a, False), size),
         _largest_eigenvalue(
-            operator(zero, transverse, 0.0, 1.0, body_pnet, body_dpdv, undamped_a, True), size
+            operator(zero, transverse, 0.0, 1.0, body_pnet, body_dpdv, undamped_a, True, False),
+            size,
         ),
         _largest_eigenvalue(
             operator(k, transverse, 0.0, 1.0, body_pnet, body_dpdv, damped_a + undamped_a, True),
@@ -201,8 +212,9 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
     # and attachments share the row sums R_i, so the two terms' rows are bounded together
     pieces = _core.stiffness_bounds(core_model(model), control_data(model), kernel_array(q))
     springs, attached = pieces["springs"], pieces["attachments"]
+    # springs and attachments share their rows; the membranes' rows add (Weyl)
     w2_damped, w2_transverse, w2_springs, damping_rate = (
-        max(s, a) for s, a in zip(springs, attached, strict=True)
+        max(s, a) + m for s, a, m in zip(springs, attached, pieces["membrane"], strict=True)
     )
     low, high = pieces["damping_ratio"]
     beta = (low, high) if low <= high else (0.0, 0.0)  # no spring with stiffness: none

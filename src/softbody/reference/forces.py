@@ -14,7 +14,16 @@ import numpy as np
 
 import softbody.reference
 from softbody.core import terms as registered_terms
-from softbody.reference import attachments, bending, external, gas, gravity, springs, volume
+from softbody.reference import (
+    attachments,
+    bending,
+    external,
+    gas,
+    gravity,
+    membrane,
+    springs,
+    volume,
+)
 from softbody.sim.control import ControlData
 from softbody.sim.model import Model
 
@@ -75,7 +84,8 @@ def eval_forces(
 
 def potential_energy(model: Model, control: ControlData, t: float, q: np.ndarray) -> float:
     """Energy [J] of the conservative terms at q (N, 3): gravity, springs, attachments,
-    the grab spring, bending and the closed bodies' gas (at their exact volumes). At zero
+    the grab spring, bending, the membranes and the closed bodies' gas (at their exact
+    volumes). At zero
     velocities, without dissipative and external forces, and with every body closed and of the
     exact volume, -dE/dx is the total force."""
     return (
@@ -84,5 +94,6 @@ def potential_energy(model: Model, control: ControlData, t: float, q: np.ndarray
         + attachments.energy(model, control, q)
         + external.grab_energy(control, q)
         + bending.energy(model, q)
+        + membrane.energy(model, q)
         + gas.potential_energy(model, control, t, q)
     )

@@ -3,8 +3,9 @@
     out = alpha_m M p + alpha_c C p + alpha_k K p,    C = df/dv, K = df/dx,
 
 with M the (diagonal) particle masses and C, K summed over the springs, the attachments
-(optional: the stability estimate adds its own), the grab spring, the gas and the bending
-hinges (their Gauss-Newton K, :mod:`softbody.reference.bending`). K drops the
+(optional: the stability estimate adds its own), the grab spring, the gas, the bending
+hinges (their Gauss-Newton K, :mod:`softbody.reference.bending`) and the membranes (their K
+clamped to negative semi-definite: :mod:`softbody.reference.membrane`). K drops the
 compressive geometric stiffness of springs and attachments (see
 :mod:`softbody.reference.springs`), so it is df/dx exactly where every spring is at or
 beyond its rest length. Gravity, external forces and terms without a Jacobian add
@@ -17,7 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from softbody.reference import attachments, bending, external, gas, springs
+from softbody.reference import attachments, bending, external, gas, membrane, springs
 from softbody.reference.forces import gas_state
 from softbody.sim.control import ControlData
 from softbody.sim.model import Model
@@ -70,6 +71,7 @@ def apply_jacobians(
     )
     if with_bending:
         out += bending.jacobian_product(model, q, p, alpha_k)
+    out += membrane.jacobian_product(model, q, p, alpha_c, alpha_k)
     return out
 
 

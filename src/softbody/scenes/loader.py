@@ -36,6 +36,7 @@ from softbody.collision.colliders import (
 )
 from softbody.errors import SizeLimitError
 from softbody.gas import Gas
+from softbody.membrane import Membrane
 from softbody.mesh import generators
 from softbody.mesh.io import file_problem, load_mesh
 from softbody.mesh.topology import half_edges
@@ -296,6 +297,29 @@ def _gas(spec, *, cloth: bool) -> Gas:
     )
 
 
+def _membrane(spec, mesh: TriMesh, where: str) -> list | None:
+    """A validated ``membrane`` (a table or an array of them) as the builder's layers of
+    (Membrane, faces or None)."""
+    if spec is None:
+        return None
+    layers = []
+    for k, layer in enumerate(spec if isinstance(spec, list) else [spec]):
+        at = f"{where}.{k}" if isinstance(spec, list) else where
+        common = {"damping": layer.damping}
+        if isinstance(layer, schema.NeoHookean):
+            material = Membrane.neo_hookean(layer.shear_modulus, layer.thickness, **common)
+        elif isinstance(layer, schema.MooneyRivlin):
+            material = Membrane.mooney_rivlin(layer.c10, layer.c01, layer.thickness, **common)
+        else:
+            material = Membrane.stvk(layer.youngs_modulus, layer.poisson_ratio,
+                                     layer.thickness, **common)  # fmt: skip
+        faces = layer.faces
+        if faces is not None and faces and max(faces) >= mesh.face_count:
+            raise SceneError(f"{at}.faces must lie in [0, {mesh.face_count - 1}]")
+        layers.append((material, faces))
+    return layers
+
+
 def _pins(spec: schema.Pin | None, mesh: TriMesh, where: str) -> np.ndarray | None:
     if spec is None:
         return None
@@ -362,13 +386,13 @@ def _check_magnitudes(spec: schema.SceneSpec, model: Model) -> None:
     from softbody.diagnostics import energies
 
     low, high = SAFE_MAGNITUDE
-    for b, body in enumerate(spec.bodies):
+    for b in range(len(spec.bodies)):
         start, end = model.body_particle_range[b]
         m = model.particle_mass[start:end]
         if m.size and not (np.all(np.isfinite(m)) and m.min() >= low and m.max() <= high):
             each = m.max() if not m.max() <= high else m.min()
             raise SceneError(
-                f"bodies.{b}.mass: {body.mass:.3g} kg over {m.size:,} particles gives "
+                f"bodies.{b}.mass: {model.body_mass[b]:.3g} kg over {m.size:,} particles gives "
                 f"{each:.3g} kg a particle, outside the {low:g} to {high:g} kg that float64 "
                 "arithmetic handles"
             )
@@ -377,7 +401,7 @@ def _check_magnitudes(spec: schema.SceneSpec, model: Model) -> None:
     causes = {
         "kinetic": ("body_kinetic", "mass or velocity"),
         "gravitational": ("body_gravitational", "mass or position, or simulation.gravity"),
-        "spring": ("body_spring", "stiffness or bend_stiffness"),
+        "spring": ("body_spring", "stiffness, bend_stiffness or membrane"),
         "gas": ("body_gas", "gas"),
     }
     for kind, (field, keys) in causes.items():
@@ -424,6 +448,7 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
         common = {key: getattr(body, key) for key in body.BUILDER_ARGUMENTS}
         common["pinned"] = _pins(body.pin, mesh, f"{where}.pin")
         common["bending"] = _bending(body.bending)
+        common["membrane"] = _membrane(body.membrane, mesh, f"{where}.membrane")
         if isinstance(body, schema.Cloth):
             builder.add_cloth(mesh, pressure=_gas(body.pressure, cloth=True), **common)
         else:

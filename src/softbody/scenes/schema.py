@@ -571,12 +571,73 @@ class MaterialBending(Table):
         return self
 
 
+class _MembraneBase(Table):
+    thickness: Real = Field(gt=0, le=1e3, description="rest thickness H [m]")
+    damping: Real = Field(
+        0.0, ge=0, le=1e6, description="strain-rate damping time beta [s] (0: none)"
+    )
+    faces: list[Annotated[Count, Field(ge=0)]] | None = Field(
+        None, description="the mesh faces this layer covers (default: every face)"
+    )
+
+
+class NeoHookean(_MembraneBase):
+    """Incompressible neo-Hookean sheet (rubber): W = mu / 2 (I1 - 3)."""
+
+    model: Literal["neo_hookean"]
+    shear_modulus: Real = Field(ge=0, description="shear modulus mu [Pa]")
+
+
+class MooneyRivlin(_MembraneBase):
+    """Incompressible Mooney-Rivlin sheet: W = c10 (I1 - 3) + c01 (I2 - 3)."""
+
+    model: Literal["mooney_rivlin"]
+    c10: Real = Field(ge=0, description="first coefficient [Pa]")
+    c01: Real = Field(ge=0, description="second coefficient [Pa]")
+
+
+class StVK(_MembraneBase):
+    """St Venant-Kirchhoff sheet in plane stress (fabric, film)."""
+
+    model: Literal["stvk"]
+    youngs_modulus: Real = Field(ge=0, description="Young's modulus E [Pa]")
+    poisson_ratio: Real = Field(gt=-1, lt=0.5, description="Poisson ratio nu [1]")
+
+
+MembraneLayer = Annotated[
+    Annotated[NeoHookean, Tag("model=neo_hookean")]
+    | Annotated[MooneyRivlin, Tag("model=mooney_rivlin")]
+    | Annotated[StVK, Tag("model=stvk")],
+    _tagged("model"),
+]
+def _layers_tag(value: Any) -> str | None:
+    """One membrane table, or an array of them (tags of the key=value form, which error
+    locations leave out)."""
+    if isinstance(value, dict):
+        return "membrane=table"
+    if isinstance(value, list | tuple):
+        return "membrane=layers"
+    return None
+
+
+MembraneSpec = Annotated[
+    Annotated[MembraneLayer, Tag("membrane=table")]
+    | Annotated[list[MembraneLayer], Tag("membrane=layers")],
+    Discriminator(_layers_tag),
+    Field(
+        description="the skin as a membrane material (softbody.Membrane): a table with "
+        "model = 'neo_hookean', 'mooney_rivlin' or 'stvk' and its parameters, or an array "
+        "of such tables, layers whose energies add (each on its faces, default all)"
+    ),
+]
+
+
 class _BodyBase(Table):
     #: Keys passed as they are to ModelBuilder.add_soft_body / add_cloth, under the same
     #: names (a new builder argument of a body is one field here and its name in this list)
     BUILDER_ARGUMENTS: ClassVar[tuple[str, ...]] = (
         "mass", "stiffness", "damping", "bend_stiffness", "bend_damping",
-        "mass_distribution", "velocity", "drag_coefficient",
+        "mass_distribution", "velocity", "drag_coefficient", "density",
     )  # fmt: skip
 
     name: Label | None = Field(None, max_length=200, description="label (default: body N)")
@@ -584,8 +645,14 @@ class _BodyBase(Table):
     position: Vec3 = Field((0.0, 0.0, 0.0), description="translation [m]")
     rotation: Rotation | None = None
     scale: Scale | None = Field(None, description="scale factor: one number or per axis [1]")
-    mass: Real = Field(gt=0, description="total mass [kg]")
-    stiffness: Real = Field(ge=0, description="edge spring stiffness [N/m]")
+    mass: Real | None = Field(None, gt=0, description="total mass [kg] (or density)")
+    density: Real | None = Field(
+        None, gt=0, description="membrane density [kg/m^3]: mass = density x thickness x area"
+    )
+    stiffness: Real | None = Field(
+        None, ge=0, description="edge spring stiffness [N/m] (optional with a membrane)"
+    )
+    membrane: MembraneSpec | None = None
     damping: Real = Field(0.0, ge=0, description="edge spring damping [N s/m]")
     bend_stiffness: Real = Field(0.0, ge=0, description="bending spring stiffness [N/m]")
     bend_damping: Real = Field(0.0, ge=0, description="bending spring damping [N s/m]")
@@ -605,6 +672,16 @@ class _BodyBase(Table):
         description="quadratic air drag coefficient C_d of every face [1] (0: none; "
         "every integrator)",
     )
+
+    @model_validator(mode="after")
+    def _mass_and_skin(self) -> _BodyBase:
+        if (self.mass is None) == (self.density is None):
+            raise _error("field", "give exactly one of mass or density", field="mass")
+        if self.density is not None and self.membrane is None:
+            raise _error("field", "density needs a membrane", field="density")
+        if self.stiffness is None and self.membrane is None:
+            raise _error("field", "give stiffness, a membrane or both", field="stiffness")
+        return self
 
 
 class SoftBody(_BodyBase):

@@ -15,6 +15,7 @@ from softbody.bending import Bending, dihedral_angles, hinge_stiffness
 from softbody.collision.colliders import Collider, SoftContactMode, collider_arrays
 from softbody.errors import MeshError
 from softbody.gas import Gas, GasLaw
+from softbody.membrane import Membrane
 from softbody.mesh.topology import bending_pairs, hinges, unique_edges, vertex_areas
 from softbody.mesh.tri_mesh import TriMesh
 from softbody.mesh.validate import validate_mesh_report
@@ -74,6 +75,78 @@ class _Body:
     closed: bool
     drag_coefficient: float = 0.0
     corner_source: np.ndarray | None = None  # (F, 3) input-mesh vertex of each corner
+    membranes: tuple = ()  # (Membrane, (F_k,) local face indices) per layer
+
+
+#: What ``membrane=`` takes: one Membrane on every face, or layers (Membrane, faces or None).
+MembraneSpec = Membrane | Sequence[tuple[Membrane, Sequence[int] | np.ndarray | None]] | None
+
+
+def _membrane_layers(spec, face_count: int, collapsed: int) -> list[tuple[Membrane, np.ndarray]]:
+    """``membrane=`` as (Membrane, local face indices (F_k,) int64) per layer."""
+    if spec is None:
+        return []
+    if isinstance(spec, Membrane):
+        spec = [(spec, None)]
+    try:
+        if isinstance(spec, str | bytes):
+            raise TypeError
+        items = list(spec)
+    except TypeError:
+        raise TypeError(
+            "membrane must be a softbody.Membrane or a list of (Membrane, faces or None), "
+            f"got {type(spec).__name__}"
+        ) from None
+    layers = []
+    for k, item in enumerate(items):
+        if not (isinstance(item, tuple | list) and len(item) == 2
+                and isinstance(item[0], Membrane)):  # fmt: skip
+            raise TypeError(f"membrane layer {k} must be a (Membrane, faces or None) pair")
+        material, faces = item
+        if faces is None:
+            idx = np.arange(face_count, dtype=np.int64)
+        else:
+            if collapsed:
+                raise ValueError(
+                    f"membrane layer {k}: welding dropped {collapsed} collapsed triangles, so "
+                    "face indices would not match the mesh's; weld the mesh first"
+                )
+            a = np.asarray(faces)
+            if a.size and not np.issubdtype(a.dtype, np.integer):
+                raise ValueError(f"membrane layer {k}: faces must be integer face indices")
+            idx = np.unique(a.astype(np.int64).reshape(-1))
+            if idx.size and (idx[0] < 0 or idx[-1] >= face_count):
+                raise ValueError(
+                    f"membrane layer {k}: face indices must lie in [0, {face_count - 1}]"
+                )
+        layers.append((material, idx))
+    return layers
+
+
+def membrane_rest_frames(q: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A0 (T,) [m^2], Dm^-1 (T, 2, 2) [1/m]) of triangles tri (T, 3) at positions q
+    (N, 3): Dm = [[|e1|, e2 . u], [0, e2 . v]], the edges e1 = x1 - x0, e2 = x2 - x0 in the
+    frame u = e1 / |e1|, v = n x u of the triangle's plane. A triangle of zero area is a
+    ValueError."""
+    x = q[tri]
+    e1, e2 = x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
+    normal = np.cross(e1, e2)
+    twice = np.linalg.norm(normal, axis=1)
+    if np.any(~(twice > 0)):
+        bad = int(np.flatnonzero(~(twice > 0))[0])
+        raise ValueError(f"membrane triangle {bad} has zero area: no rest frame")
+    l1 = np.linalg.norm(e1, axis=1)
+    u = e1 / l1[:, None]
+    v = np.cross(normal / twice[:, None], u)
+    dm = np.zeros((len(tri), 2, 2))
+    dm[:, 0, 0] = l1
+    dm[:, 0, 1] = np.einsum("ij,ij->i", e2, u)
+    dm[:, 1, 1] = np.einsum("ij,ij->i", e2, v)
+    inv = np.zeros_like(dm)
+    inv[:, 0, 0] = 1.0 / dm[:, 0, 0]
+    inv[:, 1, 1] = 1.0 / dm[:, 1, 1]
+    inv[:, 0, 1] = -dm[:, 0, 1] / (dm[:, 0, 0] * dm[:, 1, 1])
+    return 0.5 * twice, inv
 
 
 class ModelBuilder:
@@ -235,10 +308,12 @@ class ModelBuilder:
         self,
         mesh: TriMesh | trimesh.Trimesh,
         *,
-        mass: float,
-        stiffness: float,
-        damping: float,
+        mass: float | None = None,
+        stiffness: float | None = None,
+        damping: float = 0.0,
         gas: Gas | float,
+        membrane: MembraneSpec = None,
+        density: float | None = None,
         volume_method: str | VolumeMethod = "exact",
         pinned: Sequence[int] | np.ndarray | None = None,
         bend_stiffness: float = 0.0,
@@ -265,11 +340,22 @@ class ModelBuilder:
             mesh's vertices (to put its UVs back, see the USD export);
             :func:`softbody.body_mesh` gives the body's surface at a state.
         mass : float
-            Total mass [kg], > 0.
+            Total mass [kg], > 0. Give it or ``density``, not both.
         stiffness, damping : float
             Hooke stiffness [N/m] and damping [N s/m] of the spring on every mesh edge.
+            Required without a membrane; with one it may be left out (no edge springs),
+            or given to add springs beside it.
         gas : Gas or float
             The gas inside; a number means an isothermal gas with that nRT [J].
+        membrane : Membrane or list of (Membrane, faces or None), optional
+            The skin as a membrane material (:class:`softbody.Membrane`, SI units): one
+            Membrane on every face, or layers, each a Membrane on the faces listed
+            (indices into the mesh's faces; None: every face). Layers on the same face
+            add, as a strain-limiting layer bonded to a chamber's wall does.
+        density : float, optional
+            Mass density [kg/m^3] of the membrane: the total mass is density times each
+            layer's thickness times its faces' rest area (then spread by
+            ``mass_distribution``). Needs ``membrane``; excludes ``mass``.
         volume_method : str
             ``"exact"`` (default), ``"bounding_box"``, ``"bounding_sphere"``,
             ``"bounding_ellipsoid"`` or ``"monte_carlo"``.
@@ -310,6 +396,8 @@ class ModelBuilder:
             mass=mass,
             stiffness=stiffness,
             damping=damping,
+            membrane=membrane,
+            density=density,
             gas=gas,
             volume_method=volume_method,
             pinned=pinned,
@@ -328,10 +416,12 @@ class ModelBuilder:
         self,
         mesh: TriMesh | trimesh.Trimesh,
         *,
-        mass: float,
-        stiffness: float,
-        damping: float,
+        mass: float | None = None,
+        stiffness: float | None = None,
+        damping: float = 0.0,
         pressure: Gas | float = 0.0,
+        membrane: MembraneSpec = None,
+        density: float | None = None,
         pinned: Sequence[int] | np.ndarray | None = None,
         bend_stiffness: float = 0.0,
         bend_damping: float = 0.0,
@@ -346,7 +436,8 @@ class ModelBuilder:
         ``pressure`` [Pa] pushes every face along its normal (the side the right-hand
         winding points to), as wind does; give ``Gas.fixed_pressure(p, schedule=...)`` for
         a gust that changes over time. The mesh may have a boundary but must otherwise be
-        manifold and consistently wound. Other parameters as in :meth:`add_soft_body`.
+        manifold and consistently wound. Other parameters as in :meth:`add_soft_body`
+        (``membrane``: the cloth as a sheet of that material, e.g. ``Membrane.stvk``).
         """
         if not isinstance(pressure, Gas):
             pressure = Gas.fixed_pressure(_number("cloth pressure", pressure, minimum=None))
@@ -360,6 +451,8 @@ class ModelBuilder:
             mass=mass,
             stiffness=stiffness,
             damping=damping,
+            membrane=membrane,
+            density=density,
             gas=pressure,
             volume_method="exact",
             pinned=pinned,
@@ -382,6 +475,8 @@ class ModelBuilder:
         mass,
         stiffness,
         damping,
+        membrane,
+        density,
         gas,
         volume_method,
         pinned,
@@ -430,8 +525,26 @@ class ModelBuilder:
                 "to the welded mesh",
                 stacklevel=2,
             )
-        total_mass = _number("mass", mass, strict=True)
-        k = _number("stiffness", stiffness)
+        layers = _membrane_layers(membrane, mesh.face_count, report.collapsed_face_count)
+        if stiffness is None and not layers:
+            raise ValueError("stiffness is required for a body without a membrane")
+        if (mass is None) == (density is None):
+            raise ValueError(
+                "give the body's mass or its density, not both"
+                if mass is not None
+                else "give the body's mass [kg] or its membrane's density [kg/m^3]"
+            )
+        if mass is not None:
+            total_mass = _number("mass", mass, strict=True)
+        else:
+            if not layers:
+                raise ValueError("density needs a membrane (its thickness gives the mass)")
+            rho = _number("density", density, strict=True)
+            area, _ = membrane_rest_frames(mesh.vertices, mesh.faces)
+            total_mass = sum(rho * m.thickness * float(area[f].sum()) for m, f in layers)
+            total_mass = _number("mass from density", total_mass, strict=True)
+        springs = stiffness is not None
+        k = _number("stiffness", stiffness) if springs else 0.0
         c = _number("damping", damping)
         kb = _number("bend_stiffness", bend_stiffness)
         cb = _number("bend_damping", bend_damping)
@@ -482,15 +595,16 @@ class ModelBuilder:
             mesh.vertices.copy(), vel, m, pin_mask, body, report.vertex_source
         )
         edges = unique_edges(mesh.faces) + begin
-        self._springs.append(
-            (
-                edges,
-                np.full(len(edges), np.nan),
-                np.full(len(edges), k),
-                np.full(len(edges), c),
-                np.full(len(edges), body),
+        if springs:
+            self._springs.append(
+                (
+                    edges,
+                    np.full(len(edges), np.nan),
+                    np.full(len(edges), k),
+                    np.full(len(edges), c),
+                    np.full(len(edges), body),
+                )
             )
-        )
         if kb > 0:
             bend = bending_pairs(mesh.faces) + begin
             self._springs.append(
@@ -518,6 +632,7 @@ class ModelBuilder:
                 closed,
                 cd,
                 report.corner_source,
+                tuple(layers),
             )
         )
         return body
@@ -802,6 +917,8 @@ class ModelBuilder:
 
         mode, contact_e, contact_mu, margin = self._soft_contact
         body_edges = idx[spring_body >= 0] if len(idx) else np.zeros((0, 2), dtype=np.int64)
+        if not len(body_edges) and len(tri):  # membranes without springs: the mesh edges
+            body_edges = unique_edges(tri)
         edge_length = (
             np.linalg.norm(q[body_edges[:, 1]] - q[body_edges[:, 0]], axis=1)
             if len(body_edges)
@@ -824,6 +941,7 @@ class ModelBuilder:
             + np.bincount(orifices[:, :2].astype(np.int64).ravel(), minlength=bcount)
             + (leak > 0)
         ).astype(np.int64)
+        membranes = self._membrane_arrays(q, tri, body_tri_range)
         return Model(
             gravity=self.gravity.copy(),
             particle_q=q,
@@ -907,4 +1025,39 @@ class ModelBuilder:
             bending_rest_angle=hinge_rest,
             bending_stiffness=hinge_k,
             bending_body=hinge_body,
+            **membranes,
         )
+
+    def _membrane_arrays(self, q, tri, body_tri_range) -> dict[str, np.ndarray]:
+        """The membrane fields of the Model: one row per layer and face, bodies in order,
+        each body's layers in order; rest areas and frames at the initial positions."""
+        rows, material, params, thickness, damping, owner = [], [], [], [], [], []
+        for b, body in enumerate(self._bodies):
+            t0 = body_tri_range[b, 0]
+            for m, faces in body.membranes:
+                rows.append(faces + t0)
+                n = len(faces)
+                material.append(np.full(n, int(m.material), dtype=np.int64))
+                params.append(np.broadcast_to(np.array(m.params, dtype=np.float64), (n, 2)))
+                thickness.append(np.full(n, m.thickness))
+                damping.append(np.full(n, m.damping))
+                owner.append(np.full(n, b, dtype=np.int64))
+
+        def cat(parts, shape, dtype):
+            return np.ascontiguousarray(
+                np.concatenate(parts) if parts else np.zeros(shape, dtype=dtype), dtype=dtype
+            )
+
+        which = cat(rows, (0,), np.int64)
+        indices = np.ascontiguousarray(tri[which], dtype=np.int64).reshape(-1, 3)
+        area, inverse = membrane_rest_frames(q, indices)
+        return {
+            "membrane_indices": indices,
+            "membrane_material": cat(material, (0,), np.int64),
+            "membrane_params": cat(params, (0, 2), np.float64).reshape(-1, 2),
+            "membrane_thickness": cat(thickness, (0,), np.float64),
+            "membrane_rest_area": np.ascontiguousarray(area),
+            "membrane_rest_inverse": np.ascontiguousarray(inverse.reshape(-1, 2, 2)),
+            "membrane_damping": cat(damping, (0,), np.float64),
+            "membrane_body": cat(owner, (0,), np.int64),
+        }

@@ -69,6 +69,11 @@ class Model(CoreFields):
         return int(self.tri_indices.shape[0])
 
     @property
+    def membrane_count(self) -> int:
+        """Number of membrane triangles Tm (a face with two membrane layers counts twice)."""
+        return int(self.membrane_indices.shape[0])
+
+    @property
     def body_count(self) -> int:
         """Number of soft bodies B."""
         return int(self.body_particle_range.shape[0])

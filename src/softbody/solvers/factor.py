@@ -33,6 +33,15 @@ ball bounces lower and settles more softly than under converged backward Euler; 
 iterations converge to it. The springs are implicit whatever the step; the pressure and
 the other forces are explicit within each iteration, which limits the step to about
 1 / omega_gas, the gas's volume mode (``ProjectiveSolver.step_limit``).
+
+Membranes (``core/terms/membrane.hpp``) join by a quasi-Newton splitting rather than a
+projection: the matrix holds W_t G_t^T G_t per membrane triangle (G_t the map from its
+corners to its deformation gradient, a scalar 3 x 3 block g_a . g_b per coordinate;
+W_t = A0 H 2 (G_s + lam_s) (1 + beta / h), which bounds the triangle's small-strain
+stiffness and damping from above), and each iteration's right-hand side adds
+W_t G_t^T G_t x + f_membrane(x, (x - x0) / h) at the iterate. A fixed point is again
+backward Euler with the true material (any membrane model, not an as-rigid-as-possible
+stand-in), and the iteration contracts while the material's tangent stays below W_t.
 """
 
 from __future__ import annotations
@@ -96,7 +105,21 @@ def system_matrix(model, dt: float) -> sp.csc_matrix:
     np.add.at(diag, a[free[a]], att[free[a]])
     rows = np.concatenate([rows, np.arange(n)])
     cols = np.concatenate([cols, np.arange(n)])
-    return sp.csc_matrix((np.concatenate([off, diag]), (rows, cols)), shape=(n, n))
+    values = np.concatenate([off, diag])
+    if model.membrane_count:
+        r, c, v = _membrane_entries(model, dt, free)
+        rows, cols, values = (np.concatenate(x) for x in ((rows, r), (cols, c), (values, v)))
+    return sp.csc_matrix((values, (rows, cols)), shape=(n, n))
+
+
+def _membrane_entries(model, dt: float, free: np.ndarray):
+    """The membranes' W_t (1 + beta / dt) g_a . g_b entries (rows, cols, values) between
+    free corners (module docstring; core/terms/membrane.hpp: projective_weight)."""
+    from softbody.membrane import scalar_blocks
+
+    rows, cols, stiffness, damping = scalar_blocks(model)
+    keep = free[rows] & free[cols]
+    return rows[keep], cols[keep], (stiffness + damping / dt)[keep]
 
 
 def build_projective(model, dt: float) -> Projective:

@@ -9,8 +9,14 @@ preconditions with the isotropic spring Laplacian instead,
     A = M + dt (L_c + D_c) + dt^2 (L_k + D_k)   (one scalar N x N matrix, times I_3),
 
 where L_k, L_c are the graph Laplacians weighted by the springs' stiffness and damping and
-D_k, D_c the attachments' (diagonal). A bounds every spring's true stiffness block from
-above (axial k, transverse k max(0, 1 - L0/L) <= k), so A^-1 captures the stiff part and
+D_k, D_c the attachments' (diagonal). Membrane triangles add their small-strain stiffness
+and damping as Laplacians, W_t G_t^T G_t and beta W_t G_t^T G_t with W_t the mean of
+the small-strain stiffness over in-plane deformations (``softbody.membrane.scalar_blocks``;
+the largest, 2 (G_s + lam_s), needed 20-50% more iterations, a tenth of it more still),
+so a membrane-only body coarsens along its triangles; the finest level's smoother holds
+their true blocks, diagonal and between neighbours (``membrane_entries``;
+core/terms/membrane.hpp). A bounds every spring's true stiffness block from above
+(axial k, transverse k max(0, 1 - L0/L) <= k), so A^-1 captures the stiff part and
 CG is left with a spectrum of width about 1/strain, not omega_max dt.
 
 A is constant for a given dt, so its hierarchy is built once per simulator: smoothed
@@ -29,6 +35,8 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
+
+from softbody.membrane import scalar_blocks
 
 #: Unknowns at which coarsening stops and the level is solved densely.
 COARSE_SIZE = 256
@@ -75,6 +83,12 @@ class Multigrid(NamedTuple):
     x: np.ndarray  # (sum n_l, 3) scratch: level solutions
     b: np.ndarray  # (sum n_l, 3) scratch: level right-hand sides
     r: np.ndarray  # (sum n_l, 3) scratch: level residuals
+    # each particle's membrane neighbours (particles sharing a membrane triangle), sorted,
+    # and for every membrane triangle's corner pair (a, b) its entry (-1 for a = b): the
+    # smoother's off-diagonal membrane blocks (core/terms/membrane.hpp)
+    membrane_ptr: np.ndarray  # (N + 1,) int64
+    membrane_neighbor: np.ndarray  # (E,) int64
+    membrane_slot: np.ndarray  # (Tm, 3, 3) int64
 
     @property
     def sizes(self) -> list[int]:
@@ -114,7 +128,28 @@ def empty_multigrid() -> Multigrid:
         np.zeros((0, 3)),
         np.zeros((0, 3)),
         np.zeros((0, 3)),
+        np.zeros(1, dtype=np.int64),
+        i0[:0],
+        np.zeros((0, 3, 3), dtype=np.int64),
     )
+
+
+def membrane_entries(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ptr (N + 1,), neighbor (E,), slot (Tm, 3, 3)): each particle's membrane neighbours
+    as CSR sorted by the neighbour, and the entry of every membrane triangle's ordered
+    corner pair (a, b), -1 where a = b (its diagonal block)."""
+    n = model.particle_count
+    tri = model.membrane_indices.reshape(-1, 3)
+    i = np.repeat(tri, 3, axis=1).reshape(-1, 3, 3)  # i[t, a, b] = tri[t, a]
+    j = np.repeat(tri[:, None, :], 3, axis=1)  # j[t, a, b] = tri[t, b]
+    off = ~np.eye(3, dtype=bool)[None].repeat(len(tri), axis=0)
+    keys = i[off] * n + j[off]
+    unique, inverse = np.unique(keys, return_inverse=True)
+    slot = np.full((len(tri), 3, 3), -1, dtype=np.int64)
+    slot[off] = inverse
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    ptr[1:] = np.cumsum(np.bincount(unique // n, minlength=n))
+    return ptr, (unique % n).astype(np.int64), slot
 
 
 def _aggregate(indptr, indices, out):
@@ -200,6 +235,10 @@ def build_multigrid(model) -> Multigrid:
     mass = sp.diags(model.particle_mass).tocsr()
     stiff = (lap_k + sp.diags(att_k)).tocsr()
     damp = (lap_c + sp.diags(att_c)).tocsr()
+    if model.membrane_count:  # membranes as Laplacians of their small-strain stiffness
+        rows, cols, k_m, c_m = scalar_blocks(model, mean=True)
+        stiff = (stiff + sp.csr_matrix((k_m, (rows, cols)), shape=(n, n))).tocsr()
+        damp = (damp + sp.csr_matrix((c_m, (rows, cols)), shape=(n, n))).tocsr()
     levels, prolongators = [], []
     while True:
         mass, damp, stiff = _union(mass, damp, stiff)
@@ -281,6 +320,7 @@ def build_multigrid(model) -> Multigrid:
         np.zeros((total, 3)),
         np.zeros((total, 3)),
         np.zeros((total, 3)),
+        *membrane_entries(model),
     )
     return mg
 
