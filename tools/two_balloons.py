@@ -27,7 +27,7 @@ import softbody as sb
 from softbody.gas import GAS_CONSTANT as R
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_two_balloons import H, MU, P_A, PEAK, RADIUS, T, gauge, stable_pair  # noqa: E402
+from test_two_balloons import MU, P_A, PEAK, RADIUS, H, T, gauge, stable_pair
 
 
 def main(out: Path) -> None:
