@@ -719,7 +719,7 @@ def _body_ref(value: Any) -> Any:
     """A body named by its index (an integer) or its ``name`` (a string)."""
     if isinstance(value, str):
         if not value:
-            raise _error("body", "must be a body index or name, got an empty name")
+            raise _error("body", "must be a body index or a body's name")
         return value
     return _integral(value)
 
@@ -756,12 +756,50 @@ class Orifice(Table):
     discharge_coefficient: Real = Field(0.62, gt=0, le=1, description="C_d [1]")
 
 
-MassFlowTable = Annotated[
-    list[Vec2],
-    Field(
-        min_length=1,
-        description="piecewise-linear mass flow: [[time s, kg/s], ...], times increasing, "
-        "values >= 0",
+def _is_real(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _mass_flow(value: Any) -> Any:
+    """A mass flow [kg/s] >= 0, or a table of [time s, kg/s] rows, times increasing
+    strictly, flows >= 0 (one error naming what is wrong, not one per union member)."""
+    if _is_real(value):
+        if not math.isfinite(value):
+            raise _error("mass_flow", "must be finite")
+        if value < 0:
+            raise _error("mass_flow", "must be >= 0 [kg/s]")
+        return float(value)
+    if not isinstance(value, list) or not value:
+        raise _error("mass_flow", "must be a number [kg/s] or a table [[time s, kg/s], ...]")
+    rows = []
+    for row in value:
+        if not (isinstance(row, list | tuple) and len(row) == 2 and all(map(_is_real, row))):
+            raise _error("mass_flow", "every row must be [time s, kg/s], two numbers")
+        if not all(math.isfinite(v) for v in row):
+            raise _error("mass_flow", "must hold finite numbers")
+        rows.append((float(row[0]), float(row[1])))
+    if any(b[0] <= a[0] for a, b in pairwise(rows)):
+        raise _error("mass_flow", "times must increase strictly")
+    if any(v < 0 for _, v in rows):
+        raise _error("mass_flow", "mass flows must be >= 0 [kg/s]")
+    return rows
+
+
+MassFlow = Annotated[
+    Any,
+    BeforeValidator(_mass_flow),
+    WithJsonSchema(
+        {
+            "anyOf": [
+                {"type": "number", "minimum": 0},
+                {
+                    "type": "array",
+                    "minItems": 1,
+                    "items": {"type": "array", "items": {"type": "number"}, "minItems": 2,
+                              "maxItems": 2},
+                },
+            ]
+        }
     ),
 ]
 
@@ -770,21 +808,11 @@ class Inflator(Table):
     """``[[inflators]]``: gas of the body's species delivered into it."""
 
     body: BodyRef = Field(description="body index or name")
-    mass_flow: Annotated[Real, Field(ge=0)] | MassFlowTable = Field(
-        description="mass flow [kg/s], or a table [[time s, kg/s], ...] (held before the "
-        "first and after the last row)"
+    mass_flow: MassFlow = Field(
+        description="mass flow [kg/s], or a piecewise-linear table [[time s, kg/s], ...], "
+        "times increasing, flows >= 0 (held before the first and after the last row)"
     )
     temperature: Real = Field(gt=0, le=1e5, description="temperature of the gas delivered [K]")
-
-    @model_validator(mode="after")
-    def _table(self) -> Inflator:
-        table = self.mass_flow
-        if isinstance(table, list):
-            if any(b[0] <= a[0] for a, b in pairwise(table)):
-                raise _error("field", "times must increase strictly", field="mass_flow")
-            if any(v < 0 for _, v in table):
-                raise _error("field", "mass flows must be >= 0 [kg/s]", field="mass_flow")
-        return self
 
 
 class Leak(Table):
