@@ -15,6 +15,13 @@ Writes results/engine.{json,png}. Usage:
 
     git worktree add /tmp/numba 91e398b && (cd /tmp/numba && python tools/build_core.py)
     python benchmarks/engine.py --baseline /tmp/numba/src [--max-subdivisions 6]
+
+``--gas-flows`` runs the gas-flow case instead (issue 31's target: the flows cost under 2%
+of a step at 10,242 vertices): the ball at 10,242 vertices holding an adiabatic ideal gas,
+with a vent, an inflator and a leak, with a vent and an inflator only (the flows that are
+per body), and with none, stepped by the same scheme at the same dt, alternated in each
+of ``FLOW_ROUNDS`` rounds in this process; each round's CPU time per step with flows over
+that without, their median and range. Writes results/engine_gas_flows.{json,png}.
 """
 
 from __future__ import annotations
@@ -80,11 +87,128 @@ def rate(subdivisions: int, scheme: str, simd: str | None, precision: str = "flo
     return _rate(sim, model)
 
 
+FLOW_ROUNDS = 41
+FLOW_SECONDS = 0.1  # per measurement: many short alternations average out the other jobs
+FLOW_SUBDIVISIONS = 5  # 10,242 vertices
+FLOW_CASES = ("none", "vent+inflator", "vent+inflator+leak")
+
+
+def gas_flow_ball(flows: str) -> sb.Model:
+    """The ball drop's ball at 10,242 vertices holding adiabatic air at 1 atm over an
+    ambient 1 atm, with the ``flows`` of FLOW_CASES: a vent open from the start (1 cm^2),
+    an inflator (1 g/s at 600 K), a fabric leak (1e-9 kg/(s m^2 Pa))."""
+    builder = sb.ModelBuilder()
+    mesh = sb.icosphere(FLOW_SUBDIVISIONS, radius=1.0, center=(0.0, 2.0, 0.0))
+    moles = 101325.0 * 4.18 / (sb.gas.GAS_CONSTANT * 293.15)
+    gas = sb.Gas.ideal(moles, 293.15, process="adiabatic", ambient_pressure=101325.0)
+    body = builder.add_soft_body(mesh, mass=1.0, stiffness=500.0, damping=0.5, gas=gas)
+    if flows != "none":
+        builder.add_vent(body, area=1e-4)
+        builder.add_inflator(body, mass_flow=1e-3, temperature=600.0)
+    if flows.endswith("leak"):
+        builder.add_leak(body, coefficient=1e-9)
+    builder.add_collider(sb.ColliderPlane(restitution=0.5, friction=0.1))
+    return builder.finalize()
+
+
+def _seconds_per_step(sim: sb.Simulator, model: sb.Model, steps: int) -> float:
+    """CPU seconds of this process per step (one thread: less swayed than wall time by
+    the other jobs on this shared machine)."""
+    state = model.state()
+    sim.run(state, 2)
+    start = time.process_time()
+    sim.run(state, steps)
+    return (time.process_time() - start) / steps
+
+
+def gas_flows() -> None:
+    """The gas-flow case (module docstring): results/engine_gas_flows.{json,png}."""
+    results = []
+    for scheme in SCHEMES:
+        sims = {}
+        for case in FLOW_CASES:
+            model = gas_flow_ball(case)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", sb.StabilityWarning)
+                sims[case] = model, sb.Simulator(model, integrator=scheme, dt=DT)
+        # steps for about FLOW_SECONDS a measurement
+        probe = _seconds_per_step(sims["none"][1], sims["none"][0], 20)
+        steps = max(20, int(FLOW_SECONDS / probe))
+        times = {case: [] for case in FLOW_CASES}
+        for k in range(FLOW_ROUNDS):
+            order = FLOW_CASES if k % 2 == 0 else FLOW_CASES[::-1]  # alternate the order
+            for case in order:
+                model, sim = sims[case]
+                times[case].append(_seconds_per_step(sim, model, steps))
+        base = np.array(times["none"])
+        ratios = {c: (np.array(times[c]) / base).tolist() for c in FLOW_CASES if c != "none"}
+        row = {
+            "scheme": scheme,
+            "vertices": sims["none"][0].particle_count,
+            "steps_per_measurement": steps,
+            "seconds_per_step": {c: float(np.median(t)) for c, t in times.items()},
+            "seconds_per_step_rounds": times,
+            "ratio_to_none": {c: r for c, r in ratios.items()},
+            "median_ratio": {c: float(np.median(r)) for c, r in ratios.items()},
+            # the least disturbed measurement of each case (best of the rounds)
+            "best_ratio": {c: float(min(times[c]) / min(times["none"])) for c in ratios},
+        }
+        results.append(row)
+        print(
+            f"{scheme:17s} {row['vertices']:,} vertices, "
+            f"{row['seconds_per_step']['none'] * 1e3:.3f} ms a step without flows; "
+            + ", ".join(
+                f"{c}: x{np.median(r):.4f} ({min(r):.3f}-{max(r):.3f}), "
+                f"best x{row['best_ratio'][c]:.4f}"
+                for c, r in ratios.items()
+            ),
+            flush=True,
+        )
+    write_json(
+        RESULTS / "engine_gas_flows.json",
+        run_record(
+            "engine_gas_flows",
+            machine=f"{platform.machine()}, {platform.processor() or 'cpu'}",
+            command="python benchmarks/engine.py --gas-flows",
+            dt=DT,
+            rounds=FLOW_ROUNDS,
+            units="CPU time per step with the flows over without them (same scheme, dt, mesh)",
+            results=results,
+        ),
+    )
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    for k, row in enumerate(results):
+        for j, (case, r) in enumerate(row["ratio_to_none"].items()):
+            x = k * 3 + j
+            ax.plot([x] * len(r), r, "o", color=f"C{j}", alpha=0.5,
+                    label=case if k == 0 else None)  # fmt: skip
+            ax.plot([x - 0.3, x + 0.3], [np.median(r)] * 2, color=f"C{j}", lw=2.5)
+    ax.axhline(1.02, color="k", ls="--", lw=1, label="target: +2%")
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_xticks([k * 3 + 0.5 for k in range(len(results))], [r["scheme"] for r in results])
+    ax.set_ylabel("time per step / without flows")
+    ax.set_title(f"Gas flows at {results[0]['vertices']:,} vertices, dt = {DT:g} s, "
+                 f"{FLOW_ROUNDS} alternating rounds (bars: medians)")  # fmt: skip
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    save_figure(fig, RESULTS / "engine_gas_flows.png")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--max-subdivisions", type=int, default=6)
     parser.add_argument("--baseline", type=Path, help="the src folder of the Numba version")
+    parser.add_argument("--gas-flows", action="store_true", help="the gas-flow case instead")
     args = parser.parse_args()
+    if args.gas_flows:
+        gas_flows()
+        return
     workers = versions(args.baseline)
     paths = core.simd_paths()
     engines = {f"core-{p}": (workers[0], p, "float64") for p in paths}

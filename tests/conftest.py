@@ -22,6 +22,9 @@ BUILT_IN = [
     "cloth-wind",
     "bounding-volumes",
     "balloon-drop",
+    "landing-cushion",
+    "airbag",
+    "punctured-ball",
 ]
 
 

@@ -327,8 +327,9 @@ def test_dataframe_without_pandas_says_what_to_install(recorded, monkeypatch):
 
 
 def test_frames_stream_to_a_file_and_close_removes_it(model):
-    """Each capture appends the frame to the recorder's temporary file (8 (6 N + 12 C)
-    bytes a frame: positions, velocities, collider poses) instead of a list in memory;
+    """Each capture appends the frame to the recorder's temporary file (8 (6 N + 12 C +
+    2 B + V) bytes a frame: positions, velocities, collider poses, each body's gas amount
+    and temperature, each vent's latch) instead of a list in memory;
     positions are read back through a memory map; close() deletes the file and later use
     is refused."""
     rec = sb.Recorder(model, fps=FPS)
@@ -337,7 +338,8 @@ def test_frames_stream_to_a_file_and_close_removes_it(model):
         rec.capture(state)
     frames = rec._dir / "frames.f64"
     rec._frames.flush()
-    row = 6 * model.particle_count + 12 * model.collider_count
+    row = 6 * model.particle_count + 12 * model.collider_count + 2 * model.body_count
+    row += len(model.vent_body)
     assert frames.stat().st_size == 5 * 8 * row
     assert isinstance(rec.positions.base, np.memmap) or isinstance(rec.positions, np.memmap)
     rec.close()

@@ -11,7 +11,8 @@ from softbody.scenes import SceneError, list_scenes, load_scene
 
 
 def test_all_paper_scenes_are_built_in():
-    """The five scenes of the paper's figures, and balloon-drop (face drag), ship with the
+    """The five scenes of the paper's figures, balloon-drop (face drag) and the three
+    scenes of gas that flows (landing-cushion, airbag, punctured-ball) ship with the
     package."""
     assert sorted(list_scenes()) == sorted(BUILT_IN)
 
@@ -99,7 +100,7 @@ def test_bad_overrides_name_the_key(override, match):
 def test_unknown_scene_lists_the_built_ins():
     """A scene name that is neither built in nor a file is a SceneError that lists the
     built-in scenes."""
-    listed = "unknown scene 'bouncy'; built-in scenes: balloon-drop, bouncing"
+    listed = "unknown scene 'bouncy'; built-in scenes: airbag, balloon-drop, bouncing"
     with pytest.raises(SceneError, match=listed):
         load_scene("bouncy")
 

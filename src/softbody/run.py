@@ -39,12 +39,14 @@ from softbody import __version__
 from softbody.diagnostics import (
     body_area,
     body_center_of_mass,
+    body_gas_flows,
     body_pressure,
     body_volume,
     body_volume_by,
     energies,
 )
 from softbody.errors import StabilityWarning
+from softbody.gas import GasLaw
 from softbody.io.outputs import check_targets, commit, folder_lock, prepare
 from softbody.limits import check_memory
 from softbody.scenes.loader import Scene
@@ -121,6 +123,23 @@ def _check_frame_memory(plan: FramePlan, scene: Scene, outputs: Outputs) -> None
     if outputs.usd:
         size = 24 * scene.model.particle_count + 96 * scene.model.collider_count
         check_memory("usd", frames * size, f"keeping {frames:,} frames for the USD cache")
+
+
+def gas_state_bodies(model) -> np.ndarray:
+    """Which bodies hold a gas whose amount [mol] and temperature [K] are state (a closed
+    body with an isothermal or adiabatic gas, not a fixed pressure), shape (B,) bool."""
+    law = np.asarray(model.body_gas_law)
+    return (np.asarray(model.body_closed) == 1) & (law != GasLaw.FIXED_PRESSURE)
+
+
+def has_gas_flows(model) -> bool:
+    """Whether ``model`` has any vent, orifice, inflator or leak (gas that flows)."""
+    return bool(
+        len(model.vent_body)
+        or len(model.orifice_bodies)
+        or len(model.inflator_body)
+        or np.any(np.asarray(model.body_leak_coefficient) > 0)
+    )
 
 
 def _expected_files(stem: str, plan: FramePlan, outputs: Outputs, bounding: bool) -> list[str]:
@@ -284,6 +303,8 @@ def _simulate_and_write(
             (tmp / f"{stem}-meshes").mkdir()
         state = model.state()
         times, vol, pres, kin, total = [], [], [], [], []
+        height, moles, temp, inflow, outflow = [], [], [], [], []
+        flows = has_gas_flows(model)
         bounding = {m: [] for m in BOUNDING_METHODS} if settings.bounding_objects else None
         usd_frames = [] if outputs.usd else None
         usd_velocities, usd_collider_q, usd_collider_rotation = [], [], []
@@ -304,6 +325,13 @@ def _simulate_and_write(
             e = energies(model, state)
             kin.append(e.body_kinetic)
             total.append(e.total)
+            height.append(body_center_of_mass(model, state)[:, 1])
+            moles.append(state.body_gas_moles.copy())
+            temp.append(state.body_gas_temperature.copy())
+            if flows:
+                f = body_gas_flows(model, state)
+                inflow.append(f.mass_inflow)
+                outflow.append(f.mass_outflow)
             if bounding is not None:
                 for m in BOUNDING_METHODS:
                     bounding[m].append(body_volume_by(model, state, m)[0])
@@ -347,7 +375,16 @@ def _simulate_and_write(
         "pressure": np.array(pres),
         "kinetic": np.array(kin),
         "total": np.array(total),
+        "height": np.array(height),
     }
+    gas = gas_state_bodies(model)
+    if gas.any():
+        # bodies without a gas state (cloths, fixed pressures) are NaN: no line is drawn
+        series["gas_moles"] = np.where(gas, np.array(moles), np.nan)
+        series["gas_temperature"] = np.where(gas, np.array(temp), np.nan)
+    if flows:
+        series["mass_inflow"] = np.where(gas, np.array(inflow), np.nan)
+        series["mass_outflow"] = np.where(gas, np.array(outflow), np.nan)
     plot_time_series(
         tmp / f"{stem}-plots.png",
         times,
@@ -426,8 +463,13 @@ def _simulate_and_write(
                 "area_m2": float(area[b]),
                 "center_of_mass_m": com[b].tolist(),
                 "kinetic_energy_J": float(e.body_kinetic[b]),
+                **_gas_summary(series, times, b),
             }
             for b in range(model.body_count)
+        ],
+        "vents": [
+            {"body": int(model.vent_body[v]), "open": bool(state.vent_open[v])}
+            for v in range(len(model.vent_body))
         ],
         "colliders": [
             {"center_m": state.collider_q[c].tolist()} for c in range(model.collider_count)
@@ -437,6 +479,33 @@ def _simulate_and_write(
     text = json.dumps(_finite_or_null(summary), indent=2, allow_nan=False)
     (tmp / f"{stem}-summary.json").write_text(text)
     return summary
+
+
+def _gas_summary(series: dict, t: np.ndarray, b: int) -> dict:
+    """Body ``b``'s gas in the summary, where it has a gas state: its amount [mol] and
+    temperature [K] at the end and their extremes, the largest pressure [Pa], and where
+    the model has flows, the mass flows in and out at the end and at their largest
+    [kg/s] and the mass gone in and out over the run [kg] (trapezoid rule over the
+    frames)."""
+    if "gas_moles" not in series or np.isnan(series["gas_moles"][0, b]):
+        return {}
+    moles, temp = series["gas_moles"][:, b], series["gas_temperature"][:, b]
+    out = {
+        "gas_moles": _num(moles[-1]),
+        "gas_moles_initial": _num(moles[0]),
+        "gas_temperature_K": _num(temp[-1]),
+        "gas_temperature_max_K": _num(np.max(temp)),
+        "gas_temperature_min_K": _num(np.min(temp)),
+        "pressure_max_Pa": _num(np.max(series["pressure"][:, b])),
+    }
+    if "mass_inflow" in series:
+        for key, name in (("mass_inflow", "inflow"), ("mass_outflow", "outflow")):
+            flow = series[key][:, b]
+            out[f"gas_mass_{name}_kg_s"] = _num(flow[-1])
+            out[f"gas_mass_{name}_max_kg_s"] = _num(np.max(flow))
+            total = float(np.sum(0.5 * (flow[1:] + flow[:-1]) * np.diff(t))) if t.size > 1 else 0.0
+            out[f"gas_mass_{name}_total_kg"] = _num(total)
+    return out
 
 
 def _finite_or_null(value):

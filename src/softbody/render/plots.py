@@ -10,33 +10,57 @@ import numpy as np
 def plot_time_series(
     path: Path, time: np.ndarray, series: dict, names: list[str], title: str
 ) -> None:
-    """Four panels: volume, pressure, kinetic and total energy per body.
+    """Volume, pressure, kinetic and total energy per body; with gas that is state or that
+    flows, more panels: the centre-of-mass height, the gas amount and temperature, and
+    the mass flows in and out.
 
     series: 'volume' (F, B) [m^3], 'pressure' (F, B) [Pa], 'kinetic' (F, B) [J],
-    'total' (F,) [J] (the whole model's energy).
+    'total' (F,) [J] (the whole model's energy); optional: 'height' (F, B) [m] (centre
+    of mass y), 'gas_moles' (F, B) [mol], 'gas_temperature' (F, B) [K], 'mass_inflow'
+    and 'mass_outflow' (F, B) [kg/s] (NaN for a body without a gas state: no line). The
+    gas panels appear when 'gas_moles' is given, the flow panel when 'mass_inflow' is.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), dpi=100)
     panels = [
         ("volume", "volume [m^3]"),
         ("pressure", "pressure [Pa]"),
         ("kinetic", "kinetic energy [J]"),
+        ("total", "total energy [J]"),
     ]
+    if "gas_moles" in series:
+        panels += [
+            ("height", "centre of mass height [m]"),
+            ("gas_moles", "gas amount [mol]"),
+            ("gas_temperature", "gas temperature [K]"),
+        ]
+        if "mass_inflow" in series:
+            panels.append(("flows", "mass flow [kg/s] (in: solid, out: dashed)"))
+    rows = (len(panels) + 1) // 2
+    fig, axes = plt.subplots(rows, 2, figsize=(11, 3.5 * rows), dpi=100)
     for ax, (key, label) in zip(axes.flat, panels, strict=False):
-        data = _finite(series[key])
-        for b in range(data.shape[1]):
-            if np.all(np.isnan(data[:, b])):
-                continue
-            ax.plot(time, data[:, b], color=f"C{b}", label=names[b])
+        if key == "total":
+            ax.plot(time, _finite(series["total"]), color="k")
+        elif key == "flows":
+            inflow, outflow = _finite(series["mass_inflow"]), _finite(series["mass_outflow"])
+            for b in range(inflow.shape[1]):
+                if np.all(np.isnan(inflow[:, b])):
+                    continue
+                ax.plot(time, inflow[:, b], color=f"C{b}")
+                ax.plot(time, outflow[:, b], color=f"C{b}", ls="--")
+        else:
+            data = _finite(series[key])
+            for b in range(data.shape[1]):
+                if np.all(np.isnan(data[:, b])):
+                    continue
+                ax.plot(time, data[:, b], color=f"C{b}", label=names[b])
         ax.set_ylabel(label)
-    ax = axes.flat[3]
-    ax.plot(time, _finite(series["total"]), color="k")
-    ax.set_ylabel("total energy [J]")
-    for ax in axes.flat:
+    for ax in axes.flat[len(panels) :]:
+        ax.remove()
+    for ax in axes.flat[: len(panels)]:
         ax.set_xlabel("time [s]")
         ax.grid(alpha=0.3)
     if len(names) <= 8:

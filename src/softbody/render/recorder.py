@@ -56,6 +56,8 @@ _BODY_COLUMNS = (
     "gravitational_J",
     "spring_J",
     "gas_J",
+    "gas_mol",
+    "gas_temperature_K",
 )
 _FORMATS = {".mp4": "mp4", ".gif": "gif", ".usd": "usd", ".usda": "usd", ".usdc": "usd"}
 
@@ -196,8 +198,10 @@ class Recorder:
         )  # fmt: skip
         self.max_frames = int(max_frames)
         n, c = model.particle_count, model.collider_count
-        # float64 per frame: positions, velocities, collider centres, collider rotations
-        self._row = 6 * n + 12 * c
+        # float64 per frame: positions, velocities, collider centres, collider rotations,
+        # each body's gas amount and temperature, each vent's latch (the recorder's file
+        # lives as long as the recorder: no file of another layout is ever read back)
+        self._row = 6 * n + 12 * c + 2 * bodies + len(model.vent_body)
         self._table_row = 1 + len(_BODY_COLUMNS) * bodies  # time, then the body columns
         self._dir = Path(tempfile.mkdtemp(prefix="softbody-recorder-"))
         self._frames = open(self._dir / "frames.f64", "wb")  # closed by close()
@@ -250,6 +254,8 @@ class Recorder:
             e.body_gravitational,
             e.body_spring,
             e.body_gas,
+            state.body_gas_moles,
+            state.body_gas_temperature,
         )
         table = np.concatenate([[time], np.stack(columns, axis=1).reshape(-1)])
         frame = np.concatenate(
@@ -258,6 +264,9 @@ class Recorder:
                 state.particle_qd.reshape(-1),
                 state.collider_q.reshape(-1),
                 state.collider_rotation.reshape(-1),
+                state.body_gas_moles,
+                state.body_gas_temperature,
+                state.vent_open,
             ]
         )
         self._frames.write(np.ascontiguousarray(frame, dtype=np.float64).tobytes())
@@ -339,24 +348,38 @@ class Recorder:
         """The colliders' centres [m], shape (F, C, 3), and rotations, shape (F, C, 3, 3),
         of each frame."""
         n, c = self.model.particle_count, self.model.collider_count
-        rows = np.array(self._read("frames.f64", self._row)[:, 6 * n :])
+        rows = np.array(self._read("frames.f64", self._row)[:, 6 * n : 6 * n + 12 * c])
         return rows[:, : 3 * c].reshape(-1, c, 3), rows[:, 3 * c :].reshape(-1, c, 3, 3)
 
+    @property
+    def gas(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each frame's gas state: the amount of each body [mol], shape (F, B), its
+        temperature [K], shape (F, B), and each vent's latch (1.0: open), shape (F, V)."""
+        n, c, b = self.model.particle_count, self.model.collider_count, self.model.body_count
+        rows = np.array(self._read("frames.f64", self._row)[:, 6 * n + 12 * c :])
+        return rows[:, :b], rows[:, b : 2 * b], rows[:, 2 * b :]
+
     def state(self, frame: int) -> State:
-        """Frame ``frame`` as a :class:`State`: positions, velocities and collider poses
-        (the gas applied and the step count are not recorded)."""
+        """Frame ``frame`` as a :class:`State`: positions, velocities, collider poses, and
+        the gas state (each body's amount and temperature, each vent's latch), so that a
+        run can go on from it (a Control's gas applied and the step count are not
+        recorded)."""
         k = int(frame)
         if not -self._count <= k < self._count:
             raise IndexError(f"frame {frame} out of range for {self._count} frames")
         k %= self._count
         row = self._read("frames.f64", self._row)[k]
-        n, c = self.model.particle_count, self.model.collider_count
+        n, c, b = self.model.particle_count, self.model.collider_count, self.model.body_count
+        gas = 6 * n + 12 * c
         return State(
             np.array(row[: 3 * n]).reshape(n, 3),
             np.array(row[3 * n : 6 * n]).reshape(n, 3),
             time=float(self._read("table.f64", self._table_row)[k, 0]),
             collider_q=np.array(row[6 * n : 6 * n + 3 * c]).reshape(c, 3),
-            collider_rotation=np.array(row[6 * n + 3 * c :]).reshape(c, 3, 3),
+            collider_rotation=np.array(row[6 * n + 3 * c : gas]).reshape(c, 3, 3),
+            body_gas_moles=np.array(row[gas : gas + b]),
+            body_gas_temperature=np.array(row[gas + b : gas + 2 * b]),
+            vent_open=np.array(row[gas + 2 * b :]),
         )
 
     def dataframe(self):
@@ -367,7 +390,8 @@ class Recorder:
         captured control's gas), ``com_x_m``, ``com_y_m``, ``com_z_m`` (mass-weighted
         centre of the body's particles [m]), ``kinetic_J``, ``gravitational_J``,
         ``spring_J``, ``gas_J`` and their sum ``energy_J`` [J]
-        (:func:`softbody.energies`' per-body split). Needs pandas.
+        (:func:`softbody.energies`' per-body split), ``gas_mol`` and ``gas_temperature_K``
+        (the state's gas amount [mol] and temperature [K]). Needs pandas.
         """
         try:
             import pandas as pd

@@ -288,6 +288,16 @@ def _gas(spec, *, cloth: bool) -> Gas:
         return Gas.isothermal(spec.nrt, schedule=spec.schedule, **common)
     if isinstance(spec, schema.FixedPressure):
         return Gas.fixed_pressure(spec.pressure, schedule=spec.schedule, **common)
+    if isinstance(spec, schema.Ideal):
+        return Gas.ideal(
+            spec.moles,
+            spec.temperature,
+            molar_mass=spec.molar_mass,
+            gamma=spec.gamma,
+            process=spec.process,
+            ambient_temperature=spec.ambient_temperature,
+            **common,
+        )
     return Gas.adiabatic(
         spec.nrt,
         gamma=spec.gamma,
@@ -358,6 +368,35 @@ def _rotation(spec) -> np.ndarray | None:
     if spec is None:
         return None
     return rotation_about(spec[:3], np.radians(spec[3]))
+
+
+def _add_flows(spec: schema.SceneSpec, builder: ModelBuilder) -> None:
+    """The scene's vents, orifices, inflators and leaks added to ``builder``; the
+    builder's refusal (a body whose gas is prescribed, not an ideal gas) names the key."""
+    for table in ("vents", "orifices", "inflators", "leaks"):
+        for k, entry in enumerate(getattr(spec, table)):
+            bodies = spec.flow_bodies(table, k)
+            try:
+                if table == "vents":
+                    builder.add_vent(
+                        bodies[0],
+                        area=entry.area,
+                        discharge_coefficient=entry.discharge_coefficient,
+                        opening_pressure=entry.opening_pressure,
+                        opening_time=entry.opening_time,
+                    )
+                elif table == "orifices":
+                    builder.add_orifice(
+                        *bodies, area=entry.area, discharge_coefficient=entry.discharge_coefficient
+                    )
+                elif table == "inflators":
+                    builder.add_inflator(
+                        bodies[0], mass_flow=entry.mass_flow, temperature=entry.temperature
+                    )
+                else:
+                    builder.add_leak(bodies[0], coefficient=entry.coefficient)
+            except ValueError as exc:
+                raise SceneError(f"{table}.{k}: {exc}") from None
 
 
 @dataclass
@@ -480,6 +519,8 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
             damping=spring.damping,
             rest_length=spring.rest_length,
         )
+
+    _add_flows(spec, builder)
 
     for c, col in enumerate(spec.colliders):
         common = dict(

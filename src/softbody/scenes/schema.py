@@ -508,12 +508,34 @@ class Adiabatic(_GasBase):
     schedule: Schedule | None = None
 
 
+class Ideal(_GasBase):
+    """An ideal gas whose amount and temperature are state (``Gas.ideal``): P = n R T / V,
+    with n and T changed by the scene's vents, orifices, inflators and leaks."""
+
+    law: Literal["ideal"]
+    moles: Real = Field(ge=0, description="amount of gas at the initial shape [mol]")
+    temperature: Real = Field(293.15, gt=0, description="temperature at the initial shape [K]")
+    process: Literal["isothermal", "adiabatic"] = Field(
+        "isothermal",
+        description="isothermal: T stays (fast heat exchange); adiabatic: no heat exchange, "
+        "the first law of the open system sets T",
+    )
+    molar_mass: Real = Field(
+        0.028965, gt=0, le=1, description="molar mass of the gas [kg/mol] (air: 0.028965)"
+    )
+    gamma: Real = Field(1.4, gt=1, le=10, description="heat capacity ratio c_p / c_v [1]")
+    ambient_temperature: Real = Field(
+        293.15, gt=0, description="temperature of the air outside [K] (what flows in)"
+    )
+
+
 NonNegative = Annotated[Real, Field(ge=0)]
 Gas = Annotated[
     Annotated[NonNegative, Tag("=number")]
     | Annotated[Isothermal, Tag("law=isothermal")]
     | Annotated[FixedPressure, Tag("law=fixed_pressure")]
-    | Annotated[Adiabatic, Tag("law=adiabatic")],
+    | Annotated[Adiabatic, Tag("law=adiabatic")]
+    | Annotated[Ideal, Tag("law=ideal")],
     _tagged("law", default="isothermal", number="number"),
     Field(description="the gas inside: a table, or a number meaning isothermal nRT [J]"),
 ]
@@ -808,6 +830,132 @@ Collider = Annotated[
 ]
 
 
+# gas that flows: vents, orifices, inflators, leaks (``ModelBuilder.add_vent`` and so on)
+def _body_ref(value: Any) -> Any:
+    """A body named by its index (an integer) or its ``name`` (a string)."""
+    if isinstance(value, str):
+        if not value:
+            raise _error("body", "must be a body index or a body's name")
+        return value
+    return _integral(value)
+
+
+BodyRef = Annotated[
+    Any,
+    BeforeValidator(_body_ref),
+    WithJsonSchema({"anyOf": [{"type": "integer", "minimum": 0}, {"type": "string"}]}),
+]
+
+
+class Vent(Table):
+    """``[[vents]]``: an orifice from a body to the air outside it."""
+
+    body: BodyRef = Field(description="body index or name")
+    area: Real = Field(ge=0, le=1e6, description="open area [m^2]")
+    discharge_coefficient: Real = Field(0.62, gt=0, le=1, description="C_d [1]")
+    opening_pressure: Real | None = Field(
+        None,
+        description="gauge pressure P - P_ambient at which it opens and stays open [Pa] "
+        "(with neither this nor opening_time: open from the start)",
+    )
+    opening_time: Real | None = Field(
+        None, ge=0, description="time at which it opens and stays open [s]"
+    )
+
+
+class Orifice(Table):
+    """``[[orifices]]``: an orifice between two bodies (chambers), flowing both ways."""
+
+    body_a: BodyRef = Field(description="body index or name")
+    body_b: BodyRef = Field(description="body index or name (another body)")
+    area: Real = Field(ge=0, le=1e6, description="open area [m^2]")
+    discharge_coefficient: Real = Field(0.62, gt=0, le=1, description="C_d [1]")
+
+
+def _is_real(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _mass_flow(value: Any) -> Any:
+    """A mass flow [kg/s] >= 0, or a table of [time s, kg/s] rows, times increasing
+    strictly, flows >= 0 (one error naming what is wrong, not one per union member)."""
+    if _is_real(value):
+        if not math.isfinite(value):
+            raise _error("mass_flow", "must be finite")
+        if value < 0:
+            raise _error("mass_flow", "must be >= 0 [kg/s]")
+        return float(value)
+    if not isinstance(value, list) or not value:
+        raise _error("mass_flow", "must be a number [kg/s] or a table [[time s, kg/s], ...]")
+    rows = []
+    for row in value:
+        if not (isinstance(row, list | tuple) and len(row) == 2 and all(map(_is_real, row))):
+            raise _error("mass_flow", "every row must be [time s, kg/s], two numbers")
+        if not all(math.isfinite(v) for v in row):
+            raise _error("mass_flow", "must hold finite numbers")
+        rows.append((float(row[0]), float(row[1])))
+    if any(b[0] <= a[0] for a, b in pairwise(rows)):
+        raise _error("mass_flow", "times must increase strictly")
+    if any(v < 0 for _, v in rows):
+        raise _error("mass_flow", "mass flows must be >= 0 [kg/s]")
+    return rows
+
+
+MassFlow = Annotated[
+    Any,
+    BeforeValidator(_mass_flow),
+    WithJsonSchema(
+        {
+            "anyOf": [
+                {"type": "number", "minimum": 0},
+                {
+                    "type": "array",
+                    "minItems": 1,
+                    "items": {"type": "array", "items": {"type": "number"}, "minItems": 2,
+                              "maxItems": 2},
+                },
+            ]
+        }
+    ),
+]
+
+
+class Inflator(Table):
+    """``[[inflators]]``: gas of the body's species delivered into it."""
+
+    body: BodyRef = Field(description="body index or name")
+    mass_flow: MassFlow = Field(
+        description="mass flow [kg/s], or a piecewise-linear table [[time s, kg/s], ...], "
+        "times increasing, flows >= 0 (held before the first and after the last row)"
+    )
+    temperature: Real = Field(gt=0, le=1e5, description="temperature of the gas delivered [K]")
+
+
+class Leak(Table):
+    """``[[leaks]]``: fabric leakage, a mass flow c A |P - P_ambient| through the body's
+    current area A."""
+
+    body: BodyRef = Field(description="body index or name")
+    coefficient: Real = Field(ge=0, le=1e6, description="c [kg/(s m^2 Pa)]")
+
+
+def body_index(bodies: list, ref: int | str) -> int | str:
+    """The index of the body ``ref`` names among ``bodies`` (an index, or a body's
+    ``name``; a body without one is ``"body N"``), or the reason it names none (a str)."""
+    if isinstance(ref, int):
+        if not 0 <= ref < len(bodies):
+            return f"must be a body index in [0, {len(bodies) - 1}] or a body's name"
+        return ref
+    names = [b.name if b.name is not None else f"body {k}" for k, b in enumerate(bodies)]
+    found = [k for k, n in enumerate(names) if n == ref]
+    if not found:
+        shown = ", ".join(repr(n) for n in names[:10]) + (", ..." if len(names) > 10 else "")
+        return f"no body is named {ref[:100]!r} (names: {shown})"
+    if len(found) > 1:
+        return f"{len(found)} bodies are named {ref[:100]!r}: give an index"
+    return found[0]
+
+
 class SceneSpec(Table):
     """A whole scene file."""
 
@@ -822,6 +970,10 @@ class SceneSpec(Table):
     bodies: list[Body] = Field(min_length=1, description="[[bodies]]: at least one")
     attachments: list[Attachment] = []
     colliders: list[Collider] = []
+    vents: list[Vent] = Field([], description="[[vents]]: orifices to the outside air")
+    orifices: list[Orifice] = Field([], description="[[orifices]]: orifices between bodies")
+    inflators: list[Inflator] = Field([], description="[[inflators]]: gas delivered into bodies")
+    leaks: list[Leak] = Field([], description="[[leaks]]: fabric leakage of bodies")
 
     @model_validator(mode="after")
     def _cross_checks(self) -> SceneSpec:
@@ -832,7 +984,35 @@ class SceneSpec(Table):
                     f"must be a body index in [0, {len(self.bodies) - 1}]",
                     field=f"attachments.{a}.body",
                 )
+        for table in ("vents", "orifices", "inflators", "leaks"):
+            for k, entry in enumerate(getattr(self, table)):
+                keys = ("body_a", "body_b") if table == "orifices" else ("body",)
+                found = []
+                for key in keys:
+                    index = body_index(self.bodies, getattr(entry, key))
+                    if isinstance(index, str):
+                        raise _error("field", index, field=f"{table}.{k}.{key}")
+                    if isinstance(self.bodies[index], Cloth):
+                        raise _error(
+                            "field",
+                            f"body {index} is a cloth: an open surface holds no gas",
+                            field=f"{table}.{k}.{key}",
+                        )
+                    found.append(index)
+                if len(found) == 2 and found[0] == found[1]:
+                    raise _error(
+                        "field",
+                        f"must be another body than body_a (both are body {found[0]})",
+                        field=f"{table}.{k}.body_b",
+                    )
         return self
+
+    def flow_bodies(self, table: str, k: int) -> list[int]:
+        """The body indices entry ``k`` of ``table`` (``"vents"``, ``"orifices"``,
+        ``"inflators"``, ``"leaks"``) names (checked by the cross-checks)."""
+        entry = getattr(self, table)[k]
+        keys = ("body_a", "body_b") if table == "orifices" else ("body",)
+        return [int(body_index(self.bodies, getattr(entry, key))) for key in keys]
 
 
 # -- size guards -------------------------------------------------------------------------

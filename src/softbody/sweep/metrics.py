@@ -42,6 +42,16 @@ class History:
     """Simulated time of the blow-up [s], None when the run finished."""
     params: dict | None = None
     """The run's varied values."""
+    gas_moles: np.ndarray | None = None
+    """Amount of gas in each body [mol], shape (T, B), NaN for a body without a gas state
+    (a cloth, a fixed pressure); None when no body has one."""
+    gas_temperature: np.ndarray | None = None
+    """Gas temperature of each body [K], shape (T, B), as ``gas_moles``."""
+    mass_inflow: np.ndarray | None = None
+    """Mass flow of gas into each body [kg/s], shape (T, B) (vents, orifices, inflators,
+    leaks), NaN as ``gas_moles``; None when the model has no flows."""
+    mass_outflow: np.ndarray | None = None
+    """Mass flow of gas out of each body [kg/s], shape (T, B), as ``mass_inflow``."""
 
 
 def _settling_time(t: np.ndarray, kinetic: np.ndarray, fraction: float = 1e-3) -> float:
@@ -68,8 +78,49 @@ def _rebound(y: np.ndarray) -> tuple[float, float]:
     return apex, float((apex - y[low]) / drop)
 
 
+def _first_rebound(y: np.ndarray) -> float:
+    """The first bounce of a fall: (apex - low) / (start - low), where low is the first
+    local minimum of the centre-of-mass height in the lower half of the whole fall (the
+    first impact) and apex the first local maximum after it (the last sample when the
+    height rises to the end); 0 when it never rises again, NaN without a fall."""
+    drop = y[0] - np.min(y)
+    if y.size < 3 or drop <= 0:
+        return float("nan")
+    low = None
+    for k in range(1, y.size - 1):
+        if y[k] <= y[0] - 0.5 * drop and y[k + 1] > y[k] <= y[k - 1]:
+            low = k
+            break
+    if low is None:
+        return 0.0
+    apex = low + 1
+    while apex + 1 < y.size and y[apex + 1] >= y[apex]:
+        apex += 1
+    return float((y[apex] - y[low]) / (y[0] - y[low]))
+
+
+def _gas_metrics(h: History, b: int) -> dict[str, float]:
+    """Body ``b``'s gas metrics: where it has a gas state, and the flows where the model
+    has flows (none otherwise)."""
+    if h.gas_moles is None or np.isnan(h.gas_moles[0, b]):
+        return {}
+    out = {
+        "gas_moles_final": float(h.gas_moles[-1, b]),
+        "gas_moles_min": float(np.min(h.gas_moles[:, b])),
+        "gas_temperature_final": float(h.gas_temperature[-1, b]),
+        "gas_temperature_max": float(np.max(h.gas_temperature[:, b])),
+    }
+    if h.mass_inflow is not None:
+        dt = np.diff(h.t)
+        for name, flow in (("inflow", h.mass_inflow[:, b]), ("outflow", h.mass_outflow[:, b])):
+            out[f"gas_mass_{name}_max"] = float(np.max(flow))
+            out[f"gas_mass_{name}_total"] = float(np.sum(0.5 * (flow[1:] + flow[:-1]) * dt))
+    return out
+
+
 def body_metrics(h: History, b: int) -> dict[str, float]:
-    """The built-in metrics of body ``b``."""
+    """The built-in metrics of body ``b`` (the gas metrics only where it has a gas state,
+    the flow metrics only where the model has flows)."""
     ratio = h.volume[:, b] / h.rest_volume[b]
     com = h.center_of_mass[:, b]
     apex, recovered = _rebound(com[:, 1])
@@ -87,7 +138,9 @@ def body_metrics(h: History, b: int) -> dict[str, float]:
         "aspect_final": float(size[1] / max(0.5 * (size[0] + size[2]), 1e-300)),
         "rebound_height": apex,
         "rebound_ratio": recovered,
+        "first_rebound_ratio": _first_rebound(com[:, 1]),
         "settling_time": _settling_time(h.t, h.kinetic[:, b]),
+        **_gas_metrics(h, b),
     }
 
 
@@ -105,7 +158,18 @@ BODY_METRICS = {
     "aspect_final": "height over mean width (y extent over the mean of x and z) at the end",
     "rebound_height": "apex of the centre of mass after its lowest point [m]",
     "rebound_ratio": "(apex - lowest) / (start - lowest) of the centre of mass height",
+    "first_rebound_ratio": "(apex - low) / (start - low) of the first bounce: low is the first "
+    "impact (the first local minimum of the centre of mass height in the lower half of the "
+    "fall), apex the first maximum after it; 0 when it does not rise again",
     "settling_time": "time after which the kinetic energy stays below 1e-3 of its peak [s]",
+    "gas_moles_final": "amount of gas at the end [mol] (a body with a gas state)",
+    "gas_moles_min": "smallest amount of gas [mol]",
+    "gas_temperature_final": "gas temperature at the end [K]",
+    "gas_temperature_max": "largest gas temperature [K]",
+    "gas_mass_inflow_max": "largest mass flow of gas in [kg/s] (a model with flows)",
+    "gas_mass_inflow_total": "mass of gas that came in [kg] (trapezoid rule over the samples)",
+    "gas_mass_outflow_max": "largest mass flow of gas out [kg/s]",
+    "gas_mass_outflow_total": "mass of gas that went out [kg] (trapezoid rule over the samples)",
 }
 #: Built-in per-run metrics (column ``{name}``).
 RUN_METRICS = {

@@ -61,8 +61,15 @@ def run_one(
     ``steps``, ``build_time``, ``sim_time``, ``wall_time`` [s] and ``worker`` (host:pid).
     History is sampled every ``1 / sample_rate`` seconds of simulated time.
     """
-    from softbody.diagnostics import body_center_of_mass, body_pressure, body_volume, energies
+    from softbody.diagnostics import (
+        body_center_of_mass,
+        body_gas_flows,
+        body_pressure,
+        body_volume,
+        energies,
+    )
     from softbody.errors import SimulationError
+    from softbody.run import gas_state_bodies, has_gas_flows
     from softbody.scenes.loader import build_scene
     from softbody.scenes.plan import plan_frames
     from softbody.sim.simulator import Simulator
@@ -88,6 +95,9 @@ def run_one(
             state = model.state()
             t, vol, pres, com, kin, energy, impulse = [], [], [], [], [], [], []
             extent = []
+            gas = gas_state_bodies(model)
+            flows = has_gas_flows(model)
+            moles, temperature, inflow, outflow = [], [], [], []
             collider_count = model.collider_count
             owner = np.asarray(model.particle_body)
             members = [np.flatnonzero(owner == b) for b in range(model.body_count)]
@@ -104,6 +114,13 @@ def run_one(
                 energy.append(e.total)
                 imp = state.collider_impulse
                 impulse.append(np.zeros((collider_count, 3)) if imp is None else imp.copy())
+                if gas.any():
+                    moles.append(np.where(gas, state.body_gas_moles, np.nan))
+                    temperature.append(np.where(gas, state.body_gas_temperature, np.nan))
+                if flows:
+                    f = body_gas_flows(model, state)
+                    inflow.append(np.where(gas, f.mass_inflow, np.nan))
+                    outflow.append(np.where(gas, f.mass_outflow, np.nan))
 
             sample()
             blowup = None
@@ -132,6 +149,10 @@ def run_one(
             "energy": np.asarray(energy, dtype=float),
             "collider_impulse": np.asarray(impulse, dtype=float).reshape(len(t), -1, 3),
         }
+        for key, values in (("gas_moles", moles), ("gas_temperature", temperature),
+                            ("mass_inflow", inflow), ("mass_outflow", outflow)):  # fmt: skip
+            if values:
+                series[key] = np.asarray(values, dtype=float).reshape(len(t), -1)
         history = History(
             rest_volume=np.asarray(model.body_rest_volume, dtype=float),
             body_names=list(scene.body_names),

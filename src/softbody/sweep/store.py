@@ -50,7 +50,9 @@ PART = re.compile(r"part-(\d{5,})\.parquet")
 
 def series_columns(series: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """A run's history arrays as flat columns (one row per sample): ``t``, ``energy``,
-    ``body{b}.volume`` / ``.pressure`` / ``.kinetic`` / ``.com_x|y|z`` / ``.extent_x|y|z``,
+    ``body{b}.volume`` / ``.pressure`` / ``.kinetic`` / ``.com_x|y|z`` / ``.extent_x|y|z``
+    (and ``.gas_moles`` / ``.gas_temperature`` where the body has a gas state,
+    ``.mass_inflow`` / ``.mass_outflow`` where the model has flows),
     ``collider{c}.impulse_x|y|z``."""
     cols = {"t": series["t"], "energy": series["energy"]}
     for b in range(series["volume"].shape[1]):
@@ -61,6 +63,9 @@ def series_columns(series: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
             cols[f"body{b}.com_{axis}"] = series["center_of_mass"][:, b, k]
         for k, axis in enumerate("xyz"):
             cols[f"body{b}.extent_{axis}"] = series["extent"][:, b, k]
+        for key in ("gas_moles", "gas_temperature", "mass_inflow", "mass_outflow"):
+            if key in series and not np.all(np.isnan(series[key][:, b])):
+                cols[f"body{b}.{key}"] = series[key][:, b]
     for c in range(series["collider_impulse"].shape[1]):
         for k, axis in enumerate("xyz"):
             cols[f"collider{c}.impulse_{axis}"] = series["collider_impulse"][:, c, k]
