@@ -99,7 +99,8 @@ void membrane_blocks(const Model& m, const double* q, double* out) {
 }
 
 // The estimate's Gershgorin bounds, term by term: the spring-like terms' row sums first
-// (a particle's row holds its springs and its attachments), then each term's rows.
+// (a particle's row holds its springs and its attachments), the gas's rows and rank-one
+// part, then every registered term's own `bound` form.
 StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double* q,
                                  const BoundBuffers& w) {
     StiffnessBounds out;
@@ -112,8 +113,6 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
     attachments::row_bounds(m, w.attachment_weight, w.root_sum, out.attachments);
     springs::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
     attachments::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
-    membrane::bound_rows(m, q, w.membrane_row, out.membrane);
-    membrane::damping_ratios(m, out.ratio_min, out.ratio_max);
     std::fill(w.volume_gradient, w.volume_gradient + 3 * m.particles.count, 0.0);
     gas::bound_slopes(m, q, w.body_pnet, w.body_dpdv, w.volume_gradient);
     std::fill(w.pressure_row, w.pressure_row + m.particles.count, 0.0);
@@ -121,11 +120,16 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
     for (index i = 0; i < m.particles.count; ++i)
         out.pressure_rows = std::max(out.pressure_rows, w.pressure_row[i]);
     out.gas_rank_one = gas::rank_one_bound(m, w.body_dpdv, w.volume_gradient);
-    // the bending hinges' rows, in the pressure's scratch (read above)
-    std::fill(w.pressure_row, w.pressure_row + m.particles.count, 0.0);
-    bending::add_bound_rows(m, q, w.pressure_row);
-    for (index i = 0; i < m.particles.count; ++i)
-        out.bending = std::max(out.bending, w.pressure_row[i]);
+    // every other term with a bound form, in registry order
+    Terms::each([&](auto term, int k) {
+        using T = decltype(term);
+        if (!T::kBound) return;
+        TermBound b;
+        T::bound(m, c, q, w.term_rows, b);
+        for (int part = 0; part < 4; ++part) out.terms[k][part] = b.parts[part];
+        out.ratio_min = std::min(out.ratio_min, b.ratio_min);
+        out.ratio_max = std::max(out.ratio_max, b.ratio_max);
+    });
     return out;
 }
 

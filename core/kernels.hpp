@@ -30,10 +30,10 @@ struct TermEnergies {
 struct StiffnessBounds {
     double springs[4] = {0.0, 0.0, 0.0, 0.0};
     double attachments[4] = {0.0, 0.0, 0.0, 0.0};
-    double membrane[4] = {0.0, 0.0, 0.0, 0.0};  // its own Gershgorin rows (membrane.hpp)
     double pressure_rows = 0.0;  // max_i of the pressure term's rows
     double gas_rank_one = 0.0;   // max over bodies of |P'(V)| sum_i |g_i|^2 / m_i
-    double bending = 0.0;        // max_i of the bending hinges' rows
+    // each registered term's own bound by part (its `bound` form; 0 for the others)
+    double terms[kMaxTerms][4] = {};
     // c / k [s]; +inf and -inf where no spring or attachment has k > 0
     double ratio_min = std::numeric_limits<double>::infinity();
     double ratio_max = -std::numeric_limits<double>::infinity();
@@ -46,7 +46,7 @@ struct BoundBuffers {
     double* attachment_weight = nullptr;  // (A, 4) scratch
     double* root_sum = nullptr;           // (N, 4) scratch
     double* pressure_row = nullptr;       // (N,) scratch
-    double* membrane_row = nullptr;       // (N, 2) scratch
+    double* term_rows = nullptr;          // (N, 2) scratch of the terms' `bound` forms
     double* body_pnet = nullptr;          // (B,) out: P - P_a at the largest scheduled gas [Pa]
     double* body_dpdv = nullptr;          // (B,) out: P'(V) [Pa/m^3]
     double* volume_gradient = nullptr;    // (N, 3) out: exact dV/dx [m^2], 0 off bodies

@@ -333,7 +333,19 @@ struct SmootherBlocks {
 /// A registered term's name and traits (terms/term.hpp), for the bindings and Python.
 struct TermTraits {
     const char* name = "";
-    bool lane = false, projected = false, fused = false, energy = false, external = false;
+    bool lane = false, projected = false, fused = false, energy = false, external = false,
+         flow = false, bound = false;
+};
+
+/// A term's own part of the stability estimate (its `bound` form, terms/term.hpp): the
+/// largest Gershgorin rows of its stiffness against the masses by part, [damped, undamped,
+/// whole] [1/s^2] and its damping rate [1/s] (springs::BoundPart's order), which the
+/// estimate adds to the springs' (Weyl); and its damping per stiffness c / k [s], folded
+/// into [ratio_min, ratio_max].
+struct TermBound {
+    double parts[4] = {0.0, 0.0, 0.0, 0.0};
+    double ratio_min = std::numeric_limits<double>::infinity();
+    double ratio_max = -std::numeric_limits<double>::infinity();
 };
 
 /// Outcome of a run of steps (softbody.solvers.Status).

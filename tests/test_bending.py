@@ -480,7 +480,7 @@ def test_velocity_verlet_conserves_energy_to_second_order():
 @pytest.mark.parametrize("integrator", ["velocity_verlet", "symplectic_euler", "rk4"])
 def test_stable_step_estimate_includes_bending(integrator):
     """A bending-dominated sheet (springs 5 N/m, D = 0.05 N m, started bent): its mode
-    bound's omega_bending is the square root of the core's bending rows; the estimate
+    bound's omega_terms["bending"] is the square root of the core's bending rows; the estimate
     with bending (at its flat rest, as Simulator takes it) is over 3 times shorter than
     without it (the springs' alone); 3000 steps at the estimate keep the energy within
     30% of its start, and 3000 steps at the estimate without bending (the step it would
@@ -491,9 +491,9 @@ def test_stable_step_estimate_includes_bending(integrator):
     springs_only = b.finalize()
     dt = sb.stable_dt(model, integrator)  # at the model's positions, as Simulator takes it
     rows = _core.stiffness_bounds(core_model(model), control_data(model),
-                                  model.particle_q)["bending"]  # fmt: skip
+                                  model.particle_q)["terms"]["bending"][1]  # fmt: skip
     mode = sb.stability.stiffest_mode(model, spectral=False)
-    assert mode.omega_bending == pytest.approx(np.sqrt(rows), rel=1e-15) and rows > 0
+    assert mode.omega_terms["bending"] == pytest.approx(np.sqrt(rows), rel=1e-15) and rows > 0
     dt_springs = sb.stable_dt(springs_only, integrator)
     assert dt < dt_springs / 3
     sim = sb.Simulator(model, integrator=integrator, dt=dt)
@@ -526,7 +526,7 @@ def test_projective_dynamics_steps_bending_explicitly():
     """Projective dynamics takes the bending force explicitly in its iterations (no
     projection, as the gas): on the clamped plate of the cantilever (a = 2 cm) it
     settles, with its damping, to the same tip deflection as implicit Euler, to 1%, at a
-    step 17 times 1 / omega_bending (the bending's bound against the masses alone): its
+    step 17 times 1 / omega_terms["bending"] (the bending's bound against the masses alone): its
     global step holds every edge spring's full stiffness in every direction, which
     resists the stiff bending modes, so its step rule counts the gas's volume mode only."""
     a = 0.02
@@ -541,7 +541,7 @@ def test_projective_dynamics_steps_bending_explicitly():
     model = b.finalize()
     assert "bending" in sb.diagnostics.active_terms(model)
     sim = sb.Simulator(model, integrator="projective", dt=1e-3, projective_iterations=10)
-    assert sim.stiffest_mode.omega_bending * 1e-3 > 15.0
+    assert sim.stiffest_mode.omega_terms["bending"] * 1e-3 > 15.0
     state = model.state()
     sim.run(state, 3000)
     assert -state.particle_q[rows == ny, 2].mean() == pytest.approx(tip, rel=0.01)
@@ -696,7 +696,7 @@ def test_bound_rows_cover_the_whole_hessian(case):
             q[:, 2] += np.random.default_rng(7).uniform(-0.05, 0.05, len(q))
         else:
             q[:, 2] = np.where(q[:, 0] > 0.0, 0.8 * q[:, 0], 0.0)
-    rows = _core.stiffness_bounds(core_model(model), control_data(model), q)["bending"]
+    rows = _core.stiffness_bounds(core_model(model), control_data(model), q)["terms"]["bending"][1]
     whole = _hessian_frequency(model, q)
     assert whole > 0.0
     assert rows >= whole, (rows, whole)

@@ -485,7 +485,8 @@ def test_bound_pieces_match_the_numpy_formulas(name, simd):
     """softbody._core.stiffness_bounds at a deformed state, piece by piece, against the
     NumPy formulas (``_numpy_bounds``): the springs' and attachments' row bounds of each
     part, c / k range and pure dampers, the pressure rows, the rank-one term, P - P_a,
-    P'(V) and dV/dx, the bending rows. Tolerances from round-off: sums of positive terms to ULPS eps
+    P'(V) and dV/dx, the bending rows (the "terms" entry: each term's own bound form).
+    Tolerances from round-off: sums of positive terms to ULPS eps
     relative; sqrt(k |1 - L0/L|) carries |1 - L0/L|'s absolute round-off eps divided by
     2 sqrt(|1 - L0/L|); the gas's pieces carry its volume's relative round-off (times
     gamma, or 2 for P' = -nRT / V^2), enlarged by P / |P - P_a| where P - P_a cancels."""
@@ -530,8 +531,12 @@ def test_bound_pieces_match_the_numpy_formulas(name, simd):
            want["gas_rank_one"] * np.max(slope_relative, initial=1.0), "rank one")  # fmt: skip
     # the gradients' round-off relative to |g| grows as a hinge's triangles thin; these
     # meshes' are near equilateral, so a few ULPS each, summed over a row's few hinges
-    assert got["bending"] == pytest.approx(want["bending"], rel=1e-12, abs=0.0)
-    assert (got["bending"] > 0.0) == (model.bending_hinges.shape[0] > 0)
+    # (its own bound: parts undamped and whole; registered as a bound form, it is present
+    # in every model and 0 without hinges)
+    own = got["terms"]["bending"]
+    assert own[0] == own[3] == 0.0 and own[1] == own[2]
+    assert own[1] == pytest.approx(want["bending"], rel=1e-12, abs=0.0)
+    assert (own[1] > 0.0) == (model.bending_hinges.shape[0] > 0)
     # every piece is there to be checked (the cloth has no attachment, and its gas no
     # rank-one term: an open surface's pressure does not change with its volume)
     for piece in (*got["springs"], got["pressure_rows"]):

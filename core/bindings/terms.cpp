@@ -279,6 +279,8 @@ nb::list term_table() {
         d["fused"] = traits.fused;
         d["energy"] = traits.energy;
         d["external"] = traits.external;
+        d["flow"] = traits.flow;
+        d["bound"] = traits.bound;
         out.append(d);
     }
     return out;
@@ -292,13 +294,13 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     const size_t n = static_cast<size_t>(m.particles.count), nb_ = static_cast<size_t>(m.bodies.count);
     std::vector<double> spring_weight(4 * static_cast<size_t>(m.springs.count)),
         attachment_weight(4 * static_cast<size_t>(m.attachments.count)), root_sum(4 * n),
-        pressure_row(n), membrane_row(2 * n), pnet(nb_), dpdv(nb_), gradient(3 * n);
+        pressure_row(n), term_rows(2 * n), pnet(nb_), dpdv(nb_), gradient(3 * n);
     softbody::BoundBuffers w;
     w.spring_weight = spring_weight.data();
     w.attachment_weight = attachment_weight.data();
     w.root_sum = root_sum.data();
     w.pressure_row = pressure_row.data();
-    w.membrane_row = membrane_row.data();
+    w.term_rows = term_rows.data();
     w.body_pnet = pnet.data();
     w.body_dpdv = dpdv.data();
     w.volume_gradient = gradient.data();
@@ -311,10 +313,14 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     nb::dict out;
     out["springs"] = parts(b.springs);
     out["attachments"] = parts(b.attachments);
-    out["membrane"] = parts(b.membrane);
     out["pressure_rows"] = b.pressure_rows;
     out["gas_rank_one"] = b.gas_rank_one;
-    out["bending"] = b.bending;
+    // every term with a bound form (TermTraits::bound), by name
+    const softbody::KernelTable& k = softbody::kernels();
+    nb::dict terms;
+    for (int t = 0; t < k.term_count; ++t)
+        if (k.terms[t].bound) terms[k.terms[t].name] = parts(b.terms[t]);
+    out["terms"] = terms;
     out["damping_ratio"] = nb::make_tuple(b.ratio_min, b.ratio_max);
     out["pure_dampers"] = b.pure_dampers;
     out["body_pnet"] = to_numpy(std::move(pnet));
@@ -342,12 +348,14 @@ void bind_terms(nb::module_& mod) {
             "The registered physics terms in the order their forces are summed: a list of "
             "dicts of 'name' and the traits 'lane' (a vertex-major form), 'projected' "
             "(projective dynamics' local step), 'fused' (the fused symplectic pass), "
-            "'energy' (has one), 'external' (its energy is work from outside the model).");
+            "'energy' (has one), 'external' (its energy is work from outside the model), "
+            "'flow' (it moves gas), 'bound' (its own part of the stability estimate).");
     mod.def("stiffness_bounds", &stiffness_bounds, nb::arg("model"), nb::arg("control"),
             nb::arg("q").noconvert(),
             "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'springs', "
-            "'attachments', 'membrane' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
-            "'pressure_rows', 'gas_rank_one', 'bending' [1/s^2], 'damping_ratio' (min, max c / k [s]), "
+            "'attachments' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
+            "'pressure_rows', 'gas_rank_one' [1/s^2], 'terms' (each term with a bound form: "
+            "name -> its own parts, in the same order), 'damping_ratio' (min, max c / k [s]), "
             "'pure_dampers', and the gas at its largest scheduled value: 'body_pnet' (B,) "
             "[Pa], 'body_dpdv' (B,) [Pa/m^3], 'volume_gradient' (N, 3) [m^2].");
     mod.def("eval_forces", &eval_forces, nb::arg("model"), nb::arg("control"), nb::arg("t"),

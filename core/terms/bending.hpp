@@ -193,7 +193,17 @@ inline void add_bound_rows(const Model& m, const double* q, double* rows) {
 /// (l.bending_gradient); the products compute them at l.q where it does not.
 struct Term : TermBase {
     static constexpr const char* kName = "bending";
-    static constexpr bool kEnergy = true;
+    static constexpr bool kEnergy = true, kBound = true;
+    /// The stability estimate: its rows are undamped stiffness (parts undamped and whole).
+    static void bound(const Model& m, const Control&, const double* q, double* rows,
+                      TermBound& out) {
+        std::fill(rows, rows + m.particles.count, 0.0);
+        add_bound_rows(m, q, rows);
+        for (index i = 0; i < m.particles.count; ++i) {
+            out.parts[1] = std::max(out.parts[1], rows[i]);
+            out.parts[2] = std::max(out.parts[2], rows[i]);
+        }
+    }
     static bool active(const Model& m, const Control&) { return m.bending.count > 0; }
     static void force(const Eval& e, double* f) { bending::force(e.m, e.q, f); }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }

@@ -598,7 +598,13 @@ inline void damping_ratios(const Model& m, double& lo, double& hi) {
 /// The registered term (terms/registry.hpp).
 struct Term : TermBase {
     static constexpr const char* kName = "membrane";
-    static constexpr bool kProjected = true, kEnergy = true;
+    static constexpr bool kProjected = true, kEnergy = true, kBound = true;
+    /// The stability estimate: bound_rows by part, and beta into the c / k range.
+    static void bound(const Model& m, const Control&, const double* q, double* rows,
+                      TermBound& out) {
+        bound_rows(m, q, rows, out.parts);
+        damping_ratios(m, out.ratio_min, out.ratio_max);
+    }
     static bool active(const Model& m, const Control&) { return m.membranes.count > 0; }
     static void force(const Eval& e, double* f) { membrane::force(e.m, e.q, e.qd, f); }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }

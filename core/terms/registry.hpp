@@ -49,7 +49,8 @@ inline const TermTraits* term_traits() {
     static TermTraits traits[Terms::count];
     Terms::each([](auto term, int k) {
         using T = decltype(term);
-        traits[k] = {T::kName, T::kLane, T::kProjected, T::kFused, T::kEnergy, T::kExternal};
+        traits[k] = {T::kName,   T::kLane,     T::kProjected, T::kFused,
+                     T::kEnergy, T::kExternal, T::kFlow,      T::kBound};
     });
     return traits;
 }

@@ -25,6 +25,10 @@
 //   flow        a gas-flow term's molar flows into and out of the bodies' gas at e, added
 //               to e.gas's flow_in, flow_in_t and flow_out (terms/flows.hpp), which every
 //               scheme integrates into the gas state (solvers/gas_state.hpp)
+//   bound       the stability estimate: the term's own Gershgorin bound by part at positions
+//               q (TermBound), added to the springs' (kBound says it has one; rows (N, 2)
+//               scratch). Springs, attachments and the gas, whose rows and rank-one part
+//               combine, are composed in kernels.cpp: stiffness_bounds
 //   active      whether the term acts at all in a call (the fused symplectic Euler pass
 //               covers only kFused terms: a call with another active term takes the
 //               general step)
@@ -61,6 +65,7 @@ struct TermBase {
     // which softbody.diagnostics leaves out of the model's total
     static constexpr bool kExternal = false;
     static constexpr bool kFlow = false;  // it moves gas (its `flow` form), no force
+    static constexpr bool kBound = false;  // it has a `bound` form
     static bool active(const Model&, const Control&) { return true; }
     static void update(const Eval&, bool /*lanes_ran*/) {}
     static void force(const Eval&, double* /*f*/) {}
@@ -74,6 +79,8 @@ struct TermBase {
     static void project(const Model&, const Control&, double /*h*/, const double* /*x*/,
                         const double* /*x0*/, double* /*rhs*/) {}
     static void flow(const Eval&) {}
+    static void bound(const Model&, const Control&, const double* /*q*/, double* /*rows*/,
+                      TermBound&) {}
 };
 
 }  // namespace softbody::SOFTBODY_KERNELS

@@ -26,7 +26,7 @@ h; for them the estimate is the step at which no mode grows faster than
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from math import factorial
 
 import numpy as np
@@ -61,9 +61,10 @@ class StiffestMode:
     omega_gas: float = 0.0
     """Part of that from the rank-one term dP/dV g g^T alone, the gas's resistance to a
     change of volume, against the masses [rad/s]."""
-    omega_bending: float = 0.0
-    """Part of the undamped bound from material bending alone (its Gershgorin rows,
-    ``softbody.stability``), against the masses [rad/s]; 0 without bending."""
+    omega_terms: dict = field(default_factory=dict)
+    """The part of the bound from each registered term with a bound form of its own (the
+    membranes, material bending: its Gershgorin rows, ``softbody.stability``), against
+    the masses [rad/s], by name; absent where the model has none of that term."""
 
 
 def amplification_matrix(integrator: Integrator, h: float, omega: float, zeta: float) -> np.ndarray:

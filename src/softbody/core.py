@@ -50,8 +50,10 @@ def terms() -> list[dict]:
     their forces, Jacobian products and energies are summed: one dict each with its
     ``name`` and traits, ``lane`` (the vertex-major pass gives its force), ``projected``
     (projective dynamics solves it by its projection), ``fused`` (the fused symplectic
-    Euler pass covers it), ``energy`` (it has one) and ``external`` (its energy is work
-    done from outside the model, such as the grab spring's)."""
+    Euler pass covers it), ``energy`` (it has one), ``external`` (its energy is work
+    done from outside the model, such as the grab spring's), ``flow`` (it moves gas
+    between bodies and the air: vents, orifices, inflators, leaks) and ``bound`` (its own
+    part of the stability estimate, ``softbody.stability``)."""
     return [dict(t) for t in _term_table()]
 
 

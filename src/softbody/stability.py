@@ -25,11 +25,12 @@ Gershgorin on 3 x 3 blocks, a triangle's block (a, b) of norm at most |H_F| |g_a
 and added to the springs' bounds (Weyl); their damping rate likewise.
 
 Each term computes its own pieces of these bounds in its file of the compiled core
-(``core/terms/springs.hpp``, ``attachments.hpp``, ``gas.hpp``, ``bending.hpp``:
-``bound_weights``, ``add_root_sums``, ``row_bounds``, ``damping_ratios``;
-``bound_slopes``, ``add_pressure_rows``, ``rank_one_bound``; ``add_bound_rows``),
-returned by ``softbody._core.stiffness_bounds``; :func:`stiffest_mode` adds and compares
-them.
+(``core/terms/springs.hpp``, ``attachments.hpp``, ``gas.hpp``: ``bound_weights``,
+``add_root_sums``, ``row_bounds``, ``damping_ratios``; ``bound_slopes``,
+``add_pressure_rows``, ``rank_one_bound``; and every other term's ``bound`` form, such as
+``membrane.hpp``'s and ``bending.hpp``'s, by part), returned by
+``softbody._core.stiffness_bounds`` (the bound forms under ``"terms"``, by name);
+:func:`stiffest_mode` adds and compares them.
 
 Gershgorin bounds hold for any spring directions but overestimate: on a triangle mesh
 the largest eigenvalue of the spring matrix is about half their bound (a flat triangular
@@ -212,9 +213,13 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
     # and attachments share the row sums R_i, so the two terms' rows are bounded together
     pieces = _core.stiffness_bounds(core_model(model), control_data(model), kernel_array(q))
     springs, attached = pieces["springs"], pieces["attachments"]
-    # springs and attachments share their rows; the membranes' rows add (Weyl)
+    # springs and attachments share their rows; every other term's own bound adds (Weyl):
+    # the membranes' (damped), material bending's (undamped), by part
+    own = np.sum([parts for parts in pieces["terms"].values()], axis=0) if pieces["terms"] else (
+        np.zeros(4)
+    )  # fmt: skip
     w2_damped, w2_transverse, w2_springs, damping_rate = (
-        max(s, a) + m for s, a, m in zip(springs, attached, pieces["membrane"], strict=True)
+        max(s, a) + float(t) for s, a, t in zip(springs, attached, own, strict=True)
     )
     low, high = pieces["damping_ratio"]
     beta = (low, high) if low <= high else (0.0, 0.0)  # no spring with stiffness: none
@@ -223,11 +228,10 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
     body_pnet, body_dpdv = pieces["body_pnet"], pieces["body_dpdv"]
     volume_gradient = pieces["volume_gradient"]
     rank_one = pieces["gas_rank_one"]
-    # Weyl: the largest eigenvalue of a sum is at most the sum of the largest eigenvalues;
-    # material bending is undamped
+    # Weyl: the largest eigenvalue of a sum is at most the sum of the largest eigenvalues
     w2_pressure = pieces["pressure_rows"] + rank_one
-    w2_undamped = w2_transverse + w2_pressure + pieces["bending"]
-    w2_total = min(w2_damped + w2_undamped, w2_springs + w2_pressure + pieces["bending"])
+    w2_undamped = w2_transverse + w2_pressure
+    w2_total = min(w2_damped + w2_undamped, w2_springs + w2_pressure)
     if spectral and model.particle_count > 0:
         bounds = spectral_bounds(model, q, body_pnet, body_dpdv, volume_gradient)
         s_damped, s_undamped, s_total, s_rate = (SPECTRAL_MARGIN * max(x, 0.0) for x in bounds)
@@ -246,7 +250,7 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
         damping_rate,
         float(np.sqrt(w2_pressure)),
         float(np.sqrt(rank_one)),
-        float(np.sqrt(pieces["bending"])),
+        {name: float(np.sqrt(parts[2])) for name, parts in pieces["terms"].items()},
     )
 
 
