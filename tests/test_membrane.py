@@ -451,6 +451,8 @@ def test_bad_material_parameters_name_the_parameter(make, message):
          r"face indices must lie in \[0, 79\]"),
         ({"membrane": [(NEO, [0.5])], "mass": 0.1}, ValueError, "integer face indices"),
         ({"membrane": [NEO], "mass": 0.1}, TypeError, r"\(Membrane, faces or None\) pair"),
+        ({"membrane": NEO, "mass": 0.1, "damping": 1.0}, ValueError,
+         "damping is the edge springs'"),
     ],
 )  # fmt: skip
 def test_bad_body_arguments_are_refused(kwargs, error, message):
@@ -564,6 +566,7 @@ def test_scene_membrane_tables_build_the_builders_layers(tmp_path):
         ("bodies.1.membrane.1.faces=[99]", r"bodies.1.membrane.1.faces must lie in \[0, 79\]"),
         ("bodies.0.membrane={thickness=1}", "bodies.0.membrane.model: required, not given"),
         ("bodies.1.membrane=3", "bodies.1.membrane: must be a table, got 3"),
+        ("bodies.0.damping=1", "bodies.0.damping: damps the edge springs: give stiffness too"),
     ],
 )  # fmt: skip
 def test_scene_membrane_errors_name_the_key(tmp_path, override, message):
