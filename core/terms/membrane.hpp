@@ -42,7 +42,7 @@
 // diagonal blocks, and the blocks between corners as the smoother's membrane entries;
 // the coarse levels see the membrane as a Laplacian: softbody.solvers.multigrid), project
 // (projective dynamics: a quasi-Newton splitting, the factor holding w A0 H G^T G per
-// triangle with w = 2 (G_s + lam_s) (1 + beta / h), the right-hand side w A0 H G^T G x +
+// triangle with w = 3 x 2 (G_s + lam_s) (1 + beta / h), the right-hand side w A0 H G^T G x +
 // f(x) at the iterate, so a fixed point is backward Euler with the true material), and
 // the stable step's Gershgorin rows (bound_rows).
 #pragma once
@@ -496,14 +496,22 @@ inline void add_jacobi_diagonal(const Model& m, double h, const double* q, const
     }
 }
 
+/// How many times the small-strain stiffness projective dynamics' matrix holds
+/// (softbody.membrane.PROJECTIVE_MARGIN): the splitting contracts while the sheet's
+/// tangent stays below the matrix's weight, and a stretched sheet stiffens (StVK's tangent
+/// grows like (3 l^2 - 1) / 2 at stretch l, and tension adds geometric stiffness). With 1
+/// a StVK balloon at stretch 1.8 and a neo-Hookean one at 2.5 diverged; with 3 both
+/// settle, and at 6 the iterations converged visibly slower.
+constexpr double kProjectiveMargin = 3.0;
+
 /// Projective dynamics' weight of triangle t for step h [s]: A0 H w (1 + beta / h),
-/// w = 2 (G_s + lam_s) the small-strain stiffness's largest eigenvalue in F [Pa], so that
-/// A0 H w G^T G bounds the elastic stiffness at rest from above (the splitting converges).
+/// w = kProjectiveMargin 2 (G_s + lam_s), 2 (G_s + lam_s) the small-strain stiffness's
+/// largest eigenvalue in F [Pa].
 inline double projective_weight(const Model& m, index t, double h) {
     double shear, lame;
     small_strain(m, t, shear, lame);
-    return m.membranes.rest_area[t] * m.membranes.thickness[t] * 2.0 * (shear + lame) *
-           (1.0 + m.membranes.damping[t] / h);
+    return m.membranes.rest_area[t] * m.membranes.thickness[t] * kProjectiveMargin * 2.0 *
+           (shear + lame) * (1.0 + m.membranes.damping[t] / h);
 }
 
 /// Projective dynamics: the membrane's part of the global step's right-hand side, added to
