@@ -110,10 +110,10 @@ struct KernelTable {
                        const BodyGas& gas);
     /// Bit k set: registered term k acts in a call with model m and control c.
     unsigned (*active_terms)(const Model& m, const Control& c);
-    /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors.
     /// Every membrane triangle's clamped stiffness and damping blocks at q into out
     /// (Tm, kMembraneBlock): what Linearization::membrane_hessian holds.
     void (*membrane_blocks)(const Model&, const double* q, double* out);
+    /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors.
     StiffnessBounds (*stiffness_bounds)(const Model&, const Control&, const double* q,
                                         const BoundBuffers& w);
 };

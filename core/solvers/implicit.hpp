@@ -6,8 +6,9 @@
 // with C = df/dv, K = df/dx at the start, h = dt and y = dt v0 (backward Euler) or
 // h = 2/3 dt and y = (x0 - x_-1) / 3 + h v0 (BDF2, Choi & Ko 2002); then x1 = x0 + dt v1,
 // or x1 = (4 x0 - x_-1) / 3 + h v1. The products C p and K p come term by term (springs,
-// attachments, grab, gas); the preconditioner is one multigrid V-cycle (the true spring
-// blocks smoothed on the finest level, the Laplacian hierarchy below) or Jacobi. The
+// attachments, grab, gas, membranes); the preconditioner is one multigrid V-cycle (the
+// true spring and membrane blocks smoothed on the finest level, the Laplacian hierarchy
+// below) or Jacobi. The
 // start forces are vertex-major on the SIMD paths, term by term on the scalar one.
 #pragma once
 

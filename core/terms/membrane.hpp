@@ -29,18 +29,22 @@
 // Linearisation: with vec(F) (6,) = [F col 0; F col 1], the Hessian of E_t in x is
 // G_t^T H_F G_t with H_F = A0 H d2W/dF2 (6 x 6) and G_t the constant map x_t -> vec(F).
 // The implicit solvers' K uses H_F with its negative eigenvalues clamped to 0 (a 6 x 6
-// Jacobi eigensolve per triangle), so -K = G^T H_F+ G is positive semi-definite; the
-// damping C = -G^T D_F G, D_F = A0 H beta L^T C0 L (L: Fdot -> Gdot), is so already.
+// Jacobi eigensolve per triangle, skipped where a Cholesky factorisation shows H_F
+// positive definite, as in a stretched sheet), so -K = G^T H_F+ G is positive
+// semi-definite; the damping C = -G^T D_F G, D_F = A0 H beta L^T C0 L (L: Fdot -> Gdot),
+// is so already.
 //
 // Forms: force and energy (edge-major, per triangle; no lane form, so the vertex-major
-// pass does not cover it), prepare + jacobian_product (the 6 x 6 blocks per triangle
+// pass does not cover it and a model with membranes takes the general step, not the
+// fused symplectic pass), prepare + jacobian_product (the 6 x 6 blocks per triangle
 // stored in Linearization::membrane_hessian, or computed on the fly where that is null),
-// add_smoother_blocks (each corner's 3 x 3 diagonal block; the off-diagonal couplings are
-// left to the coarse levels, which see the membrane as edge Laplacians:
-// softbody.solvers.multigrid), project (projective dynamics: a quasi-Newton splitting, the
-// factor holding w A0 H G^T G per triangle with w = 2 (G_s + lam_s) (1 + beta / h), the
-// right-hand side w A0 H G^T G x + f(x) at the iterate, so a fixed point is backward Euler
-// with the true material), and the stable step's Gershgorin rows (bound_rows).
+// add_smoother_blocks (the triangle's 3 x 3 blocks of M - h C - h^2 K: its corners'
+// diagonal blocks, and the blocks between corners as the smoother's membrane entries;
+// the coarse levels see the membrane as a Laplacian: softbody.solvers.multigrid), project
+// (projective dynamics: a quasi-Newton splitting, the factor holding w A0 H G^T G per
+// triangle with w = 3 x 2 (G_s + lam_s) (1 + beta / h), the right-hand side w A0 H G^T G x +
+// f(x) at the iterate, so a fixed point is backward Euler with the true material), and
+// the stable step's Gershgorin rows (bound_rows).
 #pragma once
 
 #include <algorithm>
@@ -492,14 +496,22 @@ inline void add_jacobi_diagonal(const Model& m, double h, const double* q, const
     }
 }
 
+/// How many times the small-strain stiffness projective dynamics' matrix holds
+/// (softbody.membrane.PROJECTIVE_MARGIN): the splitting contracts while the sheet's
+/// tangent stays below the matrix's weight, and a stretched sheet stiffens (StVK's tangent
+/// grows like (3 l^2 - 1) / 2 at stretch l, and tension adds geometric stiffness). With 1
+/// a StVK balloon at stretch 1.8 and a neo-Hookean one at 2.5 diverged; with 3 both
+/// settle, and at 6 the iterations converged visibly slower.
+constexpr double kProjectiveMargin = 3.0;
+
 /// Projective dynamics' weight of triangle t for step h [s]: A0 H w (1 + beta / h),
-/// w = 2 (G_s + lam_s) the small-strain stiffness's largest eigenvalue in F [Pa], so that
-/// A0 H w G^T G bounds the elastic stiffness at rest from above (the splitting converges).
+/// w = kProjectiveMargin 2 (G_s + lam_s), 2 (G_s + lam_s) the small-strain stiffness's
+/// largest eigenvalue in F [Pa].
 inline double projective_weight(const Model& m, index t, double h) {
     double shear, lame;
     small_strain(m, t, shear, lame);
-    return m.membranes.rest_area[t] * m.membranes.thickness[t] * 2.0 * (shear + lame) *
-           (1.0 + m.membranes.damping[t] / h);
+    return m.membranes.rest_area[t] * m.membranes.thickness[t] * kProjectiveMargin * 2.0 *
+           (shear + lame) * (1.0 + m.membranes.damping[t] / h);
 }
 
 /// Projective dynamics: the membrane's part of the global step's right-hand side, added to

@@ -149,13 +149,22 @@ def small_strain_moduli(material: MembraneMaterial, p0: float, p1: float) -> tup
     return p0 / (2.0 * (1.0 + p1)), p0 * p1 / (1.0 - p1 * p1)
 
 
+PROJECTIVE_MARGIN = 3.0
+"""How many times the small-strain stiffness bound 2 (G_s + lam_s) projective dynamics'
+matrix holds per membrane triangle (``core/terms/membrane.hpp``: kProjectiveMargin, which
+must equal it): its splitting contracts while the sheet's tangent stays below that weight,
+and stretched sheets stiffen. With 1 a StVK balloon at stretch 1.8 and a neo-Hookean one at
+2.5 diverged; with 3 both settle."""
+
+
 def scalar_blocks(
-    model, *, mean: bool = False
+    model, *, mean: bool = False, projective: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The membranes as weighted graph Laplacians, for the solvers' matrices: per membrane
     triangle and pair of corners (a, b) the entry W_t g_a . g_b, W_t = A0 H 2 (G_s + lam_s)
     [N/m] (the largest eigenvalue of the small-strain stiffness in F, so W_t G_t^T G_t
-    bounds the triangle's stiffness at rest from above: projective dynamics), or with
+    bounds the triangle's stiffness at rest from above), times ``PROJECTIVE_MARGIN`` for
+    projective dynamics (``projective``), or with
     ``mean`` A0 H (3 G_s + lam_s) / 2, the mean of its eigenvalues over the four in-plane
     deformations (2 (G_s + lam_s), 2 G_s twice, 0 for rotation: the multigrid hierarchy,
     where a typical stiffness coarsens better than the largest); and its damping beta W_t
@@ -165,6 +174,8 @@ def scalar_blocks(
     moduli = np.array([small_strain_moduli(m, p0, p1) for m, (p0, p1) in pairs]).reshape(-1, 2)
     shear, lame = moduli.T
     modulus = 0.5 * (3.0 * shear + lame) if mean else 2.0 * (shear + lame)
+    if projective:
+        modulus = PROJECTIVE_MARGIN * modulus
     weight = model.membrane_rest_area * model.membrane_thickness * modulus
     inv = model.membrane_rest_inverse  # rows g_1, g_2; g_0 = -(g_1 + g_2)
     g = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], axis=1)  # (Tm, 3, 2)

@@ -703,6 +703,9 @@ class _BodyBase(Table):
             raise _error("field", "density needs a membrane", field="density")
         if self.stiffness is None and self.membrane is None:
             raise _error("field", "give stiffness, a membrane or both", field="stiffness")
+        if self.stiffness is None and self.damping > 0:
+            raise _error("field", "damps the edge springs: give stiffness too (a membrane "
+                         "has its own damping)", field="damping")  # fmt: skip
         return self
 
 

@@ -545,6 +545,11 @@ class ModelBuilder:
             total_mass = _number("mass from density", total_mass, strict=True)
         springs = stiffness is not None
         k = _number("stiffness", stiffness) if springs else 0.0
+        if not springs and _number("damping", damping) > 0:
+            raise ValueError(
+                "damping is the edge springs' [N s/m]: give stiffness too, or damp the "
+                "membrane with its own damping (Membrane.neo_hookean(..., damping=beta))"
+            )
         c = _number("damping", damping)
         kb = _number("bend_stiffness", bend_stiffness)
         cb = _number("bend_damping", bend_damping)

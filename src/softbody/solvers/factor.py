@@ -37,8 +37,9 @@ the other forces are explicit within each iteration, which limits the step to ab
 Membranes (``core/terms/membrane.hpp``) join by a quasi-Newton splitting rather than a
 projection: the matrix holds W_t G_t^T G_t per membrane triangle (G_t the map from its
 corners to its deformation gradient, a scalar 3 x 3 block g_a . g_b per coordinate;
-W_t = A0 H 2 (G_s + lam_s) (1 + beta / h), which bounds the triangle's small-strain
-stiffness and damping from above), and each iteration's right-hand side adds
+W_t = 3 A0 H 2 (G_s + lam_s) (1 + beta / h): three times the bound on the triangle's
+small-strain stiffness and damping, since a stretched sheet stiffens:
+``softbody.membrane.PROJECTIVE_MARGIN``), and each iteration's right-hand side adds
 W_t G_t^T G_t x + f_membrane(x, (x - x0) / h) at the iterate. A fixed point is again
 backward Euler with the true material (any membrane model, not an as-rigid-as-possible
 stand-in), and the iteration contracts while the material's tangent stays below W_t.
@@ -117,7 +118,7 @@ def _membrane_entries(model, dt: float, free: np.ndarray):
     free corners (module docstring; core/terms/membrane.hpp: projective_weight)."""
     from softbody.membrane import scalar_blocks
 
-    rows, cols, stiffness, damping = scalar_blocks(model)
+    rows, cols, stiffness, damping = scalar_blocks(model, projective=True)
     keep = free[rows] & free[cols]
     return rows[keep], cols[keep], (stiffness + damping / dt)[keep]
 
