@@ -25,6 +25,7 @@ BUILT_IN = [
     "landing-cushion",
     "airbag",
     "punctured-ball",
+    "two-balloons",
 ]
 
 
