@@ -136,6 +136,9 @@ def _with_user_ball(model: Model, state: State) -> tuple[Model, State, int]:
         collider_motion_vector=append("collider_motion_vector", np.zeros(3)),
         collider_motion_pivot=append("collider_motion_pivot", park),
         collider_motion_frequency=append("collider_motion_frequency", 0.0),
+        collider_mesh_range=append("collider_mesh_range", [0, 0]),
+        collider_mesh_root=append("collider_mesh_root", -1),
+        collider_mesh_margin=append("collider_mesh_margin", 0.0),
     )
     state = State(
         state.particle_q.copy(),
