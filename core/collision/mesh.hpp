@@ -8,7 +8,9 @@
 //      (from the front) catches it, even where the path went on through a thin part;
 //   2. otherwise an inside test at the end position: the closest point on the mesh, and the
 //      sign of the offset against the angle-weighted pseudo-normal of the closest feature
-//      (face, edge or vertex; Baerentzen & Aanaes 2005) says inside.
+//      (face, edge or vertex; Baerentzen & Aanaes 2005) says inside. A particle outside but
+//      within the margin of the surface and approaching it is a resting contact: caught too
+//      (so that a body at rest feels the friction every step, as on the analytic colliders).
 // A caught particle goes to the surface point plus `margin` along the contact normal (so
 // that its next path starts strictly outside) and responds as against the analytic
 // colliders (colliders::respond): restitution, friction, the opposite impulse to the
@@ -210,10 +212,17 @@ inline double first_entry(const View& v, index root, V3 a, V3 b, V3& normal) {
 }
 
 /// Where a particle whose path in the collider's frame went from l0 to l1 must be (local
-/// frame): hit.x on the surface plus margin along hit.n (unit, outward), or no hit.
-inline colliders::Hit resolve(const View& v, index root, double margin, V3 l0, V3 l1) {
+/// frame): hit.x on the surface plus margin along hit.n (unit, outward), or no hit. `band`:
+/// the particle is outside but nearer the surface than the margin (a resting contact: the
+/// caller responds only when it approaches).
+inline colliders::Hit resolve(const View& v, index root, double margin, V3 l0, V3 l1,
+                              bool& band) {
     colliders::Hit out;
-    if (!segment_meets_box(v.bounds(root), l0, l1, 1.0)) return out;  // far from the mesh
+    band = false;
+    const double* b = v.bounds(root);
+    const double box[6] = {b[0] - margin, b[1] - margin, b[2] - margin,
+                           b[3] + margin, b[4] + margin, b[5] + margin};
+    if (!segment_meets_box(box, l0, l1, 1.0)) return out;  // far from the mesh
     V3 n{0.0, 0.0, 0.0};
     const double s = first_entry(v, root, l0, l1, n);
     V3 p = l1;
@@ -221,16 +230,19 @@ inline colliders::Hit resolve(const View& v, index root, double margin, V3 l0, V
         p = l0 + s * (l1 - l0) + margin * n;
         out = {true, p, n};
     }
-    // the end position (or the entry point put outside) must be outside: else to the
-    // closest point of the surface
-    const double* b = v.bounds(root);
-    if (p.x < b[0] || p.y < b[1] || p.z < b[2] || p.x > b[3] || p.y > b[4] || p.z > b[5])
+    // the end position (or the entry point put outside) must be outside and at least the
+    // margin away: else to the closest point of the surface plus the margin
+    if (p.x < box[0] || p.y < box[1] || p.z < box[2] || p.x > box[3] || p.y > box[4] ||
+        p.z > box[5])
         return out;
     const Nearest near = nearest(v, root, p);
     const V3 off = p - near.x;
-    if (!(dot(off, near.n) < 0.0)) return out;
+    const bool inside = dot(off, near.n) < 0.0;
+    if (!inside && !(near.d2 < margin * margin)) return out;
     const double dist = std::sqrt(near.d2);
-    const V3 normal = dist > 0.0 ? (-1.0 / dist) * off : near.n;
+    const double sign = inside ? -1.0 : 1.0;
+    const V3 normal = dist > 0.0 ? (sign / dist) * off : near.n;
+    band = !inside && !out.hit;
     return {true, near.x + margin * normal, normal};
 }
 
@@ -263,9 +275,12 @@ inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 w
         if (m.particles.inv_mass[i] == 0.0) continue;
         const V3 l1 = to_local(r, load(q, i) - c);
         const V3 l0 = to_local(r0, load(q_start, i) - c0);
-        const colliders::Hit local = resolve(v, root, margin, l0, l1);
+        bool band = false;
+        const colliders::Hit local = resolve(v, root, margin, l0, l1, band);
         if (!local.hit) continue;
         const colliders::Hit hit{true, c + to_world(r, local.x), to_world(r, local.n)};
+        // within the margin but leaving: free
+        if (band && dot(load(qd, i) - (vc + cross(wc, hit.x - c)), hit.n) >= 0.0) continue;
         colliders::respond(m, i, hit, vc + cross(wc, hit.x - c), e, keep, q, qd, j);
         if (seen != nullptr) seen->add(load(q, i), load(qd, i));
     }
