@@ -3,6 +3,8 @@ vertex against mesh, continuous, static, moving or driven through Control."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -261,3 +263,84 @@ def test_every_solver_runs_against_a_mesh_collider(integrator, dt, kw):
     assert state.particle_q[:, 1].min() >= 0.0
     assert state.particle_q[:, 1].min() == pytest.approx(0.0, abs=0.01)
     assert sb.body_center_of_mass(model, state)[0, 1] < 0.35  # it fell and lies there
+
+
+SCENE = """
+[simulation]
+integrator = "midpoint"
+dt = 0.0005
+duration = 0.05
+
+[[colliders]]
+type = "mesh"
+{mesh}
+restitution = 0.2
+
+[[bodies]]
+mesh = {{ shape = "icosphere", subdivisions = 2, radius = 0.3 }}
+position = [0.0, 0.8, 0.0]
+mass = 1.0
+stiffness = 800.0
+damping = 2.0
+gas = {{ law = "isothermal", nrt = 200.0 }}
+"""
+
+
+def test_scene_colliders_of_type_mesh(tmp_path):
+    """``[[colliders]] type = "mesh"`` takes a file relative to the scene file (the path
+    reaches ColliderMesh: its triangles are the file's) or a generated shape table, with
+    center, rotation and margin; a ball dropped on it stays outside."""
+    from softbody.scenes.loader import load_scene
+
+    (tmp_path / "meshes").mkdir()
+    sb.save_mesh(sb.box((1.0, 0.4, 1.0)), tmp_path / "meshes" / "table.obj")
+    (tmp_path / "a.toml").write_text(SCENE.format(mesh='file = "meshes/table.obj"'))
+    (tmp_path / "b.toml").write_text(SCENE.format(
+        mesh='mesh = { shape = "box", extents = [1.0, 0.4, 1.0] }\ncenter = [0.0, 0.1, 0.0]\n'
+             "rotation = [0.0, 1.0, 0.0, 30.0]\nmargin = 0.001"))  # fmt: skip
+    a, b = load_scene(tmp_path / "a.toml"), load_scene(tmp_path / "b.toml")
+    assert a.model.collider_kind.tolist() == [sb.collision.ColliderKind.MESH] == \
+        b.model.collider_kind.tolist()  # fmt: skip
+    assert len(a.model.collider_mesh_triangles) == 12
+    assert a.model.collider_center[0] == pytest.approx([0.0, 0.0, 0.0])
+    assert b.model.collider_center[0] == pytest.approx([0.0, 0.1, 0.0])
+    assert b.model.collider_mesh_margin[0] == 0.001
+    assert b.model.collider_rotation[0] == pytest.approx(
+        sb.collision.rotation_about((0, 1, 0), np.radians(30.0)))  # fmt: skip
+    sim = sb.Simulator(a.model, integrator="midpoint", dt=5e-4)
+    state = a.model.state()
+    sim.run(state, 1000)
+    assert state.particle_q[:, 1].min() >= 0.2
+
+
+@pytest.mark.parametrize(
+    ("mesh", "match"),
+    [
+        ('file = "missing.obj"', r"colliders\.0: .*missing\.obj: no such file"),
+        ('file = "open.obj"', r"colliders\.0: .*open\.obj: a mesh collider must be one closed "
+                              r"surface: open: 3 boundary edges"),
+        ('mesh = { file = "open.obj" }', r"colliders\.0: .*open\.obj: a mesh collider"),
+        ('mesh = { shape = "rectangle", size = [1.0, 1.0] }',
+         r"colliders\.0: mesh: a mesh collider must be one closed surface: open"),
+        ('file = "open.obj"\nmesh = { shape = "box" }', r"colliders\.0\.file: give exactly one"),
+        ("", r"colliders\.0\.file: give exactly one"),
+        ('file = "open.obj"\nmargin = -1.0', r"colliders\.0\.margin"),
+        ('file = "open.obj"\nshape = "box"', r"unknown scene key colliders\.0\.shape"),
+    ],
+)  # fmt: skip
+def test_bad_mesh_colliders_in_scenes_are_one_line_cli_errors(tmp_path, capsys, mesh, match):
+    """A scene's bad mesh collider (missing file, open mesh, both or neither of file and
+    mesh, a bad margin, an unknown key) is one line on stderr from ``softbody run`` naming
+    the key and the file, exit 2, and nothing written."""
+    from softbody.cli import main
+
+    sb.save_mesh(_open_box(), tmp_path / "open.obj")
+    scene = tmp_path / "bad.toml"
+    scene.write_text(SCENE.format(mesh=mesh))
+    out = tmp_path / "out"
+    code = main(["run", str(scene), "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert err.startswith("softbody: error:") and "\n" not in err
+    assert re.search(match, err), err
+    assert not out.exists() or not any(out.iterdir())
