@@ -344,3 +344,53 @@ def test_bad_mesh_colliders_in_scenes_are_one_line_cli_errors(tmp_path, capsys, 
     assert err.startswith("softbody: error:") and "\n" not in err
     assert re.search(match, err), err
     assert not out.exists() or not any(out.iterdir())
+
+
+def _mesh_scene_for_drawing():
+    builder = sb.ModelBuilder()
+    builder.add_soft_body(sb.icosphere(2, radius=0.3, center=(1.5, 0.5, 0.0)), mass=1.0,
+                          stiffness=800.0, damping=2.0, gas=200.0)  # fmt: skip
+    turn = sb.collision.rotation_about((0, 1, 0), 0.4)
+    builder.add_collider(sb.ColliderMesh(sb.box((1.0, 0.6, 1.0)), center=(0.0, 0.3, 0.0),
+                                         rotation=turn))  # fmt: skip
+    return builder.finalize()
+
+
+def test_renderer_draws_a_mesh_collider():
+    """The frame shows the mesh collider's triangles at its pose: the pixel the box's
+    centre projects to is grey (the collider colour, shaded), not the background, and the
+    box's projected outline covers the pixels around it."""
+    from softbody.render.frame import FrameRenderer, RenderSettings
+    from softbody.render.raster import Camera
+
+    model = _mesh_scene_for_drawing()
+    camera = Camera(eye=(0.0, 1.5, 4.0), target=(0.0, 0.3, 0.0), fov=40.0)
+    image = FrameRenderer(model, RenderSettings(width=160, height=120, camera=camera)).render(
+        model.state())  # fmt: skip
+    r, g, b = image[60, 80].astype(int)  # the image centre: the camera's target
+    assert abs(r - g) < 12 and abs(g - b) < 12 and 40 < r < 200  # grey, shaded
+    assert image[60, 80].tolist() != image[5, 80].tolist()  # not the sky above
+
+
+def test_usd_export_writes_the_mesh_collider_triangles(tmp_path):
+    """USD: a mesh collider is a Mesh prim of its triangles in its local frame, placed by
+    the collider's translate and orient; its points put at the pose are the box's corners
+    in the world."""
+    pytest.importorskip("pxr")
+    from pxr import Usd, UsdGeom
+
+    from softbody.io.usd import write_usd
+
+    model = _mesh_scene_for_drawing()
+    path = tmp_path / "scene.usda"
+    write_usd(path, model, model.particle_q[None], 30.0, ["ball"])
+    stage = Usd.Stage.Open(str(path))
+    prim = stage.GetPrimAtPath("/softbody/colliders/mesh_0")
+    mesh = UsdGeom.Mesh(prim)
+    assert list(mesh.GetFaceVertexCountsAttr().Get()) == [3] * 12
+    points = np.array(mesh.GetPointsAttr().Get())
+    world = UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default())
+    placed = np.array([list(world.Transform(p)) for p in points.tolist()])
+    rot = model.collider_rotation[0]
+    expected = model.collider_center[0] + model.collider_mesh_vertices @ rot.T
+    assert np.allclose(np.sort(placed, axis=0), np.sort(expected, axis=0), atol=1e-6)

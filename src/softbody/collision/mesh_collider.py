@@ -185,6 +185,15 @@ def mesh_collider_data(mesh: TriMesh) -> MeshColliderData:
     )
 
 
+def collider_mesh(model: Any, c: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mesh collider ``c`` of ``model`` in its local frame: vertices (V, 3) [m] and
+    triangles (T, 3) indexing them (world = centre + vertices @ rotation.T)."""
+    b, e = model.collider_mesh_range[c]
+    tris = model.collider_mesh_triangles[b:e]
+    lo, hi = int(tris.min()), int(tris.max()) + 1
+    return model.collider_mesh_vertices[lo:hi], tris - lo
+
+
 def inside_mesh(data: MeshColliderData, points: np.ndarray) -> np.ndarray:
     """Which of ``points`` (P, 3) [m, local frame] lie strictly inside the mesh, (P,) bool:
     by the parity of crossings of a ray from each point (an independent test of the core's
