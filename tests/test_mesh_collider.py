@@ -394,3 +394,19 @@ def test_usd_export_writes_the_mesh_collider_triangles(tmp_path):
     rot = model.collider_rotation[0]
     expected = model.collider_center[0] + model.collider_mesh_vertices @ rot.T
     assert np.allclose(np.sort(placed, axis=0), np.sort(expected, axis=0), atol=1e-6)
+
+
+def test_a_vertex_placed_deep_inside_is_pushed_out_through_the_nearest_face():
+    """A particle that starts deep inside a box mesh (0.4 m from its nearest face, far more
+    than its path of one step) is found inside (by the crossing parity of a ray, then the
+    closest feature) and put on the nearest face plus the margin, as the analytic box puts
+    it on its nearest face."""
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.add_particle((0.1, 0.05, 0.0), mass=1.0)
+    builder.add_collider(sb.ColliderMesh(sb.box((1.0, 1.0, 1.0)), restitution=0.0,
+                                         friction=0.0))  # fmt: skip
+    model = builder.finalize()
+    state = model.state()
+    sb.Simulator(model, integrator="symplectic_euler", dt=1e-3).step(state)
+    margin = model.collider_mesh_margin[0]
+    assert state.particle_q[0] == pytest.approx([0.5 + margin, 0.05, 0.0], abs=1e-12)

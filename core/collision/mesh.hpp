@@ -8,7 +8,10 @@
 //      (from the front) catches it, even where the path went on through a thin part;
 //   2. otherwise an inside test at the end position: the closest point on the mesh, and the
 //      sign of the offset against the angle-weighted pseudo-normal of the closest feature
-//      (face, edge or vertex; Baerentzen & Aanaes 2005) says inside. A particle outside but
+//      (face, edge or vertex; Baerentzen & Aanaes 2005) says inside. The search is bounded
+//      by the path's length plus the margin (a point it cannot reach is farther from the
+//      surface than its path: outside, unless it started inside); beyond that bound a ray's
+//      crossing parity decides, so a vertex deep inside (placed there) is still pushed out. A particle outside but
 //      within the margin of the surface and approaching it is a resting contact: caught too
 //      (so that a body at rest feels the friction every step, as on the analytic colliders).
 // A caught particle goes to the surface point plus `margin` along the contact normal (so
@@ -132,9 +135,12 @@ struct Nearest {
     V3 n{0.0, 0.0, 0.0};  // pseudo-normal of its feature
 };
 
-/// The closest point on the mesh below `root` to p (local frame), with its pseudo-normal.
-inline Nearest nearest(const View& v, index root, V3 p) {
+/// The closest point on the mesh below `root` to p (local frame), with its pseudo-normal,
+/// among those nearer than sqrt(bound2); none (d2 = bound2) when there is none.
+inline Nearest nearest(const View& v, index root, V3 p,
+                       double bound2 = std::numeric_limits<double>::infinity()) {
     Nearest best;
+    best.d2 = bound2;
     index stack[kStack];
     int top = 0;
     stack[top++] = root;
@@ -211,6 +217,46 @@ inline double first_entry(const View& v, index root, V3 a, V3 b, V3& normal) {
     return s_best;
 }
 
+/// Whether p lies inside the closed mesh, by the parity of the crossings of a ray from p
+/// to `far` (outside the mesh's box); -1 when it passed within round-off of an edge (the
+/// caller tries another direction).
+inline int inside_by_ray(const View& v, index root, V3 p, V3 far) {
+    const V3 d = far - p;
+    int crossings = 0;
+    index stack[kStack];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0) {
+        const index node = stack[--top];
+        if (!segment_meets_box(v.bounds(node), p, far, 1.0)) continue;
+        const index tb = v.begin(node), te = v.end(node);
+        if (te > tb) {
+            for (index t = tb; t < te; ++t) {
+                const V3 p0 = v.corner(t, 0), e1 = v.corner(t, 1) - p0, e2 = v.corner(t, 2) - p0;
+                const V3 h = cross(d, e2);
+                const double det = dot(e1, h);
+                if (std::fabs(det) < 1e-300) continue;
+                const double inv = 1.0 / det;
+                const V3 sv = p - p0;
+                const double u = inv * dot(sv, h);
+                const V3 qv = cross(sv, e1);
+                const double w = inv * dot(d, qv);
+                const double s = inv * dot(e2, qv);
+                if (s <= 0.0 || s > 1.0) continue;
+                constexpr double kEdge = 1e-9;
+                if (u < -kEdge || w < -kEdge || u + w > 1.0 + kEdge) continue;
+                if (u < kEdge || w < kEdge || u + w > 1.0 - kEdge) return -1;  // on an edge
+                ++crossings;
+            }
+            continue;
+        }
+        if (top + 2 > kStack) continue;
+        stack[top++] = v.child(node, 0);
+        stack[top++] = v.child(node, 1);
+    }
+    return crossings % 2;
+}
+
 /// Where a particle whose path in the collider's frame went from l0 to l1 must be (local
 /// frame): hit.x on the surface plus margin along hit.n (unit, outward), or no hit. `band`:
 /// the particle is outside but nearer the surface than the margin (a resting contact: the
@@ -235,7 +281,37 @@ inline colliders::Hit resolve(const View& v, index root, double margin, V3 l0, V
     if (p.x < box[0] || p.y < box[1] || p.z < box[2] || p.x > box[3] || p.y > box[4] ||
         p.z > box[5])
         return out;
-    const Nearest near = nearest(v, root, p);
+    // A point outside within reach of its path's length (plus the margin band) of the
+    // surface, or inside, is found by the nearest-point search bounded by that reach: a
+    // path from outside to inside crossed the surface within it. Past the reach, a ray's
+    // parity says whether the point is (deep) inside; only then the unbounded search.
+    const double reach = std::sqrt(dot(l1 - l0, l1 - l0)) + 4.0 * margin;
+    Nearest near = nearest(v, root, p, reach * reach);
+    if (!(near.d2 < reach * reach)) {
+        // rays out of the box by its nearest sides (short rays meet few nodes), each a little
+        // off the axis so that it does not run along the mesh's axis-aligned edges
+        double exit[6];
+        for (int k = 0; k < 3; ++k) {
+            exit[2 * k] = b[3 + k] - (&p.x)[k];
+            exit[2 * k + 1] = (&p.x)[k] - b[k];
+        }
+        const double pad = margin + 1e-3 * std::sqrt(dot(V3{b[3] - b[0], b[4] - b[1], b[5] - b[2]},
+                                                         V3{b[3] - b[0], b[4] - b[1], b[5] - b[2]}));
+        int in = -1;
+        bool tried[6] = {false, false, false, false, false, false};
+        for (int attempt = 0; attempt < 3 && in < 0; ++attempt) {
+            int side = -1;
+            for (int k = 0; k < 6; ++k)
+                if (!tried[k] && (side < 0 || exit[k] < exit[side])) side = k;
+            tried[side] = true;
+            const int axis = side / 2;
+            V3 dir{0.0123, 0.0317, 0.0211};
+            (&dir.x)[axis] = side % 2 == 0 ? 1.0 : -1.0;
+            in = inside_by_ray(v, root, p, p + (exit[side] + 2.0 * pad) * dir);
+        }
+        if (in == 0) return out;
+        near = nearest(v, root, p);
+    }
     const V3 off = p - near.x;
     const bool inside = dot(off, near.n) < 0.0;
     if (!inside && !(near.d2 < margin * margin)) return out;
