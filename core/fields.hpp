@@ -155,7 +155,8 @@
     F(colliders, rotation, collider_rotation, f64, (C, 3, 3), none, "",                           \
       "collider orientations at t = 0; a plane's normal is column 1")                             \
     F(colliders, size, collider_size, f64, (C, 3), none, "m",                                     \
-      "box half-extents or sphere radius (repeated)")                                             \
+      "box half-extents, sphere radius (repeated), or a mesh's bounding-box "                      \
+      "half-extents")                                                                             \
     F(colliders, restitution, collider_restitution, f64, (C), none, "",                           \
       "restitution of each collider")                                                             \
     F(colliders, friction, collider_friction, f64, (C), none, "",                                 \
