@@ -9,7 +9,6 @@ sphere by its radius, a plane by the local +y axis as its normal (the allowed si
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
@@ -166,6 +165,10 @@ class ColliderMesh(_ColliderBase):
     it, is put back where its path entered, ``margin`` [m] outside the surface (default
     ``1e-4`` of the mesh's bounding-box diagonal). Soft vertices against the mesh only:
     mesh edges against soft edges are not computed.
+
+    After construction, ``mesh`` is the checked (welded, outward-wound) TriMesh, ``name``
+    the file it came from (or "mesh"), and ``data`` its arrays for the core
+    (:class:`softbody.collision.mesh_collider.MeshColliderData`).
     """
 
     mesh: Any = None
@@ -194,7 +197,6 @@ class ColliderMesh(_ColliderBase):
             object.__setattr__(self, key, value)
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "data", data)
-        object.__setattr__(self, "source", os.fspath(mesh) if name != "mesh" else None)
 
     def __repr__(self) -> str:
         return (
