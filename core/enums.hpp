@@ -14,7 +14,7 @@
 #define SOFTBODY_ENUM_VOLUME_METHOD(X)                                                       \
     X(EXACT, 0) X(BOUNDING_BOX, 1) X(BOUNDING_SPHERE, 2) X(BOUNDING_ELLIPSOID, 3)           \
     X(MONTE_CARLO, 4)
-#define SOFTBODY_ENUM_COLLIDER_KIND(X) X(PLANE, 0) X(BOX_CONTAINER, 1) X(SPHERE, 2) X(BOX, 3)
+#define SOFTBODY_ENUM_COLLIDER_KIND(X) X(PLANE, 0) X(BOX_CONTAINER, 1) X(SPHERE, 2) X(BOX, 3) X(MESH, 4)
 #define SOFTBODY_ENUM_MOTION_KIND(X)                                                         \
     X(STATIC, 0) X(ROTATION, 1) X(TRANSLATION, 2) X(OSCILLATION, 3)
 // soft-soft contacts (ModelBuilder.set_soft_contact's mode)

@@ -27,7 +27,10 @@
     X(I, inflators, count, inflator_body)         \
     X(Q, inflators, table_count, inflator_time)   \
     X(H, bending, count, bending_hinges)          \
-    X(Tm, membranes, count, membrane_indices)
+    X(Tm, membranes, count, membrane_indices)     \
+    X(CV, collider_meshes, vertex_count, collider_mesh_vertices) \
+    X(CT, collider_meshes, tri_count, collider_mesh_triangles)   \
+    X(CN, collider_meshes, node_count, collider_mesh_node_children)
 
 #define SOFTBODY_FIELDS_PARTICLES(F)                                                              \
     F(particles, mass, particle_mass, f64, (N), none, "kg",                                       \
@@ -153,7 +156,8 @@
     F(colliders, rotation, collider_rotation, f64, (C, 3, 3), none, "",                           \
       "collider orientations at t = 0; a plane's normal is column 1")                             \
     F(colliders, size, collider_size, f64, (C, 3), none, "m",                                     \
-      "box half-extents or sphere radius (repeated)")                                             \
+      "box half-extents, sphere radius (repeated), or a mesh's bounding-box "                      \
+      "half-extents")                                                                             \
     F(colliders, restitution, collider_restitution, f64, (C), none, "",                           \
       "restitution of each collider")                                                             \
     F(colliders, friction, collider_friction, f64, (C), none, "",                                 \
@@ -165,7 +169,35 @@
     F(colliders, motion_pivot, collider_motion_pivot, f64, (C, 3), none, "m",                     \
       "pivot of rotating colliders")                                                              \
     F(colliders, motion_frequency, collider_motion_frequency, f64, (C), none, "Hz",               \
-      "frequency of oscillating colliders")
+      "frequency of oscillating colliders")                                                       \
+    F(colliders, mesh_range, collider_mesh_range, i64, (C, 2), range(CT), "",                     \
+      "[begin, end) rows of collider_mesh_triangles of each mesh collider; empty for the others") \
+    F(colliders, mesh_root, collider_mesh_root, i64, (C), index(-1, CN), "",                      \
+      "root row of each mesh collider's bounding-volume tree; -1 for the others")                \
+    F(colliders, mesh_margin, collider_mesh_margin, f64, (C), finite_nonneg, "m",                 \
+      "distance outside its surface a mesh collider puts the particles it catches; 0 for the "   \
+      "others")
+
+// Mesh colliders' triangles in their collider's local frame (core/collision/mesh.hpp): the
+// vertices and triangles of every mesh collider, each collider's rows one block, its
+// triangles in the order of its tree's leaves.
+#define SOFTBODY_FIELDS_COLLIDER_MESHES(F)                                                        \
+    F(collider_meshes, vertices, collider_mesh_vertices, f64, (CV, 3), finite, "m",               \
+      "mesh collider vertices in their collider's local frame")                                   \
+    F(collider_meshes, triangles, collider_mesh_triangles, i64, (CT, 3), index(0, CV), "",        \
+      "vertex rows of each mesh collider triangle, outward-wound")                                \
+    F(collider_meshes, vertex_normals, collider_mesh_vertex_normals, f64, (CV, 3), finite, "",    \
+      "angle-weighted pseudo-normal of each mesh collider vertex (unit)")                         \
+    F(collider_meshes, edge_normals, collider_mesh_edge_normals, f64, (CT, 3, 3), finite, "",     \
+      "pseudo-normal (unit mean of its two faces' normals) of each triangle's edges (corner k "  \
+      "to corner k + 1)")                                                                         \
+    F(collider_meshes, node_children, collider_mesh_node_children, i64, (CN, 2), index(0, CN),    \
+      "",                                                                                         \
+      "the two child rows of each inner tree node (after its own row); 0 0 for a leaf")          \
+    F(collider_meshes, node_tris, collider_mesh_node_tris, i64, (CN, 2), range(CT), "",           \
+      "[begin, end) triangle rows of each leaf; empty for an inner node")                         \
+    F(collider_meshes, node_bounds, collider_mesh_node_bounds, f64, (CN, 2, 3), finite, "m",      \
+      "lower and upper corner of each tree node's box, in the local frame")
 
 #define SOFTBODY_FIELDS_VENTS(F)                                                                  \
     F(vents, body, vent_body, i64, (V), index(0, B), "",                                          \
@@ -244,6 +276,8 @@
     P(Drag, drag, SOFTBODY_FIELDS_DRAG, )                                         \
     P(SoftContacts, soft_contacts, SOFTBODY_FIELDS_SOFT_CONTACTS, )               \
     P(Colliders, colliders, SOFTBODY_FIELDS_COLLIDERS, index count = 0;)          \
+    P(ColliderMeshes, collider_meshes, SOFTBODY_FIELDS_COLLIDER_MESHES,           \
+      index vertex_count = 0; index tri_count = 0; index node_count = 0;)         \
     P(Vents, vents, SOFTBODY_FIELDS_VENTS, index count = 0;)                      \
     P(Orifices, orifices, SOFTBODY_FIELDS_ORIFICES, index count = 0;)             \
     P(Inflators, inflators, SOFTBODY_FIELDS_INFLATORS, index count = 0; index table_count = 0;) \

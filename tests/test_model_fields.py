@@ -5,7 +5,8 @@ that table.
 Reference: the table itself. Every field it declares is a field of the Python
 ``softbody.Model`` of the declared type and shape (in the counts N, S, A, T, B, M, K, P,
 C, H of the model), on models that have every part (the every-term model, the surface
-contacts' two balls, a scene with colliders, a ball and a cloth with material bending);
+contacts' two balls, a scene with colliders, a ball and a cloth with material bending,
+a ball with mesh colliders);
 and a field's declared check refuses a value that breaks it, naming the field.
 """
 
@@ -34,6 +35,8 @@ def _counts(model: sb.Model) -> dict[str, int]:
         "I": len(model.inflator_body), "Q": len(model.inflator_time),
         "H": len(model.bending_hinges),
         "Tm": model.membrane_count,
+        "CV": len(model.collider_mesh_vertices), "CT": len(model.collider_mesh_triangles),
+        "CN": len(model.collider_mesh_node_children),
     }  # fmt: skip
 
 
@@ -48,6 +51,17 @@ def _bending_model() -> sb.Model:
     return b.finalize()
 
 
+def _mesh_collider_model() -> sb.Model:
+    """A ball above a box and a sphere given as triangle meshes, beside an analytic box."""
+    b = sb.ModelBuilder()
+    b.add_soft_body(sb.icosphere(1, center=(0.0, 2.0, 0.0)), mass=1.0, stiffness=100.0,
+                    damping=0.1, gas=10.0)  # fmt: skip
+    b.add_collider(sb.ColliderMesh(sb.box((2.0, 0.5, 2.0))))
+    b.add_collider(sb.ColliderBox(center=(3.0, 0.0, 0.0)))
+    b.add_collider(sb.ColliderMesh(sb.icosphere(2, center=(-3.0, 0.0, 0.0))))
+    return b.finalize()
+
+
 def _models():
     yield "every-term", build_case("every-term", "midpoint")[0]
     yield "surface-two-balls", build_case("surface-two-balls", "midpoint")[0]
@@ -58,6 +72,7 @@ def _models():
                           membrane=[(sb.Membrane.neo_hookean(1e5, 1e-3), None),
                                     (sb.Membrane.stvk(1e6, 0.3, 1e-4), [0, 5])])  # fmt: skip
     yield "membranes", builder.finalize()
+    yield "mesh-colliders", _mesh_collider_model()
 
 
 def test_python_fields_are_generated_from_the_table():
@@ -129,6 +144,14 @@ def test_model_fields_have_the_declared_type_and_shape(name, model):
          "bending_hinges holds"),
         ("bending_body", lambda m: np.full_like(m.bending_body, m.body_count),
          "bending_body holds"),
+        ("collider_mesh_triangles", lambda m: m.collider_mesh_triangles + 1000,
+         "collider_mesh_triangles holds"),
+        ("collider_mesh_root", lambda m: np.full_like(m.collider_mesh_root, -1),
+         "collider 0 is a mesh collider without a tree"),
+        ("collider_mesh_node_children", lambda m: np.zeros_like(m.collider_mesh_node_children),
+         "collider_mesh_node_children row 0 must name rows after it"),
+        ("collider_mesh_range", lambda m: m.collider_mesh_range[:, ::-1].copy(),
+         "collider_mesh_range row 0 is not a range"),
     ],
 )  # fmt: skip
 def test_a_field_that_breaks_its_declared_check_is_refused(field, value, message):
@@ -136,6 +159,8 @@ def test_a_field_that_breaks_its_declared_check_is_refused(field, value, message
     shape) refuses a bad value with a ValueError naming the field."""
     if field.startswith("bending"):
         model = _bending_model()
+    elif field.startswith("collider_mesh"):
+        model = _mesh_collider_model()
     else:
         model = build_case("every-term", "midpoint")[0]
     bad = dataclasses.replace(model, **{field: value(model)})

@@ -55,6 +55,18 @@ private:
             if (m.bodies.tri_range[2 * b + 1] > m.bodies.tri_range[2 * b] && p1 == p0)
                 fail("body " + std::to_string(b) + " has triangles but no particles");
         }
+        // a mesh collider has a tree, whose inner nodes' children come after them (no cycle)
+        for (Index k = 0; k < m.colliders.count; ++k)
+            if (m.colliders.kind[k] == ColliderKind::MESH && m.colliders.mesh_root[k] < 0)
+                fail("collider " + std::to_string(k) + " is a mesh collider without a tree " +
+                     "(collider_mesh_root -1)");
+        for (Index n = 0; n < m.collider_meshes.node_count; ++n) {
+            const Index* tris = m.collider_meshes.node_tris + 2 * n;
+            const Index* child = m.collider_meshes.node_children + 2 * n;
+            if (tris[1] == tris[0] && (child[0] <= n || child[1] <= n))
+                fail("collider_mesh_node_children row " + std::to_string(n) +
+                     " must name rows after it");
+        }
         if (m.soft_contacts.mode == SoftContactMode::SURFACE) {
             // the surface contacts' grid: cells of a positive, finite size
             if (!(std::isfinite(m.soft_contacts.cell_size) && m.soft_contacts.cell_size > 0.0))

@@ -238,14 +238,26 @@ struct Seen {
     }
 };
 
+}  // namespace softbody::SOFTBODY_KERNELS::colliders
+
+namespace softbody::SOFTBODY_KERNELS::mesh_collider {
+// collision/mesh.hpp (included at the end of this file)
+inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc, double e,
+                     double keep, double dt, const double* q_start, double* q, double* qd, V3& j,
+                     colliders::Seen* seen);
+}  // namespace softbody::SOFTBODY_KERNELS::mesh_collider
+
+namespace softbody::SOFTBODY_KERNELS::colliders {
+
 /// Resolve every particle against every collider, in collider order. q_start (N, 3) holds
 /// the positions at the start of the step; q, qd (N, 3) change in place; impulse (C, 3)
 /// [N s] accumulates what each collider receives. A plane (the ground of most scenes)
 /// has a loop of its own: one dot product per particle, no path to trace. With `seen`,
-/// the particles a collider moved are added to it.
+/// the particles a collider moved are added to it. dt [s]: the step (a mesh collider's
+/// pose at the step's start, for its continuous test; collision/mesh.hpp).
 inline void contacts(const Model& m, const double* cq, const double* crot, const double* cv,
                      const double* cw, const double* q_start, double* q, double* qd,
-                     double* impulse, Seen* seen = nullptr) {
+                     double* impulse, Seen* seen = nullptr, double dt = 0.0) {
     for (index k = 0; k < m.colliders.count; ++k) {
         const index kind = m.colliders.kind[k];
         const V3 center = load(cq, k);
@@ -280,6 +292,9 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
                 respond(m, i, hit, vc + cross(wc, hit.x - center), e, keep, q, qd, j);
                 if (seen != nullptr) seen->add(load(q, i), load(qd, i));
             }
+        } else if (kind == ColliderKind::MESH) {
+            mesh_collider::contacts(m, k, center, rot, vc, wc, e, keep, dt, q_start, q, qd, j,
+                                    seen);
         } else {
             for (index i = 0; i < m.particles.count; ++i) {
                 if (m.particles.inv_mass[i] == 0.0) continue;
@@ -295,3 +310,5 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::colliders
+
+#include "collision/mesh.hpp"

@@ -122,7 +122,7 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
     }
     if (m.colliders.count > 0)
         colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
-                            s.q, s.qd, s.collider_impulse, seen);
+                            s.q, s.qd, s.collider_impulse, seen, p.dt);
     return 0;
 }
 

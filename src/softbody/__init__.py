@@ -7,6 +7,7 @@ ideal gas inside whose pressure pushes every face outward along its normal.
 from softbody.bending import Bending
 from softbody.collision import (
     ColliderBox,
+    ColliderMesh,
     ColliderPlane,
     ColliderSphere,
     MotionOscillation,
@@ -65,6 +66,7 @@ __all__ = [
     "GAS_CONSTANT",
     "Bending",
     "ColliderBox",
+    "ColliderMesh",
     "ColliderPlane",
     "ColliderSphere",
     "Control",

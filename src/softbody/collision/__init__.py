@@ -3,6 +3,7 @@
 from softbody.collision.colliders import (
     ColliderBox,
     ColliderKind,
+    ColliderMesh,
     ColliderPlane,
     ColliderSphere,
     MotionOscillation,
@@ -15,6 +16,7 @@ from softbody.collision.colliders import (
 __all__ = [
     "ColliderBox",
     "ColliderKind",
+    "ColliderMesh",
     "ColliderPlane",
     "ColliderSphere",
     "MotionOscillation",

@@ -1,4 +1,5 @@
-"""Rigid colliders (ground plane, box container, solid boxes and spheres) and their motions.
+"""Rigid colliders (ground plane, box container, solid boxes and spheres, closed triangle
+meshes) and their motions.
 
 Colliders are rigid, infinitely massive shapes that particles may not enter. Each is
 static, follows a prescribed motion, or is driven per call through ``Control`` (a ball
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -22,6 +24,7 @@ class ColliderKind(IntEnum):
     BOX_CONTAINER = 1  # closed box: particles stay inside
     SPHERE = 2  # solid sphere: particles stay outside
     BOX = 3  # solid box: particles stay outside
+    MESH = 4  # closed triangle mesh: particles stay outside
 
 
 class SoftContactMode(IntEnum):
@@ -146,7 +149,63 @@ class ColliderSphere(_ColliderBase):
     radius: float = 0.5
 
 
-Collider = ColliderPlane | ColliderBox | ColliderSphere
+@dataclass(frozen=True, init=False, eq=False)
+class ColliderMesh(_ColliderBase):
+    """Any closed triangle mesh as a solid collider: particles stay outside it.
+
+    ``mesh`` is a :class:`~softbody.TriMesh`, a ``trimesh.Trimesh`` or the path of a mesh
+    file (read with the project's loader). It must be one closed, consistently wound,
+    non-self-intersecting surface: anything else raises ValueError naming the file (or
+    "mesh"). Duplicate vertices are welded and an inward-wound mesh is turned outward.
+
+    The mesh is placed as given: its pose is ``center`` [m] (default: the centre of its
+    bounding box, where the mesh already is) and ``rotation`` (3, 3) about that centre;
+    ``motion`` and ``Control.collider_target`` move that centre as for the other
+    colliders. A particle that enters it during a step, or passes through a thin part of
+    it, is put back where its path entered, ``margin`` [m] outside the surface (default
+    ``1e-4`` of the mesh's bounding-box diagonal). Soft vertices against the mesh only:
+    mesh edges against soft edges are not computed.
+
+    After construction, ``mesh`` is the checked (welded, outward-wound) TriMesh, ``name``
+    the file it came from (or "mesh"), and ``data`` its arrays for the core
+    (:class:`softbody.collision.mesh_collider.MeshColliderData`).
+    """
+
+    mesh: Any = None
+    center: ArrayLike | None = None
+    rotation: ArrayLike | None = None
+    margin: float | None = None
+
+    def __init__(
+        self,
+        mesh: Any,
+        *,
+        restitution: float = 0.5,
+        friction: float = 0.1,
+        motion: Motion = None,
+        center: ArrayLike | None = None,
+        rotation: ArrayLike | None = None,
+        margin: float | None = None,
+    ) -> None:
+        from softbody.collision.mesh_collider import checked_mesh, mesh_collider_data
+
+        checked, name = checked_mesh(mesh)
+        data = mesh_collider_data(checked)
+        for key, value in (("restitution", restitution), ("friction", friction),
+                           ("motion", motion), ("center", center), ("rotation", rotation),
+                           ("margin", margin), ("mesh", checked)):  # fmt: skip
+            object.__setattr__(self, key, value)
+        object.__setattr__(self, "name", name)
+        object.__setattr__(self, "data", data)
+
+    def __repr__(self) -> str:
+        return (
+            f"ColliderMesh({self.name}: {len(self.data.vertices)} vertices, "
+            f"{len(self.data.triangles)} triangles)"
+        )
+
+
+Collider = ColliderPlane | ColliderBox | ColliderSphere | ColliderMesh
 
 
 @dataclass
@@ -163,11 +222,22 @@ class ColliderArrays:
     motion_vector: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     motion_pivot: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     motion_frequency: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    mesh_range: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    mesh_root: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    mesh_margin: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    mesh_vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    mesh_triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    mesh_vertex_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    mesh_edge_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    mesh_node_children: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    mesh_node_tris: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    mesh_node_bounds: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
 
 
 def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
     """Validate ``colliders`` and flatten them into arrays."""
     rows = []
+    meshes = []
     for k, col in enumerate(colliders):
         name = f"collider {k}"
         restitution = _coefficient(f"{name} restitution", col.restitution)
@@ -199,6 +269,20 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
                 raise ValueError(f"{name} radius must be finite and > 0, got {col.radius!r}")
             size = np.array([r, r, r])
             rotation = np.eye(3)
+        elif isinstance(col, ColliderMesh):
+            kind = ColliderKind.MESH
+            data = col.data
+            center = data.center if col.center is None else _vec3(f"{name} center", col.center)
+            size = data.half_extents.copy()
+            rotation = _rotation(col.rotation)
+            margin = (
+                1e-4 * 2.0 * float(np.linalg.norm(data.half_extents))
+                if col.margin is None
+                else float(col.margin)
+            )
+            if not (np.isfinite(margin) and margin > 0):
+                raise ValueError(f"{name} margin must be finite and > 0, got {col.margin!r}")
+            meshes.append((k, data, margin))
         else:
             raise TypeError(f"{name}: not a collider: {type(col).__name__}")
         motion, vector, pivot, freq = MotionKind.STATIC, np.zeros(3), center.copy(), 0.0
@@ -224,6 +308,34 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
     if not rows:
         return ColliderArrays()
     cols = list(zip(*rows, strict=True))
+    count = len(rows)
+    mesh_range = np.zeros((count, 2), np.int64)
+    mesh_root = np.full(count, -1, np.int64)
+    mesh_margin = np.zeros(count)
+    parts: dict[str, list[np.ndarray]] = {key: [] for key in (
+        "vertices", "triangles", "vertex_normals", "edge_normals", "node_children",
+        "node_tris", "node_bounds")}  # fmt: skip
+    nv = nt = nn = 0
+    for k, data, margin in meshes:
+        inner = data.node_tris[:, 1] == data.node_tris[:, 0]
+        mesh_range[k] = (nt, nt + len(data.triangles))
+        mesh_root[k] = nn
+        mesh_margin[k] = margin
+        parts["vertices"].append(data.vertices)
+        parts["triangles"].append(data.triangles + nv)
+        parts["vertex_normals"].append(data.vertex_normals)
+        parts["edge_normals"].append(data.edge_normals)
+        parts["node_children"].append(np.where(inner[:, None], data.node_children + nn, 0))
+        parts["node_tris"].append(np.where(inner[:, None], 0, data.node_tris + nt))
+        parts["node_bounds"].append(data.node_bounds)
+        nv, nt, nn = nv + len(data.vertices), nt + len(data.triangles), nn + len(data.node_tris)
+    empty = ColliderArrays()
+
+    def joined(key: str) -> np.ndarray:
+        if not parts[key]:
+            return getattr(empty, f"mesh_{key}")
+        return np.ascontiguousarray(np.concatenate(parts[key]))
+
     return ColliderArrays(
         kind=np.array(cols[0], dtype=np.int64),
         center=np.array(cols[1]),
@@ -235,4 +347,14 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
         motion_vector=np.array(cols[7]),
         motion_pivot=np.array(cols[8]),
         motion_frequency=np.array(cols[9], dtype=np.float64),
+        mesh_range=mesh_range,
+        mesh_root=mesh_root,
+        mesh_margin=mesh_margin,
+        mesh_vertices=joined("vertices"),
+        mesh_triangles=joined("triangles"),
+        mesh_vertex_normals=joined("vertex_normals"),
+        mesh_edge_normals=joined("edge_normals"),
+        mesh_node_children=joined("node_children"),
+        mesh_node_tris=joined("node_tris"),
+        mesh_node_bounds=joined("node_bounds"),
     )

@@ -13,6 +13,7 @@ simulated second, frame k at time code ``start_frame + k``)::
             /box_<c>             Cube of size 2 scaled by the half-extents (a solid box)
             /container_<c>       the same for a box that holds the bodies, 15% opaque
             /sphere_<c>          Sphere of the collider's radius
+            /mesh_<c>            Mesh: a mesh collider's triangles in its local frame
 
 Colliders are placed by ``xformOp:translate`` (the collider's centre) and
 ``xformOp:orient`` (its rotation, a quaternion); a collider that moves has them sampled at
@@ -39,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from softbody.collision.colliders import ColliderKind
+from softbody.collision.mesh_collider import collider_mesh
 from softbody.sim.model import Model
 
 #: Opacity of a container box (the bodies are seen through it).
@@ -211,6 +213,14 @@ def write_usd(
             geom.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
             geom.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
             geom.CreateExtentAttr(vec3([(-h, 0, -h), (h, 0, h)]))
+        elif kind == ColliderKind.MESH:  # its triangles in its local frame
+            local, tris = collider_mesh(model, k)
+            geom = UsdGeom.Mesh.Define(stage, where)
+            geom.CreatePointsAttr(vec3(local))
+            geom.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(tris)))
+            geom.CreateFaceVertexIndicesAttr(Vt.IntArray(tris.reshape(-1).tolist()))
+            geom.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+            geom.CreateExtentAttr(vec3([local.min(axis=0), local.max(axis=0)]))
         elif kind == ColliderKind.SPHERE:
             geom = UsdGeom.Sphere.Define(stage, where)
             geom.CreateRadiusAttr(float(size[0]))

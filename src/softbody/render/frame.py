@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from softbody.collision.colliders import ColliderKind
+from softbody.collision.mesh_collider import collider_mesh
 from softbody.mesh.generators import icosphere
 from softbody.mesh.topology import unique_edges
 from softbody.render.raster import Camera, clear, downsample, draw_lines, draw_triangles
@@ -226,6 +227,11 @@ class FrameRenderer:
                     self._sphere.faces,
                     _shade(v, self._sphere.faces, np.array([0.55, 0.55, 0.58]), False),
                 )
+            elif kind == ColliderKind.MESH:
+                local, tris = collider_mesh(model, c)
+                v = (center + local @ rot.T)[tris].reshape(-1, 3)  # flat: corners apart
+                flat = np.arange(len(v)).reshape(-1, 3)
+                add_mesh(v, flat, _shade(v, flat, np.array([0.6, 0.6, 0.62]), False))
             else:
                 corners = center + (BOX_CORNERS * size) @ rot.T
                 add_lines(corners[BOX_EDGES], np.array([0.25, 0.27, 0.3]))

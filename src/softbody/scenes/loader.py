@@ -27,6 +27,7 @@ from softbody import limits
 from softbody.bending import Bending
 from softbody.collision.colliders import (
     ColliderBox,
+    ColliderMesh,
     ColliderPlane,
     ColliderSphere,
     MotionOscillation,
@@ -264,6 +265,16 @@ def _mesh(spec: schema.BaseModel, where: str, base: Path | None) -> TriMesh:
         }
         mesh = makers[type(spec)](**args)
     return mesh.reordered() if spec.reorder else mesh
+
+
+def _collider_mesh(spec: schema.MeshCollider, base: Path | None) -> TriMesh | Path:
+    """A mesh collider's mesh: a file's path (relative to the scene's folder; ColliderMesh
+    reads and checks it, naming it), or the generated or built-in mesh."""
+    file = spec.file if spec.file is not None else getattr(spec.mesh, "file", None)
+    if file is not None:
+        path = Path(file)
+        return base / path if not path.is_absolute() and base is not None else path
+    return _mesh(spec.mesh, "mesh", base)
 
 
 def _bending(spec: schema.MaterialBending | None) -> Bending | None:
@@ -536,9 +547,17 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
                 container=col.container,
                 **common,
             )
-        else:
-            made = ColliderSphere(center=col.center, radius=col.radius, **common)
         try:
+            if isinstance(col, schema.Sphere):
+                made = ColliderSphere(center=col.center, radius=col.radius, **common)
+            elif isinstance(col, schema.MeshCollider):
+                made = ColliderMesh(
+                    _collider_mesh(col, base),
+                    center=col.center,
+                    rotation=_rotation(col.rotation),
+                    margin=col.margin,
+                    **common,
+                )
             builder.add_collider(made)
         except ValueError as exc:
             raise SceneError(f"colliders.{c}: {exc}") from None

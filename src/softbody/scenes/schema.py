@@ -825,10 +825,42 @@ class Sphere(_ColliderBase):
     radius: Real = Field(gt=0, description="radius [m]")
 
 
+class MeshCollider(_ColliderBase):
+    """Solid closed triangle mesh: a mesh file, or a generated shape table like the bodies'
+    ``mesh``. It must be one closed surface that does not cross itself."""
+
+    type: Literal["mesh"]
+    file: Text | None = Field(
+        None,
+        min_length=1,
+        max_length=4096,
+        description="path of the mesh file, relative to the scene file's folder",
+    )
+    mesh: Mesh | None = Field(None, description="a generated, built-in or file mesh table")
+    center: Vec3 | None = Field(
+        None, description="where the mesh's bounding-box centre goes [m] (default: as given)"
+    )
+    rotation: Rotation | None = None
+    margin: Real | None = Field(
+        None,
+        gt=0,
+        le=1e6,
+        description="how far outside the surface caught vertices are put [m] "
+        "(default: 1e-4 of the mesh's bounding-box diagonal)",
+    )
+
+    @model_validator(mode="after")
+    def _one_mesh(self) -> MeshCollider:
+        if (self.file is None) == (self.mesh is None):
+            raise _error("field", "give exactly one of file or mesh", field="file")
+        return self
+
+
 Collider = Annotated[
     Annotated[Plane, Tag("type=plane")]
     | Annotated[BoxCollider, Tag("type=box")]
-    | Annotated[Sphere, Tag("type=sphere")],
+    | Annotated[Sphere, Tag("type=sphere")]
+    | Annotated[MeshCollider, Tag("type=mesh")],
     _tagged("type"),
 ]
 
@@ -1081,6 +1113,15 @@ def check_sizes(spec: SceneSpec) -> None:
                     f"each line against every triangle), got {body.monte_carlo_samples}"
                 )
     _guard_mesh("bodies", total_vertices, total_faces)
+    for c, col in enumerate(spec.colliders):
+        if isinstance(col, MeshCollider) and col.mesh is not None:
+            counts = {
+                k: max(v) if isinstance(v, tuple) else v
+                for k, v in col.mesh
+                if k in ("subdivisions", "rings", "segments", "resolution")
+            }
+            size_key = max(counts, key=counts.get) if counts else "shape"
+            _guard_mesh(f"colliders.{c}.mesh.{size_key}", *_mesh_count(col.mesh))
     r = spec.render
     limits.check_memory(
         "render.width", BYTES_PER_PIXEL * r.width * r.height, f"{r.width} x {r.height} frames"

@@ -656,7 +656,8 @@ class ModelBuilder:
 
     # -- contacts ------------------------------------------------------------------------
     def add_collider(self, collider: Collider) -> int:
-        """Add a rigid collider (``ColliderPlane``, ``ColliderBox``, ``ColliderSphere``);
+        """Add a rigid collider (``ColliderPlane``, ``ColliderBox``, ``ColliderSphere``,
+        ``ColliderMesh``);
         returns its index. Parameters are checked at ``finalize``."""
         collider_arrays([collider])  # validate now, so the error points at this call
         self._colliders.append(collider)
@@ -1023,6 +1024,16 @@ class ModelBuilder:
             collider_motion_vector=colliders.motion_vector,
             collider_motion_pivot=colliders.motion_pivot,
             collider_motion_frequency=colliders.motion_frequency,
+            collider_mesh_range=colliders.mesh_range,
+            collider_mesh_root=colliders.mesh_root,
+            collider_mesh_margin=colliders.mesh_margin,
+            collider_mesh_vertices=colliders.mesh_vertices,
+            collider_mesh_triangles=colliders.mesh_triangles,
+            collider_mesh_vertex_normals=colliders.mesh_vertex_normals,
+            collider_mesh_edge_normals=colliders.mesh_edge_normals,
+            collider_mesh_node_children=colliders.mesh_node_children,
+            collider_mesh_node_tris=colliders.mesh_node_tris,
+            collider_mesh_node_bounds=colliders.mesh_node_bounds,
             body_drag_coefficient=np.array([b.drag_coefficient for b in bodies], dtype=np.float64),
             air_density=float(self.air_density),
             wind=self.wind.copy(),

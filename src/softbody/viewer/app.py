@@ -27,6 +27,7 @@ from collections import deque
 import numpy as np
 
 from softbody.collision.colliders import ColliderKind
+from softbody.collision.mesh_collider import collider_mesh
 from softbody.diagnostics import body_pressure, body_volume
 from softbody.errors import SimulationError, StabilityWarning
 from softbody.gas import GasLaw
@@ -136,6 +137,9 @@ def _with_user_ball(model: Model, state: State) -> tuple[Model, State, int]:
         collider_motion_vector=append("collider_motion_vector", np.zeros(3)),
         collider_motion_pivot=append("collider_motion_pivot", park),
         collider_motion_frequency=append("collider_motion_frequency", 0.0),
+        collider_mesh_range=append("collider_mesh_range", [0, 0]),
+        collider_mesh_root=append("collider_mesh_root", -1),
+        collider_mesh_margin=append("collider_mesh_margin", 0.0),
     )
     state = State(
         state.particle_q.copy(),
@@ -392,6 +396,17 @@ class Viewer:
                     radius=float(size[0]),
                     color=(150, 150, 160) if c != self.ball else (200, 90, 60),
                     position=tuple(center),
+                )
+            elif kind == ColliderKind.MESH:
+                local, tris = collider_mesh(model, c)
+                node = scene.add_mesh_simple(
+                    f"/colliders/{c}",
+                    vertices=local.astype(np.float32),
+                    faces=tris.astype(np.uint32),
+                    color=(160, 160, 165),
+                    flat_shading=True,
+                    position=tuple(center),
+                    wxyz=tuple(_quaternion(rot)),
                 )
             elif kind == ColliderKind.BOX:
                 node = scene.add_box(
@@ -902,7 +917,7 @@ class Viewer:
                 kind = int(model.collider_kind[c])
                 if kind == ColliderKind.BOX_CONTAINER:
                     node.points = self._box_lines(c)
-                elif kind in (ColliderKind.SPHERE, ColliderKind.BOX):
+                elif kind in (ColliderKind.SPHERE, ColliderKind.BOX, ColliderKind.MESH):
                     node.position = tuple(state.collider_q[c])
                     node.wxyz = tuple(_quaternion(state.collider_rotation[c]))
             self._push_overlays(model, state)

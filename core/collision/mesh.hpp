@@ -1,0 +1,365 @@
+// Mesh colliders: any closed, outward-wound triangle mesh as a rigid collider, particles
+// against its triangles. The triangles are stored in the collider's local frame (its pose
+// is the collider's centre and rotation) with a bounding-volume tree over them, built once
+// in Python (softbody.collision.mesh_collider). Per particle and step:
+//   1. continuous: the particle's path of this step relative to the collider (from its start
+//      position in the collider's frame at the step's start to its end position in the frame
+//      at the step's end) is traced through the tree; the first triangle it enters through
+//      (from the front) catches it, even where the path went on through a thin part;
+//   2. otherwise an inside test at the end position: the closest point on the mesh, and the
+//      sign of the offset against the angle-weighted pseudo-normal of the closest feature
+//      (face, edge or vertex; Baerentzen & Aanaes 2005) says inside. The search is bounded
+//      by the path's length plus the margin (a point it cannot reach is farther from the
+//      surface than its path: outside, unless it started inside); beyond that bound a ray's
+//      crossing parity decides, so a vertex deep inside (placed there) is still pushed out. A particle outside but
+//      within the margin of the surface and approaching it is a resting contact: caught too
+//      (so that a body at rest feels the friction every step, as on the analytic colliders).
+// A caught particle goes to the surface point plus `margin` along the contact normal (so
+// that its next path starts strictly outside) and responds as against the analytic
+// colliders (colliders::respond): restitution, friction, the opposite impulse to the
+// collider. Vertices of the soft bodies against the mesh only: mesh edges against soft
+// edges are not computed.
+#pragma once
+
+#include <limits>
+
+#include "collision/colliders.hpp"
+#include "model.hpp"
+#include "vec.hpp"
+
+namespace softbody::SOFTBODY_KERNELS::mesh_collider {
+
+constexpr int kStack = 96;  // tree depth bound; the median split keeps it near log2(T)
+
+/// R^T d: a world vector d in the frame whose axes are the columns of r (3, 3).
+inline V3 to_local(const double* r, V3 d) {
+    return {r[0] * d.x + r[3] * d.y + r[6] * d.z, r[1] * d.x + r[4] * d.y + r[7] * d.z,
+            r[2] * d.x + r[5] * d.y + r[8] * d.z};
+}
+
+/// R l: a local vector l in world coordinates.
+inline V3 to_world(const double* r, V3 l) {
+    return {r[0] * l.x + r[1] * l.y + r[2] * l.z, r[3] * l.x + r[4] * l.y + r[5] * l.z,
+            r[6] * l.x + r[7] * l.y + r[8] * l.z};
+}
+
+inline V3 unit(V3 a) {
+    const double n = std::sqrt(dot(a, a));
+    return n > 0.0 ? (1.0 / n) * a : a;
+}
+
+/// Squared distance from p to the box [lo, hi].
+inline double box_distance2(const double* b, V3 p) {
+    double d2 = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        const double x = (&p.x)[k];
+        const double e = x < b[k] ? b[k] - x : (x > b[3 + k] ? x - b[3 + k] : 0.0);
+        d2 += e * e;
+    }
+    return d2;
+}
+
+/// Whether the segment a + s (b - a), s in [0, s_max], meets the box [lo, hi] (slabs).
+inline bool segment_meets_box(const double* box, V3 a, V3 b, double s_max) {
+    double s0 = 0.0, s1 = s_max;
+    for (int k = 0; k < 3; ++k) {
+        const double o = (&a.x)[k], d = (&b.x)[k] - o, lo = box[k], hi = box[3 + k];
+        if (d == 0.0) {
+            if (o < lo || o > hi) return false;
+            continue;
+        }
+        double t0 = (lo - o) / d, t1 = (hi - o) / d;
+        if (t0 > t1) std::swap(t0, t1);
+        s0 = std::max(s0, t0);
+        s1 = std::min(s1, t1);
+        if (s0 > s1) return false;
+    }
+    return true;
+}
+
+/// Closest point to p on triangle (a, b, c) (Ericson, Real-Time Collision Detection 5.1.5),
+/// and its feature: 0, 1, 2 a corner; 3, 4, 5 the edge from corner k - 3 to the next; 6 the
+/// face.
+inline V3 closest_on_triangle(V3 p, V3 a, V3 b, V3 c, int& feature) {
+    const V3 ab = b - a, ac = c - a, ap = p - a;
+    const double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0.0 && d2 <= 0.0) return feature = 0, a;
+    const V3 bp = p - b;
+    const double d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0.0 && d4 <= d3) return feature = 1, b;
+    const double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+        feature = 3;
+        return a + (d1 / (d1 - d3)) * ab;
+    }
+    const V3 cp = p - c;
+    const double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0.0 && d5 <= d6) return feature = 2, c;
+    const double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+        feature = 5;
+        return a + (d2 / (d2 - d6)) * ac;
+    }
+    const double va = d3 * d6 - d5 * d4;
+    if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+        feature = 4;
+        return b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b);
+    }
+    const double denom = 1.0 / (va + vb + vc);
+    feature = 6;
+    return a + (vb * denom) * ab + (vc * denom) * ac;
+}
+
+/// One mesh collider's arrays (rows of the model's collider_meshes part).
+struct View {
+    const Model& m;
+    V3 vertex(index v) const { return load(m.collider_meshes.vertices, v); }
+    V3 corner(index t, int k) const {
+        return vertex(m.collider_meshes.triangles[3 * t + k]);
+    }
+    const double* bounds(index node) const { return m.collider_meshes.node_bounds + 6 * node; }
+    index begin(index node) const { return m.collider_meshes.node_tris[2 * node]; }
+    index end(index node) const { return m.collider_meshes.node_tris[2 * node + 1]; }
+    index child(index node, int k) const { return m.collider_meshes.node_children[2 * node + k]; }
+    /// The pseudo-normal of feature f of triangle t (closest_on_triangle's numbering).
+    V3 pseudo_normal(index t, int f) const {
+        if (f < 3) return load(m.collider_meshes.vertex_normals, m.collider_meshes.triangles[3 * t + f]);
+        if (f < 6) return load(m.collider_meshes.edge_normals, 3 * t + (f - 3));
+        return unit(cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0)));
+    }
+};
+
+struct Nearest {
+    double d2 = std::numeric_limits<double>::infinity();
+    V3 x{0.0, 0.0, 0.0};  // closest point on the mesh
+    V3 n{0.0, 0.0, 0.0};  // pseudo-normal of its feature
+};
+
+/// The closest point on the mesh below `root` to p (local frame), with its pseudo-normal,
+/// among those nearer than sqrt(bound2); none (d2 = bound2) when there is none.
+inline Nearest nearest(const View& v, index root, V3 p,
+                       double bound2 = std::numeric_limits<double>::infinity()) {
+    Nearest best;
+    best.d2 = bound2;
+    index stack[kStack];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0) {
+        const index node = stack[--top];
+        if (box_distance2(v.bounds(node), p) >= best.d2) continue;
+        const index b = v.begin(node), e = v.end(node);
+        if (e > b) {
+            for (index t = b; t < e; ++t) {
+                int f = 6;
+                const V3 x = closest_on_triangle(p, v.corner(t, 0), v.corner(t, 1), v.corner(t, 2), f);
+                const V3 d = p - x;
+                const double d2 = dot(d, d);
+                if (d2 < best.d2) best = {d2, x, v.pseudo_normal(t, f)};
+            }
+            continue;
+        }
+        if (top + 2 > kStack) continue;  // deeper than any tree the builder makes
+        const index l = v.child(node, 0), r = v.child(node, 1);
+        // the nearer child last, so that it is searched first
+        if (box_distance2(v.bounds(l), p) < box_distance2(v.bounds(r), p)) {
+            stack[top++] = r;
+            stack[top++] = l;
+        } else {
+            stack[top++] = l;
+            stack[top++] = r;
+        }
+    }
+    return best;
+}
+
+/// The first triangle the segment a -> b enters through its front (against its outward
+/// normal): the fraction s in [0, 1] along it, and the triangle's unit normal; s > 1: none.
+inline double first_entry(const View& v, index root, V3 a, V3 b, V3& normal) {
+    double s_best = 2.0;
+    const V3 d = b - a;
+    index stack[kStack];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0) {
+        const index node = stack[--top];
+        if (!segment_meets_box(v.bounds(node), a, b, std::min(s_best, 1.0))) continue;
+        const index tb = v.begin(node), te = v.end(node);
+        if (te > tb) {
+            for (index t = tb; t < te; ++t) {
+                const V3 p0 = v.corner(t, 0), e1 = v.corner(t, 1) - p0, e2 = v.corner(t, 2) - p0;
+                const V3 n = cross(e1, e2);
+                const double dn = dot(d, n);
+                if (!(dn < 0.0)) continue;  // parallel, or leaving through it
+                // Moller-Trumbore, edges included (a path through an edge meets one of its
+                // triangles)
+                const V3 h = cross(d, e2);
+                const double det = dot(e1, h);
+                if (det == 0.0) continue;
+                const double inv = 1.0 / det;
+                const V3 sv = a - p0;
+                const double u = inv * dot(sv, h);
+                constexpr double kTol = 1e-9;
+                if (u < -kTol || u > 1.0 + kTol) continue;
+                const V3 qv = cross(sv, e1);
+                const double w = inv * dot(d, qv);
+                if (w < -kTol || u + w > 1.0 + kTol) continue;
+                const double s = inv * dot(e2, qv);
+                if (s < 0.0 || s > 1.0 || s >= s_best) continue;
+                s_best = s;
+                normal = unit(n);
+            }
+            continue;
+        }
+        if (top + 2 > kStack) continue;
+        stack[top++] = v.child(node, 0);
+        stack[top++] = v.child(node, 1);
+    }
+    return s_best;
+}
+
+/// Whether p lies inside the closed mesh, by the parity of the crossings of a ray from p
+/// to `far` (outside the mesh's box); -1 when it passed within round-off of an edge (the
+/// caller tries another direction).
+inline int inside_by_ray(const View& v, index root, V3 p, V3 far) {
+    const V3 d = far - p;
+    int crossings = 0;
+    index stack[kStack];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0) {
+        const index node = stack[--top];
+        if (!segment_meets_box(v.bounds(node), p, far, 1.0)) continue;
+        const index tb = v.begin(node), te = v.end(node);
+        if (te > tb) {
+            for (index t = tb; t < te; ++t) {
+                const V3 p0 = v.corner(t, 0), e1 = v.corner(t, 1) - p0, e2 = v.corner(t, 2) - p0;
+                const V3 h = cross(d, e2);
+                const double det = dot(e1, h);
+                if (std::fabs(det) < 1e-300) continue;
+                const double inv = 1.0 / det;
+                const V3 sv = p - p0;
+                const double u = inv * dot(sv, h);
+                const V3 qv = cross(sv, e1);
+                const double w = inv * dot(d, qv);
+                const double s = inv * dot(e2, qv);
+                if (s <= 0.0 || s > 1.0) continue;
+                constexpr double kEdge = 1e-9;
+                if (u < -kEdge || w < -kEdge || u + w > 1.0 + kEdge) continue;
+                if (u < kEdge || w < kEdge || u + w > 1.0 - kEdge) return -1;  // on an edge
+                ++crossings;
+            }
+            continue;
+        }
+        if (top + 2 > kStack) continue;
+        stack[top++] = v.child(node, 0);
+        stack[top++] = v.child(node, 1);
+    }
+    return crossings % 2;
+}
+
+/// Where a particle whose path in the collider's frame went from l0 to l1 must be (local
+/// frame): hit.x on the surface plus margin along hit.n (unit, outward), or no hit. `band`:
+/// the particle is outside but nearer the surface than the margin (a resting contact: the
+/// caller responds only when it approaches).
+inline colliders::Hit resolve(const View& v, index root, double margin, V3 l0, V3 l1,
+                              bool& band) {
+    colliders::Hit out;
+    band = false;
+    const double* b = v.bounds(root);
+    const double box[6] = {b[0] - margin, b[1] - margin, b[2] - margin,
+                           b[3] + margin, b[4] + margin, b[5] + margin};
+    if (!segment_meets_box(box, l0, l1, 1.0)) return out;  // far from the mesh
+    V3 n{0.0, 0.0, 0.0};
+    const double s = first_entry(v, root, l0, l1, n);
+    V3 p = l1;
+    if (s <= 1.0) {
+        p = l0 + s * (l1 - l0) + margin * n;
+        out = {true, p, n};
+    }
+    // the end position (or the entry point put outside) must be outside and at least the
+    // margin away: else to the closest point of the surface plus the margin
+    if (p.x < box[0] || p.y < box[1] || p.z < box[2] || p.x > box[3] || p.y > box[4] ||
+        p.z > box[5])
+        return out;
+    // A point outside within reach of its path's length (plus the margin band) of the
+    // surface, or inside, is found by the nearest-point search bounded by that reach: a
+    // path from outside to inside crossed the surface within it. Past the reach, a ray's
+    // parity says whether the point is (deep) inside; only then the unbounded search.
+    const double reach = std::sqrt(dot(l1 - l0, l1 - l0)) + 4.0 * margin;
+    Nearest near = nearest(v, root, p, reach * reach);
+    if (!(near.d2 < reach * reach)) {
+        // rays out of the box by its nearest sides (short rays meet few nodes), each a little
+        // off the axis so that it does not run along the mesh's axis-aligned edges
+        double exit[6];
+        for (int k = 0; k < 3; ++k) {
+            exit[2 * k] = b[3 + k] - (&p.x)[k];
+            exit[2 * k + 1] = (&p.x)[k] - b[k];
+        }
+        const double pad = margin + 1e-3 * std::sqrt(dot(V3{b[3] - b[0], b[4] - b[1], b[5] - b[2]},
+                                                         V3{b[3] - b[0], b[4] - b[1], b[5] - b[2]}));
+        int in = -1;
+        bool tried[6] = {false, false, false, false, false, false};
+        for (int attempt = 0; attempt < 3 && in < 0; ++attempt) {
+            int side = -1;
+            for (int k = 0; k < 6; ++k)
+                if (!tried[k] && (side < 0 || exit[k] < exit[side])) side = k;
+            tried[side] = true;
+            const int axis = side / 2;
+            V3 dir{0.0123, 0.0317, 0.0211};
+            (&dir.x)[axis] = side % 2 == 0 ? 1.0 : -1.0;
+            in = inside_by_ray(v, root, p, p + (exit[side] + 2.0 * pad) * dir);
+        }
+        if (in == 0) return out;
+        near = nearest(v, root, p);
+    }
+    const V3 off = p - near.x;
+    const bool inside = dot(off, near.n) < 0.0;
+    if (!inside && !(near.d2 < margin * margin)) return out;
+    const double dist = std::sqrt(near.d2);
+    const double sign = inside ? -1.0 : 1.0;
+    const V3 normal = dist > 0.0 ? (sign / dist) * off : near.n;
+    band = !inside && !out.hit;
+    return {true, near.x + margin * normal, normal};
+}
+
+/// Mesh collider k (centre c, rotation r at the step's end; velocity vc [m/s], angular
+/// velocity wc [rad/s]) against every particle: q_start (N, 3) the positions at the step's
+/// start, dt [s] the step (the collider's pose at its start is taken back along vc, wc);
+/// q, qd (N, 3) change in place, j gathers the impulse the collider receives [N s].
+inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc, double e,
+                     double keep, double dt, const double* q_start, double* q, double* qd, V3& j,
+                     colliders::Seen* seen) {
+    const index root = m.colliders.mesh_root[k];
+    if (root < 0) return;
+    const View v{m};
+    const double margin = m.colliders.mesh_margin[k];
+    // the pose at the step's start
+    const V3 c0 = c - dt * vc;
+    double r0[9];
+    const double rate = std::sqrt(dot(wc, wc));
+    if (rate > 0.0 && dt > 0.0) {
+        double back[9];
+        colliders::rotate_about((1.0 / rate) * wc, -rate * dt, back);
+        for (int a = 0; a < 3; ++a)
+            for (int b = 0; b < 3; ++b)
+                r0[3 * a + b] = back[3 * a] * r[b] + back[3 * a + 1] * r[3 + b] +
+                                back[3 * a + 2] * r[6 + b];
+    } else {
+        for (int a = 0; a < 9; ++a) r0[a] = r[a];
+    }
+    for (index i = 0; i < m.particles.count; ++i) {
+        if (m.particles.inv_mass[i] == 0.0) continue;
+        const V3 l1 = to_local(r, load(q, i) - c);
+        const V3 l0 = to_local(r0, load(q_start, i) - c0);
+        bool band = false;
+        const colliders::Hit local = resolve(v, root, margin, l0, l1, band);
+        if (!local.hit) continue;
+        const colliders::Hit hit{true, c + to_world(r, local.x), to_world(r, local.n)};
+        // within the margin but leaving: free
+        if (band && dot(load(qd, i) - (vc + cross(wc, hit.x - c)), hit.n) >= 0.0) continue;
+        colliders::respond(m, i, hit, vc + cross(wc, hit.x - c), e, keep, q, qd, j);
+        if (seen != nullptr) seen->add(load(q, i), load(qd, i));
+    }
+}
+
+}  // namespace softbody::SOFTBODY_KERNELS::mesh_collider
