@@ -269,11 +269,52 @@ inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_da
     }
 }
 
+/// XPBD's step for one distance constraint C = |d| - L0 of stiffness k [N/m] and damping c
+/// [N s/m] over a substep h [s] (Macklin et al. 2016, eq. 26, with alpha = 1 / k and
+/// beta = c, multiplied through by k h^2 so that k = 0 is a pure damper): the multiplier's
+/// change dlambda = -(k h^2 C + lambda + c h u . e) / ((k h^2 + c h) w + 1) [N s^2], with e
+/// the edge's change since the substep's start and w the ends' inverse masses summed.
+inline double xpbd_delta(double stretch, double lambda, double u_dot_e, double k, double c,
+                         double h, double w) {
+    const double kh2 = k * h * h, ch = c * h;
+    return -(kh2 * stretch + lambda + ch * u_dot_e) / ((kh2 + ch) * w + 1.0);
+}
+
+/// XPBD's pass over the springs (ConstraintPass): colour by colour, each spring's
+/// distance constraint moves its two ends along its direction by their inverse masses
+/// (pinned ends, inverse mass 0, stay). A zero-length spring has no direction: skipped.
+inline void constrain(const Model& m, const ConstraintPass& p) {
+    const index* ends = m.springs.indices;
+    const double* inv = m.particles.inv_mass;
+    const index count = p.colour_ptr[p.colours];
+    for (index r = 0; r < count; ++r) {
+        const index s = p.spring_order[r];
+        const index i = ends[2 * s], j = ends[2 * s + 1];
+        const double w = inv[i] + inv[j];
+        if (w == 0.0) continue;
+        const V3 d = load(p.x, j) - load(p.x, i);
+        const double length = std::sqrt(dot(d, d));
+        if (length == 0.0) continue;
+        const V3 u = (1.0 / length) * d;
+        const V3 e = d - (load(p.x_start, j) - load(p.x_start, i));
+        const double dl = xpbd_delta(length - m.springs.rest_length[s], p.spring_lambda[s],
+                                     dot(u, e), m.springs.stiffness[s], m.springs.damping[s],
+                                     p.h, w);
+        p.spring_lambda[s] += dl;
+        add_to(p.x, i, -(inv[i] * dl) * u);
+        add_to(p.x, j, (inv[j] * dl) * u);
+    }
+}
+
 /// The registered term (terms/registry.hpp): its forms for the solvers.
 struct Term : TermBase {
     static constexpr const char* kName = "springs";
     static constexpr bool kLane = true, kProjected = true, kFused = true, kEnergy = true;
+    static constexpr bool kConstraint = true;
     static void force(const Eval& e, double* f) { springs::force(e.m, e.q, e.qd, f); }
+    static void constrain(const Model& m, const Control&, const ConstraintPass& p) {
+        springs::constrain(m, p);
+    }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
     static void prepare(const Eval& e, const Linearization& l) {
         springs::prepare(e.m, l.q, l.spring_u, l.spring_a, l.spring_b);

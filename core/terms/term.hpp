@@ -25,6 +25,9 @@
 //   flow        a gas-flow term's molar flows into and out of the bodies' gas at e, added
 //               to e.gas's flow_in, flow_in_t and flow_out (terms/flows.hpp), which every
 //               scheme integrates into the gas state (solvers/gas_state.hpp)
+//   constrain   XPBD's pass over the term's constraints (solvers/substep.hpp): positions
+//               p.x moved in place by each constraint's Delta lambda (kConstraint terms;
+//               their force is left out of the substep's explicit forces)
 //   active      whether the term acts at all in a call (the fused symplectic Euler pass
 //               covers only kFused terms: a call with another active term takes the
 //               general step)
@@ -49,6 +52,22 @@ struct Eval {
     const BodyGas& gas;
 };
 
+/// XPBD's constraint pass within one substep of h [s] (solvers/substep.hpp): the iterate
+/// x (N, 3) moved in place, the substep's start x_start (N, 3) (the damping's reference),
+/// the springs in colour order (spring_order (S,), colour c holding entries
+/// [colour_ptr[c], colour_ptr[c + 1]), no two springs of a colour sharing a particle) and
+/// each constraint's multiplier lambda [N s^2], zeroed at the substep's start.
+struct ConstraintPass {
+    double h = 0.0;
+    double* x = nullptr;
+    const double* x_start = nullptr;
+    const index* spring_order = nullptr;  // (S,)
+    const index* colour_ptr = nullptr;    // (colours + 1,)
+    index colours = 0;
+    double* spring_lambda = nullptr;      // (S,)
+    double* attachment_lambda = nullptr;  // (A,)
+};
+
 /// Every form's default: none. A term's struct derives from this and hides what it has.
 struct TermBase {
     static constexpr bool kLane = false;       // the vertex-major pass gives its force
@@ -61,6 +80,8 @@ struct TermBase {
     // which softbody.diagnostics leaves out of the model's total
     static constexpr bool kExternal = false;
     static constexpr bool kFlow = false;  // it moves gas (its `flow` form), no force
+    // XPBD (solvers/substep.hpp) solves it by its `constrain` form, no force there
+    static constexpr bool kConstraint = false;
     static bool active(const Model&, const Control&) { return true; }
     static void update(const Eval&, bool /*lanes_ran*/) {}
     static void force(const Eval&, double* /*f*/) {}
@@ -74,6 +95,7 @@ struct TermBase {
     static void project(const Model&, const Control&, double /*h*/, const double* /*x*/,
                         const double* /*x0*/, double* /*rhs*/) {}
     static void flow(const Eval&) {}
+    static void constrain(const Model&, const Control&, const ConstraintPass&) {}
 };
 
 }  // namespace softbody::SOFTBODY_KERNELS
