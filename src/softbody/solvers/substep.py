@@ -120,7 +120,13 @@ class SubstepSolver(Solver):
     def _simulate(self, state, steps, dt, control, limits: RunLimits, progress) -> RunResult:
         return self._result(
             self._core.simulate(
-                steps, dt, self.substeps, self.iterations_per_substep, control, state, limits,
+                steps,
+                dt,
+                self.substeps,
+                self.iterations_per_substep,
+                control,
+                state,
+                limits,
                 progress,
             )
         )
