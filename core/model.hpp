@@ -295,6 +295,8 @@ struct SubstepBuffers {
     double* q_prev = nullptr;  // (N, 3) start-of-substep positions
     double* spring_lambda = nullptr;      // (S,) [N s^2]
     double* attachment_lambda = nullptr;  // (A,) [N s^2]
+    double* spring_coef = nullptr;        // (6, S) the springs' constants for the substep
+    const index* spring_ends = nullptr;   // (2, S) the ends of spring_order's springs
     const index* spring_order = nullptr;  // (S,) the springs, colour by colour
     const index* colour_ptr = nullptr;    // (colours + 1,)
     index colours = 0;

@@ -22,6 +22,7 @@ public:
         threads_.attach(buffers_.lanes_view);
         buffers_.allow_growth();  // the surface contacts grow their hash inside a run
         spring_lambda_.assign(static_cast<size_t>(std::max<Index>(m.springs.count, 1)), 0.0);
+        spring_coef_.assign(static_cast<size_t>(6 * std::max<Index>(m.springs.count, 1)), 0.0);
         attachment_lambda_.assign(static_cast<size_t>(std::max<Index>(m.attachments.count, 1)),
                                   0.0);
         w_.lanes = buffers_.lanes_view;
@@ -31,6 +32,8 @@ public:
         w_.q_prev = buffers_.row(3);
         w_.spring_lambda = spring_lambda_.data();
         w_.attachment_lambda = attachment_lambda_.data();
+        w_.spring_coef = spring_coef_.data();
+        w_.spring_ends = ends_.data();
         w_.spring_order = order_.data();
         w_.colour_ptr = colour_ptr_.data();
         w_.colours = static_cast<Index>(colour_ptr_.size()) - 1;
@@ -101,6 +104,11 @@ private:
         }
         order_.assign(order, order + s);
         colour_ptr_.assign(ptr, ptr + colours + 1);
+        ends_.assign(static_cast<size_t>(std::max<Index>(2 * s, 1)), 0);
+        for (Index r = 0; r < s; ++r) {
+            ends_[static_cast<size_t>(r)] = m.springs.indices[2 * order[r]];
+            ends_[static_cast<size_t>(s + r)] = m.springs.indices[2 * order[r] + 1];
+        }
     }
 
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
@@ -108,8 +116,8 @@ private:
     Buffers buffers_;
     SolverThreads threads_;
     softbody::SubstepBuffers w_;
-    std::vector<Index> order_, colour_ptr_;
-    std::vector<double> spring_lambda_, attachment_lambda_;
+    std::vector<Index> order_, colour_ptr_, ends_;
+    std::vector<double> spring_lambda_, attachment_lambda_, spring_coef_;
 };
 
 }  // namespace

@@ -105,6 +105,14 @@ inline void project(const Model& m, const Control& c, double h, const double* x,
     Terms::each([&](auto term, int) { decltype(term)::project(m, c, h, x, x0, rhs); });
 }
 
+/// XPBD's set-up for a substep p.h: every kConstraint term's prepare_constraints form.
+inline void prepare_constraints(const Model& m, const Control& c, const ConstraintPass& p) {
+    Terms::each([&](auto term, int) {
+        using T = decltype(term);
+        if (T::kConstraint) T::prepare_constraints(m, c, p);
+    });
+}
+
 /// XPBD's constraint pass: every kConstraint term's constrain form, in registry order.
 inline void constrain(const Model& m, const Control& c, const ConstraintPass& p) {
     Terms::each([&](auto term, int) {

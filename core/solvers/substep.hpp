@@ -46,8 +46,25 @@ inline RunResult undo(const Model& m, const StateView& s, const SubstepBuffers& 
     return r;
 }
 
-/// One substep of h from time t (the explicit forces already in w.f): the prediction, the
-/// constraint passes, the velocities from the positions.
+/// The constraint pass's view of the buffers for a substep of h on positions x.
+inline ConstraintPass constraint_pass(const SubstepBuffers& w, double h, double* x) {
+    ConstraintPass p;
+    p.h = h;
+    p.x = x;
+    p.x_start = w.q_prev;
+    p.spring_order = w.spring_order;
+    p.colour_ptr = w.colour_ptr;
+    p.colours = w.colours;
+    p.spring_lambda = w.spring_lambda;
+    p.attachment_lambda = w.attachment_lambda;
+    p.spring_coef = w.spring_coef;
+    p.spring_ends = w.spring_ends;
+    return p;
+}
+
+/// One substep of h from time t (the explicit forces already in w.f, the constraints'
+/// constants prepared for h): the prediction, the constraint passes, the velocities from
+/// the positions.
 inline void substep(const Model& m, const Control& c, double h, index iterations,
                     const StateView& s, const SubstepBuffers& w) {
     const index n = m.particles.count;
@@ -59,8 +76,7 @@ inline void substep(const Model& m, const Control& c, double h, index iterations
     }
     std::fill(w.spring_lambda, w.spring_lambda + m.springs.count, 0.0);
     std::fill(w.attachment_lambda, w.attachment_lambda + m.attachments.count, 0.0);
-    const ConstraintPass p{h,           s.q,       w.q_prev,        w.spring_order,
-                           w.colour_ptr, w.colours, w.spring_lambda, w.attachment_lambda};
+    const ConstraintPass p = constraint_pass(w, h, s.q);
     for (index it = 0; it < iterations; ++it) forms::constrain(m, c, p);
     const double inv_h = 1.0 / h;
     for (index i = 0; i < n; ++i) store(s.qd, i, inv_h * (load(s.q, i) - load(w.q_prev, i)));
@@ -76,6 +92,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     sub.steps = p.steps * substeps;
     sub.dt = h;
     const bool flowing = gas_state::flowing(m, c);
+    forms::prepare_constraints(m, c, constraint_pass(w, h, s.q));
     double* dn = gas_state::slot(m, w.gas, gas_state::kDn);
     double* dth = gas_state::slot(m, w.gas, gas_state::kDt);
     double* theta = gas_state::slot(m, w.gas, gas_state::kTheta);

@@ -280,29 +280,113 @@ inline double xpbd_delta(double stretch, double lambda, double u_dot_e, double k
     return -(kh2 * stretch + lambda + ch * u_dot_e) / ((kh2 + ch) * w + 1.0);
 }
 
-/// XPBD's pass over the springs (ConstraintPass): colour by colour, each spring's
-/// distance constraint moves its two ends along its direction by their inverse masses
-/// (pinned ends, inverse mass 0, stay). A zero-length spring has no direction: skipped.
-inline void constrain(const Model& m, const ConstraintPass& p) {
+/// Rows of ConstraintPass::spring_coef, each (S,) per entry of spring_order.
+enum CoefRow { kRest = 0, kStretch = 1, kDamp = 2, kLambda = 3, kWi = 4, kWj = 5, kCoefRows = 6 };
+
+/// XPBD's constants of every spring for the substep p.h, per entry r of p.spring_order,
+/// into the rows of p.spring_coef (kCoefRows, S): L0, k h^2 / D, c h / D and 1 / D with
+/// D = (k h^2 + c h) w + 1 (xpbd_delta's terms; w = w_i + w_j the ends' inverse masses),
+/// and w_i, w_j, so that the pass divides by nothing but the length. A spring between two
+/// pinned particles (w = 0) gets zeros: it moves nothing.
+inline void constraint_coefficients(const Model& m, const ConstraintPass& p) {
     const index* ends = m.springs.indices;
     const double* inv = m.particles.inv_mass;
-    const index count = p.colour_ptr[p.colours];
+    const index count = m.springs.count;
+    const double h = p.h;
+    double* coef = p.spring_coef;
     for (index r = 0; r < count; ++r) {
         const index s = p.spring_order[r];
-        const index i = ends[2 * s], j = ends[2 * s + 1];
-        const double w = inv[i] + inv[j];
-        if (w == 0.0) continue;
-        const V3 d = load(p.x, j) - load(p.x, i);
-        const double length = std::sqrt(dot(d, d));
-        if (length == 0.0) continue;
-        const V3 u = (1.0 / length) * d;
-        const V3 e = d - (load(p.x_start, j) - load(p.x_start, i));
-        const double dl = xpbd_delta(length - m.springs.rest_length[s], p.spring_lambda[s],
-                                     dot(u, e), m.springs.stiffness[s], m.springs.damping[s],
-                                     p.h, w);
-        p.spring_lambda[s] += dl;
-        add_to(p.x, i, -(inv[i] * dl) * u);
-        add_to(p.x, j, (inv[j] * dl) * u);
+        const double wi = inv[ends[2 * s]], wj = inv[ends[2 * s + 1]];
+        const double w = wi + wj;
+        const double kh2 = m.springs.stiffness[s] * h * h, ch = m.springs.damping[s] * h;
+        const double inv_d = w == 0.0 ? 0.0 : 1.0 / ((kh2 + ch) * w + 1.0);
+        coef[kRest * count + r] = m.springs.rest_length[s];
+        coef[kStretch * count + r] = kh2 * inv_d;
+        coef[kDamp * count + r] = ch * inv_d;
+        coef[kLambda * count + r] = inv_d;
+        coef[kWi * count + r] = wi;
+        coef[kWj * count + r] = wj;
+    }
+}
+
+/// XPBD's step for the springs at entries [r, r + kLanes) of the colouring, one per lane
+/// (no two share a particle: their updates are independent): xpbd_delta with
+/// constraint_coefficients' constants, each spring's two ends moved along its direction
+/// by their inverse masses. A zero-length spring has no direction: it moves nothing.
+inline void constrain_lanes(const ConstraintPass& p, index count, index r) {
+    const index* ei = p.spring_ends + r;
+    const index* ej = p.spring_ends + count + r;
+    alignas(64) double a[12][kLanes];  // x_i, x_j, their start positions, by component
+    for (int l = 0; l < kLanes; ++l) {
+        const index i = 3 * ei[l], j = 3 * ej[l];
+        for (int k = 0; k < 3; ++k) {
+            a[k][l] = p.x[i + k];
+            a[3 + k][l] = p.x[j + k];
+            a[6 + k][l] = p.x_start[i + k];
+            a[9 + k][l] = p.x_start[j + k];
+        }
+    }
+    const double* coef = p.spring_coef + r;
+    vd d[3], u[3];
+    vd length2{}, u_dot_e{};
+    for (int k = 0; k < 3; ++k) {
+        d[k] = load_lanes(a[3 + k]) - load_lanes(a[k]);
+        length2 += d[k] * d[k];
+    }
+    const vi live = length2 != 0.0;
+    const vd inv_length = select(live, splat(1.0) / vsqrt(length2));
+    for (int k = 0; k < 3; ++k) {
+        u[k] = inv_length * d[k];
+        u_dot_e += u[k] * (d[k] - (load_lanes(a[9 + k]) - load_lanes(a[6 + k])));
+    }
+    const vd stretch = length2 * inv_length - load_lanes(coef + kRest * count);
+    double* lambda = p.spring_lambda + r;
+    const vd dl = select(live, -(load_lanes(coef + kStretch * count) * stretch +
+                                 load_lanes(coef + kDamp * count) * u_dot_e +
+                                 load_lanes(coef + kLambda * count) * load_lanes(lambda)));
+    store_lanes(lambda, load_lanes(lambda) + dl);
+    const vd di = load_lanes(coef + kWi * count) * dl, dj = load_lanes(coef + kWj * count) * dl;
+    alignas(64) double step[6][kLanes];
+    for (int k = 0; k < 3; ++k) {
+        store_lanes(step[k], di * u[k]);
+        store_lanes(step[3 + k], dj * u[k]);
+    }
+    for (int l = 0; l < kLanes; ++l) {
+        const index i = 3 * ei[l], j = 3 * ej[l];
+        for (int k = 0; k < 3; ++k) {
+            p.x[i + k] -= step[k][l];
+            p.x[j + k] += step[3 + k][l];
+        }
+    }
+}
+
+/// The same step for the one spring at entry r.
+inline void constrain_one(const ConstraintPass& p, index count, index r) {
+    const index i = p.spring_ends[r], j = p.spring_ends[count + r];
+    const double* coef = p.spring_coef + r;
+    const V3 d = load(p.x, j) - load(p.x, i);
+    const double length2 = dot(d, d);
+    if (length2 == 0.0) return;
+    const double inv_length = 1.0 / std::sqrt(length2);
+    const V3 u = inv_length * d;
+    const V3 e = d - (load(p.x_start, j) - load(p.x_start, i));
+    const double stretch = length2 * inv_length - coef[kRest * count];
+    const double dl = -(coef[kStretch * count] * stretch + coef[kDamp * count] * dot(u, e) +
+                        coef[kLambda * count] * p.spring_lambda[r]);
+    p.spring_lambda[r] += dl;
+    add_to(p.x, i, -(coef[kWi * count] * dl) * u);
+    add_to(p.x, j, (coef[kWj * count] * dl) * u);
+}
+
+/// XPBD's pass over the springs (ConstraintPass): Gauss-Seidel colour by colour; within a
+/// colour (no two springs sharing a particle) kLanes springs at a time, the rest one by one.
+inline void constrain(const Model& m, const ConstraintPass& p) {
+    const index count = m.springs.count;
+    for (index c = 0; c < p.colours; ++c) {
+        index r = p.colour_ptr[c];
+        const index end = p.colour_ptr[c + 1];
+        for (; r + kLanes <= end; r += kLanes) constrain_lanes(p, count, r);
+        for (; r < end; ++r) constrain_one(p, count, r);
     }
 }
 
@@ -312,6 +396,9 @@ struct Term : TermBase {
     static constexpr bool kLane = true, kProjected = true, kFused = true, kEnergy = true;
     static constexpr bool kConstraint = true;
     static void force(const Eval& e, double* f) { springs::force(e.m, e.q, e.qd, f); }
+    static void prepare_constraints(const Model& m, const Control&, const ConstraintPass& p) {
+        constraint_coefficients(m, p);
+    }
     static void constrain(const Model& m, const Control&, const ConstraintPass& p) {
         springs::constrain(m, p);
     }

@@ -25,6 +25,7 @@
 //   flow        a gas-flow term's molar flows into and out of the bodies' gas at e, added
 //               to e.gas's flow_in, flow_in_t and flow_out (terms/flows.hpp), which every
 //               scheme integrates into the gas state (solvers/gas_state.hpp)
+//   prepare_constraints  what XPBD's constraint pass needs for a substep h, once per run
 //   constrain   XPBD's pass over the term's constraints (solvers/substep.hpp): positions
 //               p.x moved in place by each constraint's Delta lambda (kConstraint terms;
 //               their force is left out of the substep's explicit forces)
@@ -56,7 +57,10 @@ struct Eval {
 /// x (N, 3) moved in place, the substep's start x_start (N, 3) (the damping's reference),
 /// the springs in colour order (spring_order (S,), colour c holding entries
 /// [colour_ptr[c], colour_ptr[c + 1]), no two springs of a colour sharing a particle) and
-/// each constraint's multiplier lambda [N s^2], zeroed at the substep's start.
+/// each constraint's multiplier lambda [N s^2], zeroed at the substep's start (the springs'
+/// per entry of spring_order). spring_ends (2, S): each entry's two particles;
+/// spring_coef (6, S), per entry: what prepare_constraints computes once for h
+/// (springs::constraint_coefficients).
 struct ConstraintPass {
     double h = 0.0;
     double* x = nullptr;
@@ -66,6 +70,8 @@ struct ConstraintPass {
     index colours = 0;
     double* spring_lambda = nullptr;      // (S,)
     double* attachment_lambda = nullptr;  // (A,)
+    const index* spring_ends = nullptr;   // (2, S)
+    double* spring_coef = nullptr;        // (6, S)
 };
 
 /// Every form's default: none. A term's struct derives from this and hides what it has.
@@ -95,6 +101,7 @@ struct TermBase {
     static void project(const Model&, const Control&, double /*h*/, const double* /*x*/,
                         const double* /*x0*/, double* /*rhs*/) {}
     static void flow(const Eval&) {}
+    static void prepare_constraints(const Model&, const Control&, const ConstraintPass&) {}
     static void constrain(const Model&, const Control&, const ConstraintPass&) {}
 };
 
