@@ -8,9 +8,9 @@ import warnings
 
 import numpy as np
 import pytest
-from conftest import ball_model, deformed, uniform_scaling_stationary
 
 import softbody as sb
+from conftest import ball_model, deformed, uniform_scaling_stationary
 from softbody import _core
 from softbody.core import core_model
 from softbody.solvers.substep import DEFAULT_SUBSTEPS, SubstepSolver, colour_springs
@@ -127,7 +127,8 @@ def test_free_body_momentum_is_conserved():
     model = ball_model(subdivisions=2, damping=0.5)
     state = deformed(model, seed=7, amplitude=0.05)
     rng = np.random.default_rng(8)
-    state.particle_qd[:] = rng.normal(0.0, 0.5, state.particle_qd.shape) + (1.0, 2.0, -0.5)
+    drift = np.array([1.0, 2.0, -0.5])  # [m/s]
+    state.particle_qd[:] = rng.normal(0.0, 0.5, state.particle_qd.shape) + drift
     mass = model.particle_mass[:, None]
     before = (mass * state.particle_qd).sum(axis=0)
     xpbd(model).run(state, 60)
