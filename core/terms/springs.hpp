@@ -14,6 +14,8 @@
 // largest sqrt(w) (R_i / m_i + R_j / m_j), R_i the sum of sqrt(w) at i).
 #pragma once
 
+#include <cstring>
+
 #include "model.hpp"
 #include "simd.hpp"
 #include "terms/term.hpp"
@@ -309,35 +311,52 @@ inline void constraint_coefficients(const Model& m, const ConstraintPass& p) {
     }
 }
 
+/// base[idx] per lane (a gather; the scalar build's one lane).
+inline vd gather_lanes(const double* base, vi idx) {
+#if defined(__AVX512F__)
+    return _mm512_i64gather_pd((__m512i)idx, base, 8);
+#elif defined(__AVX2__)
+    return _mm256_i64gather_pd(base, (__m256i)idx, 8);
+#else
+    return vd{base[idx[0]]};
+#endif
+}
+
+/// base[idx] = v per lane; the lanes' indices are distinct (a scatter).
+inline void scatter_lanes(double* base, vi idx, vd v) {
+#if defined(__AVX512F__)
+    _mm512_i64scatter_pd(base, (__m512i)idx, (__m512d)v, 8);
+#else
+    for (int l = 0; l < kLanes; ++l) base[idx[l]] = v[l];
+#endif
+}
+
 /// XPBD's step for the springs at entries [r, r + kLanes) of the colouring, one per lane
-/// (no two share a particle: their updates are independent): xpbd_delta with
-/// constraint_coefficients' constants, each spring's two ends moved along its direction
-/// by their inverse masses. A zero-length spring has no direction: it moves nothing.
+/// (no two share a particle: their updates are independent, gathered and scattered at
+/// once): xpbd_delta with constraint_coefficients' constants, each spring's two ends
+/// moved along its direction by their inverse masses. A zero-length spring has no
+/// direction: it moves nothing.
 inline void constrain_lanes(const ConstraintPass& p, index count, index r) {
-    const index* ei = p.spring_ends + r;
-    const index* ej = p.spring_ends + count + r;
-    alignas(64) double a[12][kLanes];  // x_i, x_j, their start positions, by component
-    for (int l = 0; l < kLanes; ++l) {
-        const index i = 3 * ei[l], j = 3 * ej[l];
-        for (int k = 0; k < 3; ++k) {
-            a[k][l] = p.x[i + k];
-            a[3 + k][l] = p.x[j + k];
-            a[6 + k][l] = p.x_start[i + k];
-            a[9 + k][l] = p.x_start[j + k];
-        }
-    }
+    vi ii, jj;
+    std::memcpy(&ii, p.spring_ends + r, sizeof ii);
+    std::memcpy(&jj, p.spring_ends + count + r, sizeof jj);
+    ii *= 3;
+    jj *= 3;
     const double* coef = p.spring_coef + r;
-    vd d[3], u[3];
+    vd xi[3], xj[3], d[3], u[3];
     vd length2{}, u_dot_e{};
     for (int k = 0; k < 3; ++k) {
-        d[k] = load_lanes(a[3 + k]) - load_lanes(a[k]);
+        xi[k] = gather_lanes(p.x + k, ii);
+        xj[k] = gather_lanes(p.x + k, jj);
+        d[k] = xj[k] - xi[k];
         length2 += d[k] * d[k];
     }
     const vi live = length2 != 0.0;
     const vd inv_length = select(live, splat(1.0) / vsqrt(length2));
     for (int k = 0; k < 3; ++k) {
         u[k] = inv_length * d[k];
-        u_dot_e += u[k] * (d[k] - (load_lanes(a[9 + k]) - load_lanes(a[6 + k])));
+        const vd start = gather_lanes(p.x_start + k, jj) - gather_lanes(p.x_start + k, ii);
+        u_dot_e += u[k] * (d[k] - start);
     }
     const vd stretch = length2 * inv_length - load_lanes(coef + kRest * count);
     double* lambda = p.spring_lambda + r;
@@ -346,17 +365,9 @@ inline void constrain_lanes(const ConstraintPass& p, index count, index r) {
                                  load_lanes(coef + kLambda * count) * load_lanes(lambda)));
     store_lanes(lambda, load_lanes(lambda) + dl);
     const vd di = load_lanes(coef + kWi * count) * dl, dj = load_lanes(coef + kWj * count) * dl;
-    alignas(64) double step[6][kLanes];
     for (int k = 0; k < 3; ++k) {
-        store_lanes(step[k], di * u[k]);
-        store_lanes(step[3 + k], dj * u[k]);
-    }
-    for (int l = 0; l < kLanes; ++l) {
-        const index i = 3 * ei[l], j = 3 * ej[l];
-        for (int k = 0; k < 3; ++k) {
-            p.x[i + k] -= step[k][l];
-            p.x[j + k] += step[3 + k][l];
-        }
+        scatter_lanes(p.x + k, ii, xi[k] - di * u[k]);
+        scatter_lanes(p.x + k, jj, xj[k] + dj * u[k]);
     }
 }
 
