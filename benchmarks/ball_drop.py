@@ -25,6 +25,13 @@ same process. Bullet's position-solver iterations (4, 8, ..., 128), each with kP
 both sides are timed with a valid ball; the ratio softbody (fastest valid integrator) /
 Bullet is printed per size.
 
+XPBD with small steps ("xpbd") runs at 1/60 s with its default substeps, and again as
+"xpbd fewest valid": the fewest substeps of XPBD_SUBSTEPS (one constraint pass each) whose
+2 s drop is valid and rebounds >= 0.9 m, tried fewest first (as Bullet's iterations are).
+``--runs xpbd "xpbd fewest valid"`` measures only those runs and merges them into the rows
+of the same sizes in results/ball_drop.json, keeping every other run's entries (and the
+memory and CG tolerance measurements) as they were.
+
 Writes results/ball_drop.{json,png}. After each size, the sizes measured so far go to
 results/ball_drop.partial.json (removed when the run completes), so a run stopped or
 crashed at a large size keeps what it measured and the last complete result is left as
@@ -65,7 +72,16 @@ RUNS = {
     "bdf2": ("bdf2", IMPLICIT_TOLERANCE),
     "implicit_euler cg 1e-2": ("implicit_euler", LOOSE_TOLERANCE),
     "bdf2 cg 1e-2": ("bdf2", LOOSE_TOLERANCE),
+    "xpbd": ("xpbd", None),
+    "xpbd fewest valid": ("xpbd", None),
 }
+
+#: the frame XPBD runs at, its substeps cut from it
+XPBD_DT = 1.0 / 60.0
+#: XPBD's substeps per 1/60 s frame tried by "xpbd fewest valid", fewest first
+XPBD_SUBSTEPS = (8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
+#: the rebound [m] "xpbd fewest valid" asks for (issue 33: the bounce kept)
+XPBD_REBOUND = 0.9
 
 
 def ball_drop(subdivisions: int) -> sb.Model:
@@ -81,8 +97,11 @@ def ball_drop(subdivisions: int) -> sb.Model:
     return builder.finalize()
 
 
-def simulator(model, run: str) -> sb.Simulator:
+def simulator(model, run: str, substeps: int | None = None) -> sb.Simulator:
     integrator, tolerance = RUNS[run]
+    if integrator == "xpbd":
+        options = {} if substeps is None else {"xpbd_substeps": substeps}
+        return sb.Simulator(model, integrator="xpbd", dt=XPBD_DT, **options)
     if tolerance is not None:
         return sb.Simulator(model, integrator=integrator, dt=1 / 60, implicit_tolerance=tolerance)
     probe = sb.Simulator(model, integrator=integrator, dt=1e-6)
@@ -392,6 +411,88 @@ def tolerance_error(subdivisions: int) -> dict:
     return result
 
 
+def measure(model, name: str, substeps: int | None = None) -> dict:
+    """A run's rate (steps_per_second) and, within CHECK_BUDGET, its checked 2 s drop."""
+    sim = simulator(model, name, substeps)
+    rate = steps_per_second(model, sim)
+    entry = {
+        "dt_s": sim.dt,
+        "steps_per_second": rate,
+        "simulated_per_wall_second": rate * sim.dt,
+        "vertex_steps_per_second": rate * model.particle_count,
+    }
+    if sim.integrator == sb.Integrator.XPBD:
+        entry["xpbd_substeps"] = sim.solver.substeps
+    if 2.0 / entry["simulated_per_wall_second"] <= CHECK_BUDGET:
+        entry["full_drop"] = check_drop(model, sim)
+    return entry
+
+
+def xpbd_fewest_valid(model) -> dict:
+    """XPBD at the fewest substeps of XPBD_SUBSTEPS whose drop is valid (check_drop) and
+    rebounds >= XPBD_REBOUND; the tries recorded. With none valid (or the next too slow to
+    check), the last try is reported, its drop not ok."""
+    tries = []
+    for substeps in XPBD_SUBSTEPS:
+        entry = measure(model, "xpbd fewest valid", substeps)
+        drop = entry.get("full_drop")
+        tries.append({
+            "xpbd_substeps": substeps,
+            "simulated_per_wall_second": entry["simulated_per_wall_second"],
+            "ok": drop["ok"] if drop else None,
+            "rebound_m": drop["rebound_m"] if drop else None,
+            "volume_ratio_range": drop["volume_ratio_range"] if drop else None,
+        })  # fmt: skip
+        if drop is None:
+            break
+        if drop["ok"] and drop["rebound_m"] >= XPBD_REBOUND:
+            break
+    if entry.get("full_drop") and entry["full_drop"]["rebound_m"] < XPBD_REBOUND:
+        entry["full_drop"]["ok"] = False
+    entry["tries"] = tries
+    return entry
+
+
+def merge(rows: list[dict], names: list[str]) -> dict:
+    """The last results/ball_drop.json with the runs ``names`` of ``rows`` written into the
+    rows of the same vertex counts (rows of new sizes appended), everything else kept."""
+    result = json.loads((RESULTS / "ball_drop.json").read_text())
+    by_count = {r["vertex_count"]: r for r in result["sizes"]}
+    for row in rows:
+        old = by_count.get(row["vertex_count"])
+        if old is None:
+            result["sizes"].append(row)
+            continue
+        for name in names:
+            old["integrators"][name] = row["integrators"][name]
+    result["sizes"].sort(key=lambda r: r["vertex_count"])
+    result[f"{'+'.join(names)} measured"] = time.strftime("%Y-%m-%d")
+    result["largest_realtime_vertex_count"] = largest_realtime(result["sizes"])
+    return result
+
+
+def largest_realtime(rows: list[dict]) -> dict:
+    """Per run, the most vertices whose checked drop ran at real time or faster."""
+    realtime = {}
+    for name in RUNS:
+        good = [
+            r["vertex_count"]
+            for r in rows
+            if r["integrators"].get(name, {}).get("full_drop", {}).get("ok")
+            and r["integrators"][name]["full_drop"]["simulated_per_wall_second"] >= 1.0
+        ]
+        realtime[name] = max(good) if good else 0
+    bullet_ok = [
+        r["vertex_count"]
+        for r in rows
+        if r.get("bullet", {}).get("full_drop", {}).get("ok")
+        and r["bullet"]["full_drop"]["simulated_per_wall_second"] >= 1.0
+    ]
+    if any("bullet" in r for r in rows):
+        realtime["bullet"] = max(bullet_ok) if bullet_ok else 0
+    return realtime
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--min-subdivisions", type=int, default=2)
@@ -403,7 +504,13 @@ def main() -> None:
         "--memory-only", action="store_true",
         help="measure the memory per vertex again into results/ball_drop.json",
     )  # fmt: skip
+    parser.add_argument(
+        "--runs", nargs="+", choices=list(RUNS), default=None,
+        help="measure only these runs and merge them into results/ball_drop.json",
+    )  # fmt: skip
     args = parser.parse_args()
+    names = list(RUNS) if args.runs is None else args.runs
+    subset = args.runs is not None
     if args.plot_only:
         plot(json.loads((RESULTS / "ball_drop.json").read_text()), RESULTS / "ball_drop.png")
         return
@@ -419,29 +526,33 @@ def main() -> None:
     rows = []
     for s in range(args.min_subdivisions, args.max_subdivisions + 1):
         model = ball_drop(s)
-        row = {
-            "vertex_count": model.particle_count,
-            "peak_bytes_per_vertex": memory_per_vertex(s),
-            "integrators": {},
-        }
-        for name in RUNS:
-            sim = simulator(model, name)
-            rate = steps_per_second(model, sim)
-            entry = {
-                "dt_s": sim.dt,
-                "steps_per_second": rate,
-                "simulated_per_wall_second": rate * sim.dt,
-                "vertex_steps_per_second": rate * model.particle_count,
-            }
-            if 2.0 / entry["simulated_per_wall_second"] <= CHECK_BUDGET:
-                entry["full_drop"] = check_drop(model, sim)
+        row = {"vertex_count": model.particle_count, "integrators": {}}
+        if not subset:
+            row["peak_bytes_per_vertex"] = memory_per_vertex(s)
+        for name in names:
+            if name == "xpbd fewest valid":
+                entry = xpbd_fewest_valid(model)
+            else:
+                entry = measure(model, name)
             row["integrators"][name] = entry
+            drop = entry.get("full_drop")
             print(
-                f"{model.particle_count:>7} {name:17s} dt {sim.dt:.2e} s  "
-                f"{rate:10.1f} steps/s  {entry['simulated_per_wall_second']:9.4f}x real time"
-                + (f"  drop ok={entry['full_drop']['ok']}" if "full_drop" in entry else ""),
+                f"{model.particle_count:>7} {name:17s} dt {entry['dt_s']:.2e} s  "
+                f"{entry['steps_per_second']:10.1f} steps/s  "
+                f"{entry['simulated_per_wall_second']:9.4f}x real time"
+                + (f"  substeps {entry['xpbd_substeps']}" if "xpbd_substeps" in entry else "")
+                + (
+                    f"  drop ok={drop['ok']} rebound {drop['rebound_m']:.3f} m volume "
+                    f"{drop['volume_ratio_range'][0]:.3f}-{drop['volume_ratio_range'][1]:.3f}"
+                    if drop
+                    else ""
+                ),
                 flush=True,
             )
+        if subset:
+            rows.append(row)
+            write_json(PARTIAL, run_record("ball_drop", threads=1, dtype="float64", sizes=rows))
+            continue
         try:
             import panda3d.bullet  # noqa: F401
 
@@ -478,23 +589,15 @@ def main() -> None:
             pass
         rows.append(row)
         write_json(PARTIAL, run_record("ball_drop", threads=1, dtype="float64", sizes=rows))
-    realtime = {}
-    for name in RUNS:
-        good = [
-            r["vertex_count"]
-            for r in rows
-            if r["integrators"][name].get("full_drop", {}).get("ok")
-            and r["integrators"][name]["full_drop"]["simulated_per_wall_second"] >= 1.0
-        ]
-        realtime[name] = max(good) if good else 0
-    bullet_ok = [
-        r["vertex_count"]
-        for r in rows
-        if r.get("bullet", {}).get("full_drop", {}).get("ok")
-        and r["bullet"]["full_drop"]["simulated_per_wall_second"] >= 1.0
-    ]
-    if any("bullet" in r for r in rows):
-        realtime["bullet"] = max(bullet_ok) if bullet_ok else 0
+    if subset:
+        result = merge(rows, names)
+        print("largest real-time ball drop (vertices):", result["largest_realtime_vertex_count"])
+        write_json(RESULTS / "ball_drop.json", result)
+        plot(result, RESULTS / "ball_drop.png")
+        PARTIAL.unlink(missing_ok=True)
+        print(f"merged {names} into {RESULTS / 'ball_drop.json'} and .png")
+        return
+    realtime = largest_realtime(rows)
     print("largest real-time ball drop (vertices):", realtime)
     result = run_record(
         "ball_drop",
@@ -528,7 +631,6 @@ def plot(result: dict, path: Path) -> None:
 
     rows = result["sizes"]
     fig, ax = plt.subplots(figsize=(9, 5.5), dpi=110)
-    n = [r["vertex_count"] for r in rows]
 
     def plot(xs, entries, style, color, label):
         ys = [e["simulated_per_wall_second"] for e in entries]
@@ -543,7 +645,11 @@ def plot(result: dict, path: Path) -> None:
 
     for k, name in enumerate(RUNS):
         style = "o:" if name.endswith(" cg 1e-2") else "o-"
-        plot(n, [r["integrators"][name] for r in rows], style, f"C{k}", name)
+        have = [r for r in rows if name in r["integrators"]]
+        if name.startswith("xpbd"):
+            style = "D-" if name == "xpbd" else "D:"
+        plot([r["vertex_count"] for r in have], [r["integrators"][name] for r in have], style,
+             f"C{k}", name)  # fmt: skip
     if any("bullet" in r for r in rows):
         plot(
             [r["vertex_count"] for r in rows if "bullet" in r],
@@ -559,7 +665,7 @@ def plot(result: dict, path: Path) -> None:
     ax.set_ylabel("simulated seconds per wall second")
     ax.set_title(
         "Ball drop (1 m, 1 kg, inflated): explicit schemes at 0.9 of their stable dt, "
-        "implicit ones at 1/60 s\n"
+        "implicit ones and xpbd at 1/60 s\n"
         "filled: the 2 s drop checked round and bouncing; hollow: failed or not checked",
         fontsize=10,
     )

@@ -9,7 +9,7 @@
 
 #define SOFTBODY_ENUM_INTEGRATOR(X)                                                          \
     X(EULER, 0) X(MIDPOINT, 1) X(RK4, 2) X(SYMPLECTIC_EULER, 3) X(VELOCITY_VERLET, 4)      \
-    X(IMPLICIT_EULER, 5) X(BDF2, 6) X(PROJECTIVE, 7)
+    X(IMPLICIT_EULER, 5) X(BDF2, 6) X(PROJECTIVE, 7) X(XPBD, 8)
 #define SOFTBODY_ENUM_GAS_LAW(X) X(ISOTHERMAL, 0) X(FIXED_PRESSURE, 1) X(ADIABATIC, 2)
 #define SOFTBODY_ENUM_VOLUME_METHOD(X)                                                       \
     X(EXACT, 0) X(BOUNDING_BOX, 1) X(BOUNDING_SPHERE, 2) X(BOUNDING_ELLIPSOID, 3)           \

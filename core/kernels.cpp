@@ -9,6 +9,7 @@
 #include "solvers/implicit.hpp"
 #include "solvers/multigrid.hpp"
 #include "solvers/projective.hpp"
+#include "solvers/substep.hpp"
 #include "terms/registry.hpp"
 #include "terms/volume.hpp"
 
@@ -46,6 +47,11 @@ void apply_multigrid(const MultigridView& mg, const double* r, double* z) {
 RunResult simulate_projective(const Model& m, const Control& c, const RunParams& p,
                               const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
     return projective::simulate(m, c, p, s, a, w);
+}
+
+RunResult simulate_substep(const Model& m, const Control& c, const RunParams& p,
+                           const StateView& s, const SubstepBuffers& w) {
+    return substep::simulate(m, c, p, s, w);
 }
 
 void projective_solve(const Factor& a, const double* b, double* x, double* out) {
@@ -140,7 +146,7 @@ const KernelTable& kernel_table() {
     static const KernelTable table{SOFTBODY_STRING(SOFTBODY_ISA), Terms::count, term_traits(),
                                    simulate_explicit,
                                    simulate_implicit, apply_preconditioner, apply_multigrid, simulate_projective,
-                                   projective_solve, eval_forces,
+                                   simulate_substep, projective_solve, eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
                                    eval_energies, eval_flows, active_terms, membrane_blocks,

@@ -76,6 +76,10 @@ struct KernelTable {
     RunResult (*simulate_projective)(const Model&, const Control&, const RunParams&,
                                      const StateView&, const Factor& a,
                                      const ProjectiveBuffers&);
+    /// Advance a state by XPBD with small steps (p.substeps per step, p.iterations
+    /// constraint passes each; solvers/substep.hpp).
+    RunResult (*simulate_substep)(const Model&, const Control&, const RunParams&,
+                                  const StateView&, const SubstepBuffers&);
     /// out = A^-1 b for b, out (N, 3): projective dynamics' two triangular solves on the
     /// factor a; x (N, 3) scratch.
     void (*projective_solve)(const Factor& a, const double* b, double* x, double* out);

@@ -298,6 +298,24 @@ struct ProjectiveBuffers {
 /// blocks by their upper triangles (terms/membrane.hpp).
 constexpr int kMembraneBlock = 42;
 
+/// XPBD's scratch (solvers/substep.hpp) and the springs' colouring it sweeps in.
+struct SubstepBuffers {
+    LaneBuffers lanes;
+    double* f = nullptr;       // (N, 3) the explicit forces at the substep's start [N]
+    double* q0 = nullptr;      // (N, 3) start-of-step positions
+    double* v0 = nullptr;      // (N, 3) start-of-step velocities
+    double* q_prev = nullptr;  // (N, 3) start-of-substep positions
+    double* spring_lambda = nullptr;      // (S,) [N s^2]
+    double* attachment_lambda = nullptr;  // (A,) [N s^2]
+    double* spring_coef = nullptr;        // (6, S) the springs' constants for the substep
+    const index* spring_ends = nullptr;   // (2, S) the ends of spring_order's springs
+    const index* spring_order = nullptr;  // (S,) the springs, colour by colour
+    const index* colour_ptr = nullptr;    // (colours + 1,)
+    index colours = 0;
+    BodyGas gas;
+    ContactBuffers contact;
+};
+
 /// The implicit solvers' linearisation at a point q (N, 3): what `prepare` writes and
 /// `jacobian_product` / `add_smoother_blocks` read. The Python API's apply_jacobians passes
 /// the same arrays in.
@@ -376,6 +394,7 @@ struct ImplicitParams {
 struct RunParams {
     int scheme = Integrator::SYMPLECTIC_EULER;  // an explicit scheme (0-4)
     index iterations = 0;  // projective dynamics: local-global iterations per step
+    index substeps = 1;    // XPBD: substeps per step (iterations: its passes per substep)
     index steps = 0;
     double t0 = 0.0, dt = 0.0;
     double max_speed = 1e4;

@@ -25,6 +25,7 @@ NB_MODULE(_core, mod) {
     softbody::bindings::bind_model(mod);
     softbody::bindings::bind_explicit(mod);
     softbody::bindings::bind_projective(mod);
+    softbody::bindings::bind_substep(mod);
     softbody::bindings::bind_implicit(mod);
     softbody::bindings::bind_terms(mod);
     softbody::bindings::bind_plan(mod);

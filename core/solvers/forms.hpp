@@ -15,8 +15,10 @@ namespace softbody::SOFTBODY_KERNELS::forms {
 enum class Which {
     kAll,        // every term (explicit and implicit schemes)
     kBody,       // the lane terms only (kLane: what the fused symplectic pass starts from)
-    kUnprojected // all but the kProjected terms (projective dynamics: their projections
-                 // stand for them in its global step)
+    kUnprojected, // all but the kProjected terms (projective dynamics: their projections
+                  // stand for them in its global step)
+    kUnconstrained // all but the kConstraint terms (XPBD: their constraint pass stands for
+                   // them; solvers/substep.hpp)
 };
 
 /// Forces at time t [s] for q, qd (N, 3) into f (N, 3) [N], the gas state into gas. With
@@ -32,7 +34,8 @@ inline void eval_forces(const Model& m, const Control& c, double t, const double
                         double* f) {
     const bool pass = lanes::use_vertex_pass(lanes);
     if (pass)
-        lanes::vertex_pass<kWhich != Which::kUnprojected>(m, q, qd, gas, lanes, f);
+        lanes::vertex_pass<kWhich != Which::kUnprojected && kWhich != Which::kUnconstrained>(
+            m, q, qd, gas, lanes, f);
     else
         std::fill(f, f + 3 * m.particles.count, 0.0);
     const Eval e{m, c, t, q, qd, gas};
@@ -42,6 +45,7 @@ inline void eval_forces(const Model& m, const Control& c, double t, const double
         if (pass && T::kLane) return;                              // the pass gave it
         if (kWhich == Which::kBody && !T::kLane) return;           // the fused pass adds it
         if (kWhich == Which::kUnprojected && T::kProjected) return;  // in the global step
+        if (kWhich == Which::kUnconstrained && T::kConstraint) return;  // XPBD's constraints
         T::force(e, f);
     });
 }
@@ -99,6 +103,22 @@ inline void smoother_blocks(const Model& m, const Control& c, const Linearizatio
 inline void project(const Model& m, const Control& c, double h, const double* x,
                     const double* x0, double* rhs) {
     Terms::each([&](auto term, int) { decltype(term)::project(m, c, h, x, x0, rhs); });
+}
+
+/// XPBD's set-up for a substep p.h: every kConstraint term's prepare_constraints form.
+inline void prepare_constraints(const Model& m, const Control& c, const ConstraintPass& p) {
+    Terms::each([&](auto term, int) {
+        using T = decltype(term);
+        if (T::kConstraint) T::prepare_constraints(m, c, p);
+    });
+}
+
+/// XPBD's constraint pass: every kConstraint term's constrain form, in registry order.
+inline void constrain(const Model& m, const Control& c, const ConstraintPass& p) {
+    Terms::each([&](auto term, int) {
+        using T = decltype(term);
+        if (T::kConstraint) T::constrain(m, c, p);
+    });
 }
 
 /// Every term's energy at e: total[k] [J] for term k, and its bodies' shares in

@@ -169,11 +169,35 @@ inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_da
     }
 }
 
-/// The registered term (terms/registry.hpp).
+/// XPBD's pass over the attachments (ConstraintPass): each a distance constraint
+/// |x_i - anchor| - L0 (springs::xpbd_delta) moving its particle alone; the anchor is
+/// Control's, fixed over the call. Pinned particles have none.
+inline void constrain(const Model& m, const Control& c, const ConstraintPass& p) {
+    const double* inv = m.particles.inv_mass;
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const index i = m.attachments.particle[a];
+        if (inv[i] == 0.0) continue;
+        const V3 d = load(p.x, i) - load(c.attachment_anchor, a);
+        const double length = std::sqrt(dot(d, d));
+        if (length == 0.0) continue;
+        const V3 u = (1.0 / length) * d;
+        const V3 e = load(p.x, i) - load(p.x_start, i);
+        const double dl = springs::xpbd_delta(
+            length - m.attachments.rest_length[a], p.attachment_lambda[a], dot(u, e),
+            m.attachments.stiffness[a], m.attachments.damping[a], p.h, inv[i]);
+        p.attachment_lambda[a] += dl;
+        add_to(p.x, i, (inv[i] * dl) * u);
+    }
+}
+
+/// The registered term (terms/registry.hpp): its forms for the solvers.
 struct Term : TermBase {
     static constexpr const char* kName = "attachments";
-    static constexpr bool kProjected = true, kEnergy = true;
+    static constexpr bool kProjected = true, kEnergy = true, kConstraint = true;
     static bool active(const Model& m, const Control&) { return m.attachments.count > 0; }
+    static void constrain(const Model& m, const Control& c, const ConstraintPass& p) {
+        attachments::constrain(m, c, p);
+    }
     static void force(const Eval& e, double* f) { attachments::force(e.m, e.c, e.q, e.qd, f); }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.c, e.q, body); }
     static void jacobian_product(const Model& m, const Control& c, const Linearization& l,

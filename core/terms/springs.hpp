@@ -14,6 +14,8 @@
 // largest sqrt(w) (R_i / m_i + R_j / m_j), R_i the sum of sqrt(w) at i).
 #pragma once
 
+#include <cstring>
+
 #include "model.hpp"
 #include "simd.hpp"
 #include "terms/term.hpp"
@@ -269,11 +271,148 @@ inline void damping_ratios(const Model& m, double& lo, double& hi, bool& pure_da
     }
 }
 
+/// XPBD's step for one distance constraint C = |d| - L0 of stiffness k [N/m] and damping c
+/// [N s/m] over a substep h [s] (Macklin et al. 2016, eq. 26, with alpha = 1 / k and
+/// beta = c, multiplied through by k h^2 so that k = 0 is a pure damper): the multiplier's
+/// change dlambda = -(k h^2 C + lambda + c h u . e) / ((k h^2 + c h) w + 1) [N s^2], with e
+/// the edge's change since the substep's start and w the ends' inverse masses summed.
+inline double xpbd_delta(double stretch, double lambda, double u_dot_e, double k, double c,
+                         double h, double w) {
+    const double kh2 = k * h * h, ch = c * h;
+    return -(kh2 * stretch + lambda + ch * u_dot_e) / ((kh2 + ch) * w + 1.0);
+}
+
+/// Rows of ConstraintPass::spring_coef, each (S,) per entry of spring_order.
+enum CoefRow { kRest = 0, kStretch = 1, kDamp = 2, kLambda = 3, kWi = 4, kWj = 5, kCoefRows = 6 };
+
+/// XPBD's constants of every spring for the substep p.h, per entry r of p.spring_order,
+/// into the rows of p.spring_coef (kCoefRows, S): L0, k h^2 / D, c h / D and 1 / D with
+/// D = (k h^2 + c h) w + 1 (xpbd_delta's terms; w = w_i + w_j the ends' inverse masses),
+/// and w_i, w_j, so that the pass divides by nothing but the length. A spring between two
+/// pinned particles (w = 0) gets zeros: it moves nothing.
+inline void constraint_coefficients(const Model& m, const ConstraintPass& p) {
+    const index* ends = m.springs.indices;
+    const double* inv = m.particles.inv_mass;
+    const index count = m.springs.count;
+    const double h = p.h;
+    double* coef = p.spring_coef;
+    for (index r = 0; r < count; ++r) {
+        const index s = p.spring_order[r];
+        const double wi = inv[ends[2 * s]], wj = inv[ends[2 * s + 1]];
+        const double w = wi + wj;
+        const double kh2 = m.springs.stiffness[s] * h * h, ch = m.springs.damping[s] * h;
+        const double inv_d = w == 0.0 ? 0.0 : 1.0 / ((kh2 + ch) * w + 1.0);
+        coef[kRest * count + r] = m.springs.rest_length[s];
+        coef[kStretch * count + r] = kh2 * inv_d;
+        coef[kDamp * count + r] = ch * inv_d;
+        coef[kLambda * count + r] = inv_d;
+        coef[kWi * count + r] = wi;
+        coef[kWj * count + r] = wj;
+    }
+}
+
+/// base[idx] per lane (a gather; the scalar build's one lane).
+inline vd gather_lanes(const double* base, vi idx) {
+#if defined(__AVX512F__)
+    return _mm512_i64gather_pd((__m512i)idx, base, 8);
+#elif defined(__AVX2__)
+    return _mm256_i64gather_pd(base, (__m256i)idx, 8);
+#else
+    return vd{base[idx[0]]};
+#endif
+}
+
+/// base[idx] = v per lane; the lanes' indices are distinct (a scatter).
+inline void scatter_lanes(double* base, vi idx, vd v) {
+#if defined(__AVX512F__)
+    _mm512_i64scatter_pd(base, (__m512i)idx, (__m512d)v, 8);
+#else
+    for (int l = 0; l < kLanes; ++l) base[idx[l]] = v[l];
+#endif
+}
+
+/// XPBD's step for the springs at entries [r, r + kLanes) of the colouring, one per lane
+/// (no two share a particle: their updates are independent, gathered and scattered at
+/// once): xpbd_delta with constraint_coefficients' constants, each spring's two ends
+/// moved along its direction by their inverse masses. A zero-length spring has no
+/// direction: it moves nothing.
+inline void constrain_lanes(const ConstraintPass& p, index count, index r) {
+    vi ii, jj;
+    std::memcpy(&ii, p.spring_ends + r, sizeof ii);
+    std::memcpy(&jj, p.spring_ends + count + r, sizeof jj);
+    ii *= 3;
+    jj *= 3;
+    const double* coef = p.spring_coef + r;
+    vd xi[3], xj[3], d[3], u[3];
+    vd length2{}, u_dot_e{};
+    for (int k = 0; k < 3; ++k) {
+        xi[k] = gather_lanes(p.x + k, ii);
+        xj[k] = gather_lanes(p.x + k, jj);
+        d[k] = xj[k] - xi[k];
+        length2 += d[k] * d[k];
+    }
+    const vi live = length2 != 0.0;
+    const vd inv_length = select(live, splat(1.0) / vsqrt(length2));
+    for (int k = 0; k < 3; ++k) {
+        u[k] = inv_length * d[k];
+        const vd start = gather_lanes(p.x_start + k, jj) - gather_lanes(p.x_start + k, ii);
+        u_dot_e += u[k] * (d[k] - start);
+    }
+    const vd stretch = length2 * inv_length - load_lanes(coef + kRest * count);
+    double* lambda = p.spring_lambda + r;
+    const vd dl = select(live, -(load_lanes(coef + kStretch * count) * stretch +
+                                 load_lanes(coef + kDamp * count) * u_dot_e +
+                                 load_lanes(coef + kLambda * count) * load_lanes(lambda)));
+    store_lanes(lambda, load_lanes(lambda) + dl);
+    const vd di = load_lanes(coef + kWi * count) * dl, dj = load_lanes(coef + kWj * count) * dl;
+    for (int k = 0; k < 3; ++k) {
+        scatter_lanes(p.x + k, ii, xi[k] - di * u[k]);
+        scatter_lanes(p.x + k, jj, xj[k] + dj * u[k]);
+    }
+}
+
+/// The same step for the one spring at entry r.
+inline void constrain_one(const ConstraintPass& p, index count, index r) {
+    const index i = p.spring_ends[r], j = p.spring_ends[count + r];
+    const double* coef = p.spring_coef + r;
+    const V3 d = load(p.x, j) - load(p.x, i);
+    const double length2 = dot(d, d);
+    if (length2 == 0.0) return;
+    const double inv_length = 1.0 / std::sqrt(length2);
+    const V3 u = inv_length * d;
+    const V3 e = d - (load(p.x_start, j) - load(p.x_start, i));
+    const double stretch = length2 * inv_length - coef[kRest * count];
+    const double dl = -(coef[kStretch * count] * stretch + coef[kDamp * count] * dot(u, e) +
+                        coef[kLambda * count] * p.spring_lambda[r]);
+    p.spring_lambda[r] += dl;
+    add_to(p.x, i, -(coef[kWi * count] * dl) * u);
+    add_to(p.x, j, (coef[kWj * count] * dl) * u);
+}
+
+/// XPBD's pass over the springs (ConstraintPass): Gauss-Seidel colour by colour; within a
+/// colour (no two springs sharing a particle) kLanes springs at a time, the rest one by one.
+inline void constrain(const Model& m, const ConstraintPass& p) {
+    const index count = m.springs.count;
+    for (index c = 0; c < p.colours; ++c) {
+        index r = p.colour_ptr[c];
+        const index end = p.colour_ptr[c + 1];
+        for (; r + kLanes <= end; r += kLanes) constrain_lanes(p, count, r);
+        for (; r < end; ++r) constrain_one(p, count, r);
+    }
+}
+
 /// The registered term (terms/registry.hpp): its forms for the solvers.
 struct Term : TermBase {
     static constexpr const char* kName = "springs";
     static constexpr bool kLane = true, kProjected = true, kFused = true, kEnergy = true;
+    static constexpr bool kConstraint = true;
     static void force(const Eval& e, double* f) { springs::force(e.m, e.q, e.qd, f); }
+    static void prepare_constraints(const Model& m, const Control&, const ConstraintPass& p) {
+        constraint_coefficients(m, p);
+    }
+    static void constrain(const Model& m, const Control&, const ConstraintPass& p) {
+        springs::constrain(m, p);
+    }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
     static void prepare(const Eval& e, const Linearization& l) {
         springs::prepare(e.m, l.q, l.spring_u, l.spring_a, l.spring_b);

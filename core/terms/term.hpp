@@ -29,6 +29,10 @@
 //               q (TermBound), added to the springs' (kBound says it has one; rows (N, 2)
 //               scratch). Springs, attachments and the gas, whose rows and rank-one part
 //               combine, are composed in kernels.cpp: stiffness_bounds
+//   prepare_constraints  what XPBD's constraint pass needs for a substep h, once per run
+//   constrain   XPBD's pass over the term's constraints (solvers/substep.hpp): positions
+//               p.x moved in place by each constraint's Delta lambda (kConstraint terms;
+//               their force is left out of the substep's explicit forces)
 //   active      whether the term acts at all in a call (the fused symplectic Euler pass
 //               covers only kFused terms: a call with another active term takes the
 //               general step)
@@ -53,6 +57,27 @@ struct Eval {
     const BodyGas& gas;
 };
 
+/// XPBD's constraint pass within one substep of h [s] (solvers/substep.hpp): the iterate
+/// x (N, 3) moved in place, the substep's start x_start (N, 3) (the damping's reference),
+/// the springs in colour order (spring_order (S,), colour c holding entries
+/// [colour_ptr[c], colour_ptr[c + 1]), no two springs of a colour sharing a particle) and
+/// each constraint's multiplier lambda [N s^2], zeroed at the substep's start (the springs'
+/// per entry of spring_order). spring_ends (2, S): each entry's two particles;
+/// spring_coef (6, S), per entry: what prepare_constraints computes once for h
+/// (springs::constraint_coefficients).
+struct ConstraintPass {
+    double h = 0.0;
+    double* x = nullptr;
+    const double* x_start = nullptr;
+    const index* spring_order = nullptr;  // (S,)
+    const index* colour_ptr = nullptr;    // (colours + 1,)
+    index colours = 0;
+    double* spring_lambda = nullptr;      // (S,)
+    double* attachment_lambda = nullptr;  // (A,)
+    const index* spring_ends = nullptr;   // (2, S)
+    double* spring_coef = nullptr;        // (6, S)
+};
+
 /// Every form's default: none. A term's struct derives from this and hides what it has.
 struct TermBase {
     static constexpr bool kLane = false;       // the vertex-major pass gives its force
@@ -66,6 +91,8 @@ struct TermBase {
     static constexpr bool kExternal = false;
     static constexpr bool kFlow = false;  // it moves gas (its `flow` form), no force
     static constexpr bool kBound = false;  // it has a `bound` form
+    // XPBD (solvers/substep.hpp) solves it by its `constrain` form, no force there
+    static constexpr bool kConstraint = false;
     static bool active(const Model&, const Control&) { return true; }
     static void update(const Eval&, bool /*lanes_ran*/) {}
     static void force(const Eval&, double* /*f*/) {}
@@ -81,6 +108,8 @@ struct TermBase {
     static void flow(const Eval&) {}
     static void bound(const Model&, const Control&, const double* /*q*/, double* /*rows*/,
                       TermBound&) {}
+    static void prepare_constraints(const Model&, const Control&, const ConstraintPass&) {}
+    static void constrain(const Model&, const Control&, const ConstraintPass&) {}
 };
 
 }  // namespace softbody::SOFTBODY_KERNELS

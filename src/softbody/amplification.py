@@ -74,6 +74,8 @@ def amplification_matrix(integrator: Integrator, h: float, omega: float, zeta: f
     integrator = Integrator(integrator)
     if integrator == Integrator.PROJECTIVE:
         raise ValueError("projective dynamics has no fixed amplification matrix")
+    if integrator == Integrator.XPBD:
+        raise ValueError("xpbd has no fixed amplification matrix (its constraints are solved)")
     if integrator == Integrator.IMPLICIT_EULER:
         return np.linalg.inv(np.eye(2) - h * a)
     if integrator == Integrator.BDF2:

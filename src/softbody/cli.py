@@ -39,6 +39,7 @@ INTEGRATORS = [
     "implicit_euler",
     "bdf2",
     "projective",
+    "xpbd",
 ]
 
 

@@ -1,6 +1,6 @@
 """Time integrators: explicit Euler, Midpoint (RK2), RK4, symplectic Euler, velocity Verlet,
-implicit (backward) Euler and BDF2, and projective dynamics (backward Euler by
-local-global iterations)."""
+implicit (backward) Euler and BDF2, projective dynamics (backward Euler by
+local-global iterations), and XPBD with small steps (substeps of one constraint pass)."""
 
 from __future__ import annotations
 
@@ -20,17 +20,19 @@ class Integrator(IntEnum):
     IMPLICIT_EULER = 5
     BDF2 = 6
     PROJECTIVE = 7
+    XPBD = 8
 
     @property
     def order(self) -> int:
         """Global order of accuracy for smooth problems."""
-        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 2, 7: 1}[int(self)]
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 2, 7: 1, 8: 1}[int(self)]
 
     @property
     def force_evaluations(self) -> int:
         """Force evaluations per step (the implicit schemes add their CG iterations;
-        projective dynamics evaluates the non-spring forces once per iteration)."""
-        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 1, 7: 1}[int(self)]
+        projective dynamics evaluates the non-spring forces once per iteration, XPBD the
+        unconstrained forces once per substep)."""
+        return {0: 1, 1: 2, 2: 4, 3: 1, 4: 2, 5: 1, 6: 1, 7: 1, 8: 1}[int(self)]
 
     @property
     def implicit(self) -> bool:
@@ -65,6 +67,7 @@ class Integrator(IntEnum):
                 "implicit_bdf2": "bdf2",
                 "pd": "projective",
                 "projective_dynamics": "projective",
+                "substep": "xpbd",
             }
             key = aliases.get(key, key)
             for member in cls:

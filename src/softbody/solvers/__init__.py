@@ -1,7 +1,8 @@
 """The solvers a :class:`~softbody.Simulator` steps with, one class per method, each
 owning its options, the compiled core's loop and buffers, its history and caches and its
 stable-step rule: :class:`ExplicitSolver` (five explicit schemes), :class:`ImplicitSolver`
-(backward Euler and BDF2) and :class:`ProjectiveSolver` (projective dynamics)."""
+(backward Euler and BDF2), :class:`ProjectiveSolver` (projective dynamics) and
+:class:`SubstepSolver` (XPBD with small steps)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,11 @@ from softbody.solvers.base import RunLimits, RunResult, Solver, Status
 from softbody.solvers.explicit import ExplicitSolver
 from softbody.solvers.implicit import ImplicitSolver
 from softbody.solvers.projective import ProjectiveSolver
+from softbody.solvers.substep import SubstepSolver
 
-SOLVERS: tuple[type[Solver], ...] = (ExplicitSolver, ImplicitSolver, ProjectiveSolver)
+SOLVERS: tuple[type[Solver], ...] = (
+    ExplicitSolver, ImplicitSolver, ProjectiveSolver, SubstepSolver
+)
 
 
 def solver_class(integrator: Integrator) -> type[Solver]:
@@ -31,5 +35,6 @@ __all__ = [
     "RunResult",
     "Solver",
     "Status",
+    "SubstepSolver",
     "solver_class",
 ]
