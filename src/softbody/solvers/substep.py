@@ -97,9 +97,10 @@ class SubstepSolver(Solver):
         compliance is stable for them at any h. What stays explicit is symplectic Euler
         within the substep, stable on a mode x'' = -omega^2 x for h omega < 2; the pressure's
         volume mode (its rank-one dP/dV g g^T against the masses), the bending hinges and the
-        membranes are the stiff ones, and 1 / omega keeps the margin projective dynamics keeps for the
-        same mode. The local part of the pressure Hessian is resisted by the constraints
-        (as in ``ProjectiveSolver.step_limit``); gravity and drag (slow) do not bound h.
+        membranes are the stiff ones, and 1 / omega keeps the margin projective dynamics
+        keeps for the same mode. The local part of the pressure Hessian is resisted by the
+        constraints (as in ``ProjectiveSolver.step_limit``); gravity and drag (slow) do not
+        bound h.
         """
         w = max(mode.omega_gas, *mode.omega_terms.values())
         return float("inf") if w <= 0 else 1.0 / w
