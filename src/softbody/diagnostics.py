@@ -192,6 +192,20 @@ def body_gas_flows(model: Model, state: State, control: Control | None = None) -
     )
 
 
+def gas_state_bodies(model: Model) -> np.ndarray:
+    """Which bodies hold a gas whose amount [mol] and temperature [K] are state (a closed
+    body with an isothermal or adiabatic gas, not a fixed pressure), shape (B,) bool."""
+    law = np.asarray(model.body_gas_law)
+    return (np.asarray(model.body_closed) == 1) & (law != GasLaw.FIXED_PRESSURE)
+
+
+def has_gas_flows(model: Model) -> bool:
+    """Whether a term that moves gas acts in ``model`` (a vent, an orifice, an inflator or
+    a leak: the registered terms with the ``flow`` trait, :func:`softbody.core.terms`)."""
+    flows = {t["name"] for t in terms() if t["flow"]}
+    return any(name in flows for name in active_terms(model))
+
+
 def body_area(model: Model, state: State) -> np.ndarray:
     """Surface area of each body [m^2], shape (B,)."""
     x = state.particle_q[model.tri_indices]

@@ -44,9 +44,10 @@ from softbody.diagnostics import (
     body_volume,
     body_volume_by,
     energies,
+    gas_state_bodies,
+    has_gas_flows,
 )
 from softbody.errors import StabilityWarning
-from softbody.gas import GasLaw
 from softbody.io.outputs import check_targets, commit, folder_lock, prepare
 from softbody.limits import check_memory
 from softbody.scenes.loader import Scene
@@ -123,23 +124,6 @@ def _check_frame_memory(plan: FramePlan, scene: Scene, outputs: Outputs) -> None
     if outputs.usd:
         size = 24 * scene.model.particle_count + 96 * scene.model.collider_count
         check_memory("usd", frames * size, f"keeping {frames:,} frames for the USD cache")
-
-
-def gas_state_bodies(model) -> np.ndarray:
-    """Which bodies hold a gas whose amount [mol] and temperature [K] are state (a closed
-    body with an isothermal or adiabatic gas, not a fixed pressure), shape (B,) bool."""
-    law = np.asarray(model.body_gas_law)
-    return (np.asarray(model.body_closed) == 1) & (law != GasLaw.FIXED_PRESSURE)
-
-
-def has_gas_flows(model) -> bool:
-    """Whether ``model`` has any vent, orifice, inflator or leak (gas that flows)."""
-    return bool(
-        len(model.vent_body)
-        or len(model.orifice_bodies)
-        or len(model.inflator_body)
-        or np.any(np.asarray(model.body_leak_coefficient) > 0)
-    )
 
 
 def _expected_files(stem: str, plan: FramePlan, outputs: Outputs, bounding: bool) -> list[str]:

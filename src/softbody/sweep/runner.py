@@ -67,9 +67,10 @@ def run_one(
         body_pressure,
         body_volume,
         energies,
+        gas_state_bodies,
+        has_gas_flows,
     )
     from softbody.errors import SimulationError
-    from softbody.run import gas_state_bodies, has_gas_flows
     from softbody.scenes.loader import build_scene
     from softbody.scenes.plan import plan_frames
     from softbody.sim.simulator import Simulator
