@@ -151,6 +151,8 @@ def main() -> None:
     for skin in ("springs", "membrane"):
         left.plot(v, [r["mvps"][skin] for r in rows], "o-", label=skin)
     left.set_xscale("log")
+    left.set_xticks(v, [f"{x:,}" for x in v])
+    left.minorticks_off()
     left.set_xlabel("vertices")
     left.set_ylabel("million vertex-steps / s (symplectic Euler)")
     left.legend()
@@ -158,8 +160,8 @@ def main() -> None:
     right.plot(t, drop["heights"])
     right.set_xlabel("time [s]")
     right.set_ylabel("centre height [m]")
-    right.set_title(f"implicit Euler 1/60 s, {drop['vertices']} vertices: "
-                    f"{drop['realtime_factor']:.2f}x real time")  # fmt: skip
+    right.set_title(f"implicit Euler 1/60 s, {drop['vertices']:,} vertices: "
+                    f"{drop['realtime_factor']:.2f}x real time", fontsize=10)  # fmt: skip
     fig.tight_layout()
     save_figure(fig, RESULTS / "membranes.png")
 
