@@ -3,8 +3,8 @@
 // step dt is cut into n substeps of h = dt / n; each substep:
 //
 //   f        the forces of every registered term without a constraint form (gravity, the
-//            gas pressure with the exact volume and dV/dx at the substep's start, drag,
-//            bending, Control's forces): forms::eval_forces<kUnconstrained>
+//            gas pressure with the exact volume and dV/dx at the substep's start, the air
+//            on faces, bending, membranes, Control's forces): forms::eval_forces<kUnconstrained>
 //   x*       = x + h v + h^2 f / m (pinned particles, 1 / m = 0, move with their velocity)
 //   x        every kConstraint term's constrain form on x*, `iterations` passes (springs:
 //            a distance constraint of compliance 1 / k with XPBD's damping, Gauss-Seidel

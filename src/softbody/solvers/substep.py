@@ -56,10 +56,11 @@ def colour_springs(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray
 class SubstepSolver(Solver):
     """``xpbd``: XPBD with small steps. Each step of dt takes ``xpbd_substeps`` substeps of
     h = dt / n; each substep predicts x + h v + h^2 f / m under the forces of the terms
-    without a constraint form (gravity, the pressure from the exact volume and dV/dx, drag,
-    bending, Control's), runs ``xpbd_iterations`` passes of the springs' and attachments'
-    compliant distance constraints (compliance 1 / k, XPBD's damping from c), Gauss-Seidel
-    over a colouring of the springs, sets v = (x - x_prev) / h and resolves the contacts.
+    without a constraint form (gravity, the pressure from the exact volume and dV/dx, the
+    air on faces, bending, membranes, Control's), runs ``xpbd_iterations`` passes of the
+    springs' and attachments' compliant distance constraints (compliance 1 / k, XPBD's
+    damping from c), Gauss-Seidel over a colouring of the springs, sets v = (x - x_prev) /
+    h and resolves the contacts.
 
     The constraints are stable at any h; the explicit forces are symplectic Euler within
     each substep, so the pressure bounds h (``step_limit``). First order: as the substeps
@@ -99,8 +100,8 @@ class SubstepSolver(Solver):
         volume mode (its rank-one dP/dV g g^T against the masses), the bending hinges and the
         membranes are the stiff ones, and 1 / omega keeps the margin projective dynamics
         keeps for the same mode. The local part of the pressure Hessian is resisted by the
-        constraints (as in ``ProjectiveSolver.step_limit``); gravity and drag (slow) do not
-        bound h.
+        constraints (as in ``ProjectiveSolver.step_limit``); gravity and the air (slow) do
+        not bound h.
         """
         w = max(mode.omega_gas, *mode.omega_terms.values())
         return float("inf") if w <= 0 else 1.0 / w
