@@ -153,15 +153,16 @@ def test_two_chambers_conserve_gas_and_equalise(process):
 
 @pytest.mark.parametrize(
     "integrator",
-    ["rk4", "symplectic_euler", "velocity_verlet", "implicit_euler", "bdf2", "projective"],
+    ["rk4", "symplectic_euler", "velocity_verlet", "implicit_euler", "bdf2", "projective",
+     "xpbd"],
 )
 def test_every_solver_conserves_gas_between_moving_chambers(integrator):
     """Two free, elastic balloons joined by an orifice, the gas adiabatic: whatever the
     solver (explicit Euler and midpoint amplify the balloons' vibration at any step and
     have their gas checked on the rigid vessel above), the total amount is conserved to
     round-off while the balloons move and the gas flows (gas_state.hpp: flows applied to
-    both sides alike, explicitly in the implicit solvers and projective dynamics); the
-    amounts stay positive."""
+    both sides alike, explicitly in the implicit solvers, projective dynamics and xpbd's
+    substeps); the amounts stay positive."""
     model, state = _two_chambers("adiabatic", pinned=False, pressures=(1.6e5, 1.1e5))
     total = state.body_gas_moles.sum()
     sim = sb.Simulator(model, integrator=integrator, dt=2e-5)
