@@ -65,6 +65,10 @@ class StiffestMode:
     """The part of the bound from each registered term with a bound form of its own (the
     membranes, material bending: its Gershgorin rows, ``softbody.stability``), against
     the masses [rad/s], by name; absent where the model has none of that term."""
+    damping_rate_terms: dict = field(default_factory=dict)
+    """The bound on each of those terms' own damping rate (the largest eigenvalue of
+    M^-1 C for its C alone) [1/s], by name: a membrane's strain-rate damping; 0 for
+    undamped bending."""
 
 
 def amplification_matrix(integrator: Integrator, h: float, omega: float, zeta: float) -> np.ndarray:

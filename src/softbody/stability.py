@@ -251,6 +251,7 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
         float(np.sqrt(w2_pressure)),
         float(np.sqrt(rank_one)),
         {name: float(np.sqrt(parts[2])) for name, parts in pieces["terms"].items()},
+        {name: float(parts[3]) for name, parts in pieces["terms"].items()},
     )
 
 

@@ -92,7 +92,9 @@ class SubstepSolver(Solver):
     def substep_limit(cls, mode: StiffestMode) -> float:
         """The largest stable substep h [s]: 1 / omega, omega the largest of the gas's volume
         mode and the terms XPBD keeps explicit that have a bound of their own, material
-        bending and the membranes (``mode.omega_gas``, ``mode.omega_terms``).
+        bending and the membranes (``mode.omega_gas``, ``mode.omega_terms``), and at most
+        1 / c for c the largest damping rate of those terms (``mode.damping_rate_terms``: a
+        membrane's strain-rate damping, explicit in the substep as its stiffness is).
 
         The constraints (springs, attachments) are solved, not integrated: XPBD with
         compliance is stable for them at any h. What stays explicit is symplectic Euler
@@ -104,7 +106,9 @@ class SubstepSolver(Solver):
         not bound h.
         """
         w = max(mode.omega_gas, *mode.omega_terms.values())
-        return float("inf") if w <= 0 else 1.0 / w
+        # their own damping, explicit too: symplectic Euler on x' = -c x needs h c < 2
+        rate = max(0.0, *mode.damping_rate_terms.values())
+        return min(float("inf") if w <= 0 else 1.0 / w, float("inf") if rate <= 0 else 1.0 / rate)
 
     @classmethod
     def step_limit(cls, integrator: Integrator, mode: StiffestMode) -> float:
