@@ -42,13 +42,10 @@ def stable_pair(total, c, v0):
     return rising(s2), s2
 
 
-def test_two_joined_balloons_end_unequal_on_the_closed_form():
-    """Two 162-vertex neo-Hookean balloons (mu = 0.2 MPa, H = 1 mm, R = 0.2 m) at
-    stretches 1.65 and 1.55, both past the peak, each holding the air that balances it,
-    joined by an orifice (isothermal air at 1 bar outside): the smaller shrinks onto the
-    rising branch and the larger grows, to the closed-form pair within 1e-3 of the
-    stretch (the mesh is not exactly uniform under pressure: 1e-5 measured); the air is
-    conserved to round-off throughout, and the pressures end equal."""
+def joined_balloons(start):
+    """Two 162-vertex neo-Hookean balloons joined by a wide orifice, scaled to the
+    stretches `start` (2,), each holding the isothermal air that balances it alone: (model,
+    state, c [Pa] the curve's constant, V0 [m^3] the rest volume)."""
     neo = sb.Membrane.neo_hookean(MU, H, damping=0.002)
     builder = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
     for x in (-1.0, 1.0):
@@ -58,17 +55,26 @@ def test_two_joined_balloons_end_unequal_on_the_closed_form():
         )  # fmt: skip
     builder.add_orifice(0, 1, area=0.05)
     model = builder.finalize()
-    area = model.membrane_rest_area[model.membrane_body == 0].sum()
     v0 = model.body_rest_volume[0]
-    c = 2 * MU * H * area / (3 * v0)
+    c = 2 * MU * H * model.membrane_rest_area[model.membrane_body == 0].sum() / (3 * v0)
     state = model.state()
-    start = (1.65, 1.55)
     for body, s in enumerate(start):
         p0, p1 = model.body_particle_range[body]
         centre = state.particle_q[p0:p1].mean(axis=0)
         state.particle_q[p0:p1] = centre + s * (state.particle_q[p0:p1] - centre)
     volume = sb.body_volume(model, state)
-    state.body_gas_moles[:] = (P_A + gauge(np.array(start), c)) * volume / (R * T)
+    state.body_gas_moles[:] = (P_A + gauge(np.asarray(start), c)) * volume / (R * T)
+    return model, state, c, v0
+
+
+def test_two_joined_balloons_end_unequal_on_the_closed_form():
+    """Two 162-vertex neo-Hookean balloons (mu = 0.2 MPa, H = 1 mm, R = 0.2 m) at
+    stretches 1.65 and 1.55, both past the peak, each holding the air that balances it,
+    joined by an orifice (isothermal air at 1 bar outside): the smaller shrinks onto the
+    rising branch and the larger grows, to the closed-form pair within 1e-3 of the
+    stretch (the mesh is not exactly uniform under pressure: 1e-5 measured); the air is
+    conserved to round-off throughout, and the pressures end equal."""
+    model, state, c, v0 = joined_balloons((1.65, 1.55))
     total = state.body_gas_moles.sum()
     s1, s2 = stable_pair(total, c, v0)
     assert s1 < PEAK < s2

@@ -24,33 +24,14 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import softbody as sb
-from softbody.gas import GAS_CONSTANT as R
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from test_two_balloons import MU, P_A, PEAK, RADIUS, H, T, gauge, stable_pair
+from test_two_balloons import P_A, PEAK, gauge, joined_balloons, stable_pair
 
 
 def main(out: Path) -> None:
-    neo = sb.Membrane.neo_hookean(MU, H, damping=0.002)
-    builder = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
-    for x in (-1.0, 1.0):
-        builder.add_soft_body(
-            sb.icosphere(2, radius=RADIUS, center=(x, 0.0, 0.0)), mass=0.05, membrane=neo,
-            gas=sb.Gas.ideal(1.0, T, ambient_pressure=P_A),
-        )  # fmt: skip
-    builder.add_orifice(0, 1, area=0.05)
-    model = builder.finalize()
-    area = model.membrane_rest_area[model.membrane_body == 0].sum()
-    v0 = model.body_rest_volume[0]
-    c = 2 * MU * H * area / (3 * v0)
-    state = model.state()
     start = np.array([1.65, 1.55])
-    for body, s in enumerate(start):
-        p0, p1 = model.body_particle_range[body]
-        centre = state.particle_q[p0:p1].mean(axis=0)
-        state.particle_q[p0:p1] = centre + s * (state.particle_q[p0:p1] - centre)
-    volume = sb.body_volume(model, state)
-    state.body_gas_moles[:] = (P_A + gauge(start, c)) * volume / (R * T)
+    model, state, c, v0 = joined_balloons(start)
     s1, s2 = stable_pair(state.body_gas_moles.sum(), c, v0)
     sim = sb.Simulator(model, integrator="implicit_euler", dt=2e-3)
     times, stretch, pressure = [0.0], [start.copy()], [sb.body_pressure(model, state) - P_A]
