@@ -8,6 +8,7 @@
 #include "collision/soft.hpp"
 #include "model.hpp"
 #include "simd.hpp"
+#include "solvers/gas_state.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::loop {
@@ -142,6 +143,20 @@ inline RunResult end_step(const Model& m, const Control& c, const RunParams& p, 
         copy(v0, s.qd, n3);
         r.steps_done = step;
     }
+    return r;
+}
+
+/// A whole run, every solver's frame around its steps: the run's start (begin_run), the
+/// gas state from the state's temperatures (gas_state::begin), `steps()` (a RunResult:
+/// the solver's time loop), then the state's temperatures and scheduled amounts at the
+/// time the steps reached (gas_state::finish).
+template <class Steps>
+inline RunResult run(const Model& m, const Control& c, const RunParams& p, const StateView& s,
+                     const ContactBuffers& contact, const BodyGas& gas, Steps steps) {
+    begin_run(m, c, p, s, contact);
+    gas_state::begin(m, s.q, s, gas);
+    const RunResult r = steps();
+    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, gas);
     return r;
 }
 

@@ -272,7 +272,8 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
     return {OK, p.steps, -1, 0.0};
 }
 
-/// The steps of simulate (gas_state::begin done, finish to follow).
+/// The steps of simulate, inside loop::run (the run's start and the gas state's begin and
+/// finish around them).
 inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                            const StateView& s, const ExplicitBuffers& w) {
     const index n3 = 3 * m.particles.count;
@@ -310,11 +311,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
 /// at the failing step's start.
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const ExplicitBuffers& w) {
-    loop::begin_run(m, c, p, s, w.contact);
-    gas_state::begin(m, s.q, s, w.gas);
-    const RunResult r = run_steps(m, c, p, s, w);
-    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, w.gas);
-    return r;
+    return loop::run(m, c, p, s, w.contact, w.gas, [&] { return run_steps(m, c, p, s, w); });
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::explicit_solver

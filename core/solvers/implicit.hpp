@@ -321,7 +321,8 @@ inline bool contacts_acted(index n3, const double* q, const double* qd, const do
     return false;
 }
 
-/// The steps of simulate (gas_state::begin done, finish to follow).
+/// The steps of simulate, inside loop::run (the run's start and the gas state's begin and
+/// finish around them).
 inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                           const ImplicitParams& ip, const StateView& s, const ImplicitBuffers& w,
                           const MultigridView* mg) {
@@ -365,11 +366,8 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const ImplicitParams& ip, const StateView& s, const ImplicitBuffers& w,
                           const MultigridView* mg) {
-    loop::begin_run(m, c, p, s, w.contact);
-    gas_state::begin(m, s.q, s, w.gas);
-    const RunResult r = run_steps(m, c, p, ip, s, w, mg);
-    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, w.gas);
-    return r;
+    return loop::run(m, c, p, s, w.contact, w.gas,
+                     [&] { return run_steps(m, c, p, ip, s, w, mg); });
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::implicit_solver

@@ -159,7 +159,8 @@ inline void step(const Model& m, const Control& c, double t, double dt, index it
     }
 }
 
-/// The steps of simulate (gas_state::begin done, finish to follow).
+/// The steps of simulate, inside loop::run (the run's start and the gas state's begin and
+/// finish around them).
 inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
     const index n3 = 3 * m.particles.count;
@@ -196,11 +197,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
 /// contacts and restores are the explicit loop's (solvers/explicit.hpp).
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const Factor& a, const ProjectiveBuffers& w) {
-    loop::begin_run(m, c, p, s, w.contact);
-    gas_state::begin(m, s.q, s, w.gas);
-    const RunResult r = run_steps(m, c, p, s, a, w);
-    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, w.gas);
-    return r;
+    return loop::run(m, c, p, s, w.contact, w.gas, [&] { return run_steps(m, c, p, s, a, w); });
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::projective

@@ -82,7 +82,8 @@ inline void substep(const Model& m, const Control& c, double h, index iterations
     for (index i = 0; i < n; ++i) store(s.qd, i, inv_h * (load(s.q, i) - load(w.q_prev, i)));
 }
 
-/// The steps of simulate (gas_state::begin done, finish to follow).
+/// The steps of simulate, inside loop::run (the run's start and the gas state's begin and
+/// finish around them).
 inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                            const StateView& s, const SubstepBuffers& w) {
     const index n3 = 3 * m.particles.count;
@@ -144,11 +145,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
 /// back to the failing step's start (a volume that fails at a step's start: that state).
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const SubstepBuffers& w) {
-    loop::begin_run(m, c, p, s, w.contact);
-    gas_state::begin(m, s.q, s, w.gas);
-    const RunResult r = run_steps(m, c, p, s, w);
-    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, w.gas);
-    return r;
+    return loop::run(m, c, p, s, w.contact, w.gas, [&] { return run_steps(m, c, p, s, w); });
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::substep
