@@ -26,6 +26,8 @@ BUILT_IN = [
     "airbag",
     "punctured-ball",
     "two-balloons",
+    "balloon-tank",
+    "bending-actuator",
 ]
 
 

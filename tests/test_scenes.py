@@ -11,9 +11,9 @@ from softbody.scenes import SceneError, list_scenes, load_scene
 
 
 def test_all_paper_scenes_are_built_in():
-    """The five scenes of the paper's figures, balloon-drop (face drag) and the three
-    scenes of gas that flows (landing-cushion, airbag, punctured-ball) ship with the
-    package."""
+    """The five scenes of the paper's figures, balloon-drop (face drag), the scenes of
+    gas that flows (landing-cushion, airbag, punctured-ball, two-balloons) and of
+    membranes (balloon-tank, bending-actuator) ship with the package."""
     assert sorted(list_scenes()) == sorted(BUILT_IN)
 
 

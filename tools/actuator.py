@@ -2,7 +2,8 @@
 
     python tools/actuator.py [OUT.png]   (default docs/images/actuator.png)
 
-A soft-robot finger as such grippers are built: a closed box chamber 2 x 10 x 2 cm of
+The bending-actuator scene (softbody run bending-actuator), measured. A soft-robot
+finger as such grippers are built: a closed box chamber 2 x 10 x 2 cm of
 soft silicone (neo-Hookean, mu = 39 kPa, Ecoflex 00-30's; 2 mm thick), one long side
 bonded to an inextensible layer (a StVK sheet of E H = 100 kN/m, paper), its base clamped
 (every base vertex pinned). The gas pressure rises slowly from 0 to 5.5 kPa over 4 s
@@ -25,25 +26,17 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import softbody as sb
+from softbody.scenes import load_scene
 
-WIDTH, LENGTH = 0.02, 0.1
-P_MAX, RAMP = 5.5e3, 4.0
+SCENE = "bending-actuator"
+LENGTH = 0.1  # the chamber's length [m]: its base at y = -LENGTH / 2, its tip at +LENGTH / 2
 
 
 def finger() -> tuple[sb.Model, np.ndarray]:
-    """The actuator's model and the particles of its free end face."""
-    mesh = sb.box((WIDTH, LENGTH, WIDTH), subdivisions=4)
-    v, f = mesh.vertices, mesh.faces
-    layer = np.flatnonzero(v[f].mean(axis=1)[:, 0] < -WIDTH / 2 + 1e-9)  # the -x side
-    silicone = sb.Membrane.neo_hookean(39e3, 2e-3, damping=0.01)
-    paper = sb.Membrane.stvk(1e9, 0.3, 1e-4, damping=0.01)
-    builder = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
-    builder.add_soft_body(
-        mesh, mass=0.02, membrane=[(silicone, None), (paper, layer)],
-        gas=sb.Gas.fixed_pressure(0.0, schedule=[(0.0, 0.0), (RAMP, P_MAX)]),
-        pinned=np.flatnonzero(v[:, 1] < -LENGTH / 2 + 1e-9),
-    )  # fmt: skip
-    return builder.finalize(), np.flatnonzero(v[:, 1] > LENGTH / 2 - 1e-9)
+    """The actuator's model (the bending-actuator scene) and the particles of its free end
+    face."""
+    model = load_scene(SCENE).model
+    return model, np.flatnonzero(model.particle_q[:, 1] > LENGTH / 2 - 1e-9)
 
 
 def tip_angle(q: np.ndarray, tip: np.ndarray) -> float:
@@ -55,12 +48,13 @@ def tip_angle(q: np.ndarray, tip: np.ndarray) -> float:
 
 
 def main(out: Path) -> None:
+    scene = load_scene(SCENE)
     model, tip = finger()
-    sim = sb.Simulator(model, integrator="implicit_euler", dt=2e-3)
+    sim = sb.Simulator(model, integrator=scene.integrator, dt=scene.dt)
     state = model.state()
     pressures, angles, shapes = [0.0], [0.0], {}
     for k in range(1, 41):
-        sim.advance(state, RAMP / 40, progress=False)
+        sim.advance(state, scene.duration / 40, progress=False)
         pressures.append(float(sb.body_pressure(model, state)[0]))
         angles.append(tip_angle(state.particle_q, tip))
         if k in (10, 20, 30, 40):

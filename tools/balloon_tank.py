@@ -1,10 +1,10 @@
 """Draw a rubber balloon inflated from a tank through the peak of its curve
-(docs/guide/membranes.md).
+(docs/guide/membranes.md): the balloon-tank scene (softbody run balloon-tank), measured.
 
     python tools/balloon_tank.py [OUT.png]   (default docs/images/balloon-tank.png)
 
 A party balloon (a neo-Hookean membrane on a 162-vertex icosphere of R = 0.1 m, mu =
-200 kPa, H = 1 mm) is joined by an orifice of 10 cm^2 to a rigid 113-litre tank (every
+200 kPa, H = 1 mm) is joined by an orifice of 10 cm^2 to a rigid 109-litre tank (every
 vertex pinned) that an inflator fills with 2 g/s of air at 293 K; 1 bar outside, the air
 isothermal. Implicit Euler at 2 ms steps them for 10 s. The balloon's gauge pressure
 against its stretch s = (V / V0)^(1/3) lies on the closed-form curve c (1/s - 1/s^7), c =
@@ -24,33 +24,21 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import softbody as sb
-from softbody.gas import GAS_CONSTANT as R
+from softbody.scenes import load_scene
 
-MU, H, RADIUS, T, P_A = 2e5, 1e-3, 0.1, 293.15, 1e5
+MU, H, P_A = 2e5, 1e-3, 1e5  # the scene's rubber: shear modulus [Pa], thickness [m]; 1 bar
 
 
 def main(out: Path) -> None:
-    builder = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
-    balloon = builder.add_soft_body(
-        sb.icosphere(2, radius=RADIUS), mass=0.01,
-        membrane=sb.Membrane.neo_hookean(MU, H, damping=0.002),
-        gas=sb.Gas.ideal(1.0, T, ambient_pressure=P_A),
-    )  # fmt: skip
-    tank_mesh = sb.icosphere(2, radius=0.3, center=(1.0, 0.0, 0.0))
-    tank = builder.add_soft_body(
-        tank_mesh, mass=1.0, stiffness=1e4, gas=sb.Gas.ideal(1.0, T, ambient_pressure=P_A),
-        pinned=np.arange(len(tank_mesh.vertices)),
-    )  # fmt: skip
-    builder.add_orifice(balloon, tank, area=1e-3)
-    builder.add_inflator(tank, mass_flow=2e-3, temperature=T)
-    model = builder.finalize()
+    scene = load_scene("balloon-tank")
+    model = scene.model
+    balloon, tank = 0, 1
     v0 = model.body_rest_volume[balloon]
     c = 2 * MU * H * model.membrane_rest_area.sum() / (3 * v0)
     state = model.state()
-    state.body_gas_moles[:] = P_A * sb.body_volume(model, state) / (R * T)  # both at 1 bar
-    sim = sb.Simulator(model, integrator="implicit_euler", dt=2e-3)
+    sim = sb.Simulator(model, integrator=scene.integrator, dt=scene.dt)
     stretch, gauges = [1.0], [np.zeros(2)]
-    for _ in range(100):
+    for _ in range(round(scene.duration / 0.1)):
         sim.advance(state, 0.1)
         stretch.append((sb.body_volume(model, state)[balloon] / v0) ** (1 / 3))
         gauges.append(sb.body_pressure(model, state) - P_A)

@@ -335,7 +335,13 @@ def _membrane(spec, mesh: TriMesh, where: str) -> list | None:
             material = Membrane.stvk(layer.youngs_modulus, layer.poisson_ratio,
                                      layer.thickness, **common)  # fmt: skip
         faces = layer.faces
-        if faces is not None and faces and max(faces) >= mesh.face_count:
+        if isinstance(faces, schema.FaceSide):
+            centres = mesh.vertices[mesh.faces].mean(axis=1)[:, "xyz".index(faces.axis)]
+            side = centres > faces.above if faces.above is not None else centres < faces.below
+            faces = np.flatnonzero(side)
+            if faces.size == 0:
+                raise SceneError(f"{at}.faces selects no face")
+        elif faces is not None and faces and max(faces) >= mesh.face_count:
             raise SceneError(f"{at}.faces must lie in [0, {mesh.face_count - 1}]")
         layers.append((material, faces))
     return layers

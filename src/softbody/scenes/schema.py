@@ -593,13 +593,47 @@ class MaterialBending(Table):
         return self
 
 
+class FaceSide(Table):
+    """The faces whose centre lies on one side of a plane normal to an axis, in the
+    scene's coordinates (after the body's scale, rotation and position)."""
+
+    axis: Literal["x", "y", "z"] = Field(description="the plane's normal axis")
+    above: Real | None = Field(None, description="faces with a centre above this [m]")
+    below: Real | None = Field(None, description="faces with a centre below this [m]")
+
+    @model_validator(mode="after")
+    def _one_side(self) -> FaceSide:
+        if (self.above is None) == (self.below is None):
+            raise _error("field", "give one of above or below", field="above")
+        return self
+
+
+def _faces_tag(value: Any) -> str | None:
+    """Face indices, or a table selecting a side (tags of the key=value form, which error
+    locations leave out)."""
+    if isinstance(value, dict):
+        return "faces=table"
+    if isinstance(value, list | tuple):
+        return "faces=list"
+    return None
+
+
+FaceSelection = Annotated[
+    Annotated[list[Annotated[Count, Field(ge=0)]], Tag("faces=list")]
+    | Annotated[FaceSide, Tag("faces=table")],
+    Discriminator(_faces_tag),
+]
+
+
 class _MembraneBase(Table):
     thickness: Real = Field(gt=0, le=1e3, description="rest thickness H [m]")
     damping: Real = Field(
         0.0, ge=0, le=1e6, description="strain-rate damping time beta [s] (0: none)"
     )
-    faces: list[Annotated[Count, Field(ge=0)]] | None = Field(
-        None, description="the mesh faces this layer covers (default: every face)"
+    faces: FaceSelection | None = Field(
+        None,
+        description="the mesh faces this layer covers: indices, or a table selecting the "
+        "faces on one side of a plane (axis and above or below); default every face",
     )
 
 
