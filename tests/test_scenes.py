@@ -100,7 +100,7 @@ def test_bad_overrides_name_the_key(override, match):
 def test_unknown_scene_lists_the_built_ins():
     """A scene name that is neither built in nor a file is a SceneError that lists the
     built-in scenes."""
-    listed = "unknown scene 'bouncy'; built-in scenes: airbag, balloon-drop, bouncing"
+    listed = "unknown scene 'bouncy'; built-in scenes: airbag, balloon-drop, balloon-tank, bend"
     with pytest.raises(SceneError, match=listed):
         load_scene("bouncy")
 
