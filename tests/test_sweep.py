@@ -525,3 +525,20 @@ def test_address_of_something_else_is_one_line_in_bounded_time(scene, tmp_path, 
     lines = result.stderr.splitlines()
     assert len(lines) == 1 and f"tcp://127.0.0.1:{port} {match}" in lines[0], lines
     assert not (tmp_path / "out").exists()
+
+
+def test_heat_map_cell_labels_fit_their_cells():
+    """Contract of the sweep figure's heat-map texts (the landing-cushion sweep's labels
+    ran into each other): values of 1e4 and above are shown over their power of ten with
+    the scale in the title; the font shrinks to fit the widest text in the cell (0.62 of
+    the font size per character), never above 7 pt; below 4.5 pt no text is drawn."""
+    from softbody.sweep.figure import cell_labels
+
+    pressures = np.array([[1.0932e5, 1.0911e5], [np.nan, 1.047e5]])
+    texts, size, note = cell_labels(pressures, cell_points=15.0)
+    assert texts == ["1.09", "1.09", "", "1.05"] and note == " (x 1e5)"
+    assert size == pytest.approx(15.0 / (0.62 * 4))
+    texts, size, note = cell_labels(np.array([[0.578, 0.00671]]), cell_points=100.0)
+    assert texts == ["0.578", "0.00671"] and note == "" and size == 7.0
+    assert cell_labels(np.array([[0.001234, 0.005]]), 20.0)[0] == ["1.23", "5"]
+    assert cell_labels(np.array([[123.456]]), cell_points=8.0)[1] == 0.0

@@ -46,6 +46,25 @@ def _label(v) -> str:
     return f"{v:.3g}" if isinstance(v, float) else str(v)
 
 
+def cell_labels(grid: np.ndarray, cell_points: float) -> tuple[list[str], float, str]:
+    """The heat map's cell texts for ``grid``'s values (NaN: none), the font size [pt]
+    that fits the widest in a cell ``cell_points`` wide (0: they do not fit at 4.5 pt, so
+    none is drawn) and the scale the texts are in (" (x 1e5)", or "" when they are the
+    values themselves). Values of 1e4 and above, or all below 1e-2, are shown divided by
+    the power of ten of the largest, so a row of pressures near 1e5 reads 1.09, not
+    1.09e+05 over and over."""
+    finite = np.abs(grid[np.isfinite(grid)])
+    largest = finite.max() if finite.size else 0.0
+    scale, note = 1.0, ""
+    if largest >= 1e4 or 0.0 < largest < 1e-2:
+        power = int(np.floor(np.log10(largest)))
+        scale, note = 10.0**power, f" (x 1e{power})"
+    texts = ["" if not np.isfinite(v) else f"{v / scale:.3g}" for v in grid.ravel()]
+    widest = max((len(t) for t in texts), default=0)
+    size = min(7.0, cell_points / (0.62 * widest)) if widest else 0.0
+    return texts, (size if size >= 4.5 else 0.0), note
+
+
 def summary_figure(
     spec: SweepSpec, rows: list[dict], path: Path, metrics: list[str] | None = None
 ) -> Path | None:
@@ -85,19 +104,23 @@ def summary_figure(
             grid = np.where(count > 0, grid / np.maximum(count, 1), np.nan)
             im = ax.imshow(grid, origin="lower", aspect="auto", cmap="viridis")
             fig.colorbar(im, ax=ax)
+            # a cell's width in points: the axes' share of the figure (as tight_layout
+            # leaves it, about 0.62 of a panel beside its colour bar) over the columns
+            cell = 0.62 * 4.6 * 72 / len(xs)
+            texts, size, note = cell_labels(grid, cell)
             for y in range(len(ys)):
                 for x in range(len(xs)):
-                    if np.isfinite(grid[y, x]):
+                    if size and np.isfinite(grid[y, x]):
                         light = im.norm(grid[y, x]) > 0.6  # dark text on viridis' yellows
-                        ax.text(x, y, f"{grid[y, x]:.3g}", ha="center", va="center",
-                                fontsize=7, color="k" if light else "w")  # fmt: skip
+                        ax.text(x, y, texts[y * len(xs) + x], ha="center", va="center",
+                                fontsize=size, color="k" if light else "w")  # fmt: skip
                     if blown[y, x]:
                         ax.plot(x, y, "rx", ms=12, mew=2)
             ax.set_xticks(range(len(xs)), [_label(v) for v in xs], rotation=45, fontsize=8)
             ax.set_yticks(range(len(ys)), [_label(v) for v in ys], fontsize=8)
             ax.set_xlabel(varied[0])
             ax.set_ylabel(varied[1])
-            ax.set_title(m, fontsize=10)
+            ax.set_title(m + (note if size else ""), fontsize=10)
         for ax in list(axes.flat)[len(names) :]:
             ax.axis("off")
     else:
