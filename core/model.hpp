@@ -305,6 +305,9 @@ struct SubstepBuffers {
     double* q0 = nullptr;      // (N, 3) start-of-step positions
     double* v0 = nullptr;      // (N, 3) start-of-step velocities
     double* q_prev = nullptr;  // (N, 3) start-of-substep positions
+    // (N, kRow) the constraint pass's rows: the iterate x, y, z, the substep's start x, y,
+    // z, two doubles of padding (ConstraintPass)
+    double* rows = nullptr;
     double* spring_lambda = nullptr;      // (S,) [N s^2]
     double* attachment_lambda = nullptr;  // (A,) [N s^2]
     double* spring_coef = nullptr;        // (6, S) the springs' constants for the substep

@@ -5,6 +5,8 @@
 #include "bindings/poll.hpp"
 #include "threads.hpp"
 
+#include <cstdint>
+
 namespace softbody::bindings {
 namespace {
 
@@ -30,6 +32,7 @@ public:
         w_.q0 = buffers_.row(1);
         w_.v0 = buffers_.row(2);
         w_.q_prev = buffers_.row(3);
+        w_.rows = aligned_rows(m.particles.count);
         w_.spring_lambda = spring_lambda_.data();
         w_.attachment_lambda = attachment_lambda_.data();
         w_.spring_coef = spring_coef_.data();
@@ -111,13 +114,21 @@ private:
         }
     }
 
+    /// The constraint pass's rows (N, kRow), zeroed, each on a 64-byte line of its own.
+    double* aligned_rows(Index n) {
+        constexpr size_t line = 64 / sizeof(double);
+        rows_.assign(static_cast<size_t>(8 * std::max<Index>(n, 1)) + line, 0.0);
+        const size_t misaligned = (reinterpret_cast<std::uintptr_t>(rows_.data()) % 64) / 8;
+        return rows_.data() + (misaligned == 0 ? 0 : line - misaligned);
+    }
+
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
     const CoreModel& model_;
     Buffers buffers_;
     SolverThreads threads_;
     softbody::SubstepBuffers w_;
     std::vector<Index> order_, colour_ptr_, ends_;
-    std::vector<double> spring_lambda_, attachment_lambda_, spring_coef_;
+    std::vector<double> spring_lambda_, attachment_lambda_, spring_coef_, rows_;
 };
 
 }  // namespace
