@@ -398,6 +398,7 @@ struct RunParams {
     int scheme = Integrator::SYMPLECTIC_EULER;  // an explicit scheme (0-4)
     index iterations = 0;  // projective dynamics: local-global iterations per step
     index substeps = 1;    // XPBD: substeps per step (iterations: its passes per substep)
+    double relaxation = 1.0;  // XPBD: over-relaxation of the passes after a substep's first
     index steps = 0;
     double t0 = 0.0, dt = 0.0;
     double max_speed = 1e4;

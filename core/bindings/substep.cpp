@@ -45,16 +45,19 @@ public:
     }
 
     std::tuple<int, Index, Index, double> simulate(Index steps, double dt, Index substeps,
-                                                   Index iterations, nb::handle control,
+                                                   Index iterations, double relaxation,
+                                                   nb::handle control,
                                                    nb::handle state, nb::handle limits,
                                                    nb::handle progress) {
         const softbody::Model& m = model_.model();
         if (substeps < 1) fail("substeps must be >= 1");
         if (iterations < 1) fail("iterations must be >= 1");
+        if (!(relaxation > 0.0 && relaxation < 2.0)) fail("relaxation must lie in (0, 2)");
         CheckedRun run = checked_run(m, steps, dt, state, limits);
         run.params.scheme = Integrator::XPBD;
         run.params.substeps = substeps;
         run.params.iterations = iterations;
+        run.params.relaxation = relaxation;
         CoreControl c(m, control);
         attach_gas(w_.gas, run);
         RunPoll poll(run.params, progress);
@@ -150,10 +153,12 @@ void bind_substep(nb::module_& mod) {
         .def_prop_ro("hash_capacity", &SubstepSolver::hash_capacity,
                      "Entries the surface contacts' spatial hash holds (0 without them).")
         .def("simulate", &SubstepSolver::simulate, nb::arg("steps"), nb::arg("dt"),
-             nb::arg("substeps"), nb::arg("iterations"), nb::arg("control"), nb::arg("state"),
+             nb::arg("substeps"), nb::arg("iterations"), nb::arg("relaxation"), nb::arg("control"),
+             nb::arg("state"),
              nb::arg("limits"), nb::arg("progress") = nb::none(),
              "Advance a softbody.State in place from its time by steps steps of dt, each of "
-             "substeps substeps with iterations constraint passes (limits: a RunLimits); "
+             "substeps substeps with iterations constraint passes, those after the first "
+             "over-relaxed by relaxation in (0, 2) (limits: a RunLimits); "
              "returns (status, steps_done, index, value). " RUN_POLL_DOC);
 }
 

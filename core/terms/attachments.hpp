@@ -183,7 +183,7 @@ inline void constrain(const Model& m, const Control& c, const ConstraintPass& p)
         if (length == 0.0) continue;
         const V3 u = (1.0 / length) * d;
         const V3 e = load(row, 0) - load(row, 1);
-        const double dl = springs::xpbd_delta(
+        const double dl = p.relaxation * springs::xpbd_delta(
             length - m.attachments.rest_length[a], p.attachment_lambda[a], dot(u, e),
             m.attachments.stiffness[a], m.attachments.damping[a], p.h, inv[i]);
         p.attachment_lambda[a] += dl;

@@ -349,9 +349,9 @@ inline void store_positions(double* rows, const index* idx, vd x, vd y, vd z, vd
 
 /// XPBD's step for the springs at entries [r, r + kLanes) of the colouring, one per lane
 /// (no two share a particle: their updates are independent, loaded and stored at once,
-/// each end's row in one load): xpbd_delta with constraint_coefficients' constants, each
-/// spring's two ends moved along its direction by their inverse masses. A zero-length
-/// spring has no direction: it moves nothing.
+/// each end's row in one load): xpbd_delta with constraint_coefficients' constants, times
+/// p.relaxation, each spring's two ends moved along its direction by their inverse masses.
+/// A zero-length spring has no direction: it moves nothing.
 inline void constrain_lanes(const ConstraintPass& p, index count, index r) {
     const index* ii = p.spring_ends + r;
     const index* jj = p.spring_ends + count + r;
@@ -373,7 +373,8 @@ inline void constrain_lanes(const ConstraintPass& p, index count, index r) {
     double* lambda = p.spring_lambda + r;
     const vd dl = select(live, -(load_lanes(coef + kStretch * count) * stretch +
                                  load_lanes(coef + kDamp * count) * u_dot_e +
-                                 load_lanes(coef + kLambda * count) * load_lanes(lambda)));
+                                 load_lanes(coef + kLambda * count) * load_lanes(lambda))) *
+                  p.relaxation;
     store_lanes(lambda, load_lanes(lambda) + dl);
     const vd di = load_lanes(coef + kWi * count) * dl, dj = load_lanes(coef + kWj * count) * dl;
     store_positions(p.rows, ii, a.x - di * u[0], a.y - di * u[1], a.z - di * u[2], a.vx);
@@ -393,7 +394,8 @@ inline void constrain_one(const ConstraintPass& p, index count, index r) {
     const V3 e = d - (load(rj, 1) - load(ri, 1));
     const double stretch = length2 * inv_length - coef[kRest * count];
     const double dl = -(coef[kStretch * count] * stretch + coef[kDamp * count] * dot(u, e) +
-                        coef[kLambda * count] * p.spring_lambda[r]);
+                        coef[kLambda * count] * p.spring_lambda[r]) *
+                      p.relaxation;
     p.spring_lambda[r] += dl;
     add_to(ri, 0, -(coef[kWi * count] * dl) * u);
     add_to(rj, 0, (coef[kWj * count] * dl) * u);

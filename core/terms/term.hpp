@@ -70,6 +70,7 @@ struct Eval {
 /// (springs::constraint_coefficients).
 struct ConstraintPass {
     double h = 0.0;
+    double relaxation = 1.0;  // each constraint's step (Delta lambda) times this (SOR)
     double* rows = nullptr;               // (N, kRow) iterate, substep's start, padding
     const index* spring_order = nullptr;  // (S,)
     const index* colour_ptr = nullptr;    // (colours + 1,)
