@@ -305,6 +305,9 @@ struct SubstepBuffers {
     double* q0 = nullptr;      // (N, 3) start-of-step positions
     double* v0 = nullptr;      // (N, 3) start-of-step velocities
     double* q_prev = nullptr;  // (N, 3) start-of-substep positions
+    // (N, kRow) the constraint pass's rows: the iterate x, y, z, the substep's start x, y,
+    // z, two doubles of padding (ConstraintPass)
+    double* rows = nullptr;
     double* spring_lambda = nullptr;      // (S,) [N s^2]
     double* attachment_lambda = nullptr;  // (A,) [N s^2]
     double* spring_coef = nullptr;        // (6, S) the springs' constants for the substep
@@ -395,6 +398,7 @@ struct RunParams {
     int scheme = Integrator::SYMPLECTIC_EULER;  // an explicit scheme (0-4)
     index iterations = 0;  // projective dynamics: local-global iterations per step
     index substeps = 1;    // XPBD: substeps per step (iterations: its passes per substep)
+    double relaxation = 1.0;  // XPBD: over-relaxation of the passes after a substep's first
     index steps = 0;
     double t0 = 0.0, dt = 0.0;
     double max_speed = 1e4;

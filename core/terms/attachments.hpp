@@ -177,16 +177,17 @@ inline void constrain(const Model& m, const Control& c, const ConstraintPass& p)
     for (index a = 0; a < m.attachments.count; ++a) {
         const index i = m.attachments.particle[a];
         if (inv[i] == 0.0) continue;
-        const V3 d = load(p.x, i) - load(c.attachment_anchor, a);
+        double* row = p.rows + kRow * i;  // the iterate, then the substep's start
+        const V3 d = load(row, 0) - load(c.attachment_anchor, a);
         const double length = std::sqrt(dot(d, d));
         if (length == 0.0) continue;
         const V3 u = (1.0 / length) * d;
-        const V3 e = load(p.x, i) - load(p.x_start, i);
-        const double dl = springs::xpbd_delta(
+        const V3 e = load(row, 0) - load(row, 1);
+        const double dl = p.relaxation * springs::xpbd_delta(
             length - m.attachments.rest_length[a], p.attachment_lambda[a], dot(u, e),
             m.attachments.stiffness[a], m.attachments.damping[a], p.h, inv[i]);
         p.attachment_lambda[a] += dl;
-        add_to(p.x, i, (inv[i] * dl) * u);
+        add_to(row, 0, (inv[i] * dl) * u);
     }
 }
 

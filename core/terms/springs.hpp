@@ -311,82 +311,94 @@ inline void constraint_coefficients(const Model& m, const ConstraintPass& p) {
     }
 }
 
-/// base[idx] per lane (a gather; the scalar build's one lane).
-inline vd gather_lanes(const double* base, vi idx) {
+/// Positions x, y, z of the particles idx[0 .. kLanes-1] (one lane each) written into
+/// their rows (kRow doubles each: the ConstraintPass layout), with each row's fourth double
+/// rewritten as s (its own value, which the caller read with load_rows): an in-register
+/// transpose and one 4-double store per particle, where a scatter costs a store per double.
+/// The particles are distinct.
+inline void store_positions(double* rows, const index* idx, vd x, vd y, vd z, vd s) {
 #if defined(__AVX512F__)
-    return _mm512_i64gather_pd((__m512i)idx, base, 8);
+    // pairs (x, y) and (z, s) of the even and odd lanes, then each lane's two pairs side by
+    // side: e0 holds lanes 0 and 2, e1 4 and 6, e2 1 and 3, e3 5 and 7
+    const __m512d a0 = _mm512_unpacklo_pd(x, y), a1 = _mm512_unpackhi_pd(x, y);
+    const __m512d b0 = _mm512_unpacklo_pd(z, s), b1 = _mm512_unpackhi_pd(z, s);
+    const __m512d c0 = _mm512_shuffle_f64x2(a0, b0, 0x44), c1 = _mm512_shuffle_f64x2(a0, b0, 0xEE);
+    const __m512d c2 = _mm512_shuffle_f64x2(a1, b1, 0x44), c3 = _mm512_shuffle_f64x2(a1, b1, 0xEE);
+    const __m512d e0 = _mm512_shuffle_f64x2(c0, c0, 0xD8), e1 = _mm512_shuffle_f64x2(c1, c1, 0xD8);
+    const __m512d e2 = _mm512_shuffle_f64x2(c2, c2, 0xD8), e3 = _mm512_shuffle_f64x2(c3, c3, 0xD8);
+    _mm256_storeu_pd(rows + kRow * idx[0], _mm512_castpd512_pd256(e0));
+    _mm256_storeu_pd(rows + kRow * idx[2], _mm512_extractf64x4_pd(e0, 1));
+    _mm256_storeu_pd(rows + kRow * idx[4], _mm512_castpd512_pd256(e1));
+    _mm256_storeu_pd(rows + kRow * idx[6], _mm512_extractf64x4_pd(e1, 1));
+    _mm256_storeu_pd(rows + kRow * idx[1], _mm512_castpd512_pd256(e2));
+    _mm256_storeu_pd(rows + kRow * idx[3], _mm512_extractf64x4_pd(e2, 1));
+    _mm256_storeu_pd(rows + kRow * idx[5], _mm512_castpd512_pd256(e3));
+    _mm256_storeu_pd(rows + kRow * idx[7], _mm512_extractf64x4_pd(e3, 1));
 #elif defined(__AVX2__)
-    return _mm256_i64gather_pd(base, (__m256i)idx, 8);
+    const __m256d a0 = _mm256_unpacklo_pd(x, y), a1 = _mm256_unpackhi_pd(x, y);
+    const __m256d b0 = _mm256_unpacklo_pd(z, s), b1 = _mm256_unpackhi_pd(z, s);
+    _mm256_storeu_pd(rows + kRow * idx[0], _mm256_permute2f128_pd(a0, b0, 0x20));
+    _mm256_storeu_pd(rows + kRow * idx[1], _mm256_permute2f128_pd(a1, b1, 0x20));
+    _mm256_storeu_pd(rows + kRow * idx[2], _mm256_permute2f128_pd(a0, b0, 0x31));
+    _mm256_storeu_pd(rows + kRow * idx[3], _mm256_permute2f128_pd(a1, b1, 0x31));
 #else
-    return vd{base[idx[0]]};
-#endif
-}
-
-/// base[idx] = v per lane; the lanes' indices are distinct (a scatter).
-inline void scatter_lanes(double* base, vi idx, vd v) {
-#if defined(__AVX512F__)
-    _mm512_i64scatter_pd(base, (__m512i)idx, (__m512d)v, 8);
-#else
-    for (int l = 0; l < kLanes; ++l) base[idx[l]] = v[l];
+    double* r = rows + kRow * idx[0];
+    r[0] = x[0], r[1] = y[0], r[2] = z[0], r[3] = s[0];
 #endif
 }
 
 /// XPBD's step for the springs at entries [r, r + kLanes) of the colouring, one per lane
-/// (no two share a particle: their updates are independent, gathered and scattered at
-/// once): xpbd_delta with constraint_coefficients' constants, each spring's two ends
-/// moved along its direction by their inverse masses. A zero-length spring has no
-/// direction: it moves nothing.
+/// (no two share a particle: their updates are independent, loaded and stored at once,
+/// each end's row in one load): xpbd_delta with constraint_coefficients' constants, times
+/// p.relaxation, each spring's two ends moved along its direction by their inverse masses.
+/// A zero-length spring has no direction: it moves nothing.
 inline void constrain_lanes(const ConstraintPass& p, index count, index r) {
-    vi ii, jj;
-    std::memcpy(&ii, p.spring_ends + r, sizeof ii);
-    std::memcpy(&jj, p.spring_ends + count + r, sizeof jj);
-    ii *= 3;
-    jj *= 3;
+    const index* ii = p.spring_ends + r;
+    const index* jj = p.spring_ends + count + r;
+    // x, y, z the iterate; vx, vy, vz the substep's start (the rows' second triple)
+    const Rows a = load_rows(p.rows, ii), b = load_rows(p.rows, jj);
     const double* coef = p.spring_coef + r;
-    vd xi[3], xj[3], d[3], u[3];
+    const vd d[3] = {b.x - a.x, b.y - a.y, b.z - a.z};
+    const vd start[3] = {b.vx - a.vx, b.vy - a.vy, b.vz - a.vz};
+    vd u[3];
     vd length2{}, u_dot_e{};
-    for (int k = 0; k < 3; ++k) {
-        xi[k] = gather_lanes(p.x + k, ii);
-        xj[k] = gather_lanes(p.x + k, jj);
-        d[k] = xj[k] - xi[k];
-        length2 += d[k] * d[k];
-    }
+    for (int k = 0; k < 3; ++k) length2 += d[k] * d[k];
     const vi live = length2 != 0.0;
     const vd inv_length = select(live, splat(1.0) / vsqrt(length2));
     for (int k = 0; k < 3; ++k) {
         u[k] = inv_length * d[k];
-        const vd start = gather_lanes(p.x_start + k, jj) - gather_lanes(p.x_start + k, ii);
-        u_dot_e += u[k] * (d[k] - start);
+        u_dot_e += u[k] * (d[k] - start[k]);
     }
     const vd stretch = length2 * inv_length - load_lanes(coef + kRest * count);
     double* lambda = p.spring_lambda + r;
     const vd dl = select(live, -(load_lanes(coef + kStretch * count) * stretch +
                                  load_lanes(coef + kDamp * count) * u_dot_e +
-                                 load_lanes(coef + kLambda * count) * load_lanes(lambda)));
+                                 load_lanes(coef + kLambda * count) * load_lanes(lambda))) *
+                  p.relaxation;
     store_lanes(lambda, load_lanes(lambda) + dl);
     const vd di = load_lanes(coef + kWi * count) * dl, dj = load_lanes(coef + kWj * count) * dl;
-    for (int k = 0; k < 3; ++k) {
-        scatter_lanes(p.x + k, ii, xi[k] - di * u[k]);
-        scatter_lanes(p.x + k, jj, xj[k] + dj * u[k]);
-    }
+    store_positions(p.rows, ii, a.x - di * u[0], a.y - di * u[1], a.z - di * u[2], a.vx);
+    store_positions(p.rows, jj, b.x + dj * u[0], b.y + dj * u[1], b.z + dj * u[2], b.vx);
 }
 
 /// The same step for the one spring at entry r.
 inline void constrain_one(const ConstraintPass& p, index count, index r) {
-    const index i = p.spring_ends[r], j = p.spring_ends[count + r];
+    double* ri = p.rows + kRow * p.spring_ends[r];
+    double* rj = p.rows + kRow * p.spring_ends[count + r];
     const double* coef = p.spring_coef + r;
-    const V3 d = load(p.x, j) - load(p.x, i);
+    const V3 d = load(rj, 0) - load(ri, 0);
     const double length2 = dot(d, d);
     if (length2 == 0.0) return;
     const double inv_length = 1.0 / std::sqrt(length2);
     const V3 u = inv_length * d;
-    const V3 e = d - (load(p.x_start, j) - load(p.x_start, i));
+    const V3 e = d - (load(rj, 1) - load(ri, 1));
     const double stretch = length2 * inv_length - coef[kRest * count];
     const double dl = -(coef[kStretch * count] * stretch + coef[kDamp * count] * dot(u, e) +
-                        coef[kLambda * count] * p.spring_lambda[r]);
+                        coef[kLambda * count] * p.spring_lambda[r]) *
+                      p.relaxation;
     p.spring_lambda[r] += dl;
-    add_to(p.x, i, -(coef[kWi * count] * dl) * u);
-    add_to(p.x, j, (coef[kWj * count] * dl) * u);
+    add_to(ri, 0, -(coef[kWi * count] * dl) * u);
+    add_to(rj, 0, (coef[kWj * count] * dl) * u);
 }
 
 /// XPBD's pass over the springs (ConstraintPass): Gauss-Seidel colour by colour; within a

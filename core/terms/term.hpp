@@ -31,7 +31,7 @@
 //               combine, are composed in kernels.cpp: stiffness_bounds
 //   prepare_constraints  what XPBD's constraint pass needs for a substep h, once per run
 //   constrain   XPBD's pass over the term's constraints (solvers/substep.hpp): positions
-//               p.x moved in place by each constraint's Delta lambda (kConstraint terms;
+//               p.rows moved in place by each constraint's Delta lambda (kConstraint terms;
 //               their force is left out of the substep's explicit forces)
 //   active      whether the term acts at all in a call (the fused symplectic Euler pass
 //               covers only kFused terms: a call with another active term takes the
@@ -58,17 +58,20 @@ struct Eval {
 };
 
 /// XPBD's constraint pass within one substep of h [s] (solvers/substep.hpp): the iterate
-/// x (N, 3) moved in place, the substep's start x_start (N, 3) (the damping's reference),
-/// the springs in colour order (spring_order (S,), colour c holding entries
-/// [colour_ptr[c], colour_ptr[c + 1]), no two springs of a colour sharing a particle) and
-/// each constraint's multiplier lambda [N s^2], zeroed at the substep's start (the springs'
-/// per entry of spring_order). spring_ends (2, S): each entry's two particles;
-/// spring_coef (6, S), per entry: what prepare_constraints computes once for h
+/// and the substep's start (the damping's reference) packed per particle in rows
+/// (N, kRow): x, y, z of the iterate, moved in place, then x, y, z at the substep's start
+/// and two doubles of padding (one 64-byte line per particle, so that a spring's end is one
+/// load: simd.hpp's load_rows reads the two triples as its positions and velocities). The
+/// springs in colour order (spring_order (S,), colour c holding entries [colour_ptr[c],
+/// colour_ptr[c + 1]), no two springs of a colour sharing a particle) and each
+/// constraint's multiplier lambda [N s^2], zeroed at the substep's start (the springs' per
+/// entry of spring_order). spring_ends (2, S): each entry's two particles; spring_coef
+/// (6, S), per entry: what prepare_constraints computes once for h
 /// (springs::constraint_coefficients).
 struct ConstraintPass {
     double h = 0.0;
-    double* x = nullptr;
-    const double* x_start = nullptr;
+    double relaxation = 1.0;  // each constraint's step (Delta lambda) times this (SOR)
+    double* rows = nullptr;               // (N, kRow) iterate, substep's start, padding
     const index* spring_order = nullptr;  // (S,)
     const index* colour_ptr = nullptr;    // (colours + 1,)
     index colours = 0;

@@ -28,6 +28,16 @@ def check_count(name: str, value) -> int:
     return int(value)
 
 
+def check_relaxation(value) -> float:
+    """``xpbd_relaxation`` checked: a real number in (0, 2) (successive over-relaxation
+    converges for a symmetric positive definite system there), else a ``ValueError``
+    naming it."""
+    number = isinstance(value, int | float | np.integer | np.floating)
+    if isinstance(value, bool) or not number or not 0.0 < float(value) < 2.0:
+        raise ValueError(f"xpbd_relaxation must be a number in (0, 2), got {value!r}")
+    return float(value)
+
+
 def colour_springs(indices: np.ndarray, particle_count: int) -> tuple[np.ndarray, np.ndarray]:
     """A greedy edge colouring of the springs ``indices`` (S, 2): each spring, in order,
     takes the lowest colour neither end has yet, so no two springs of a colour share a
@@ -68,17 +78,32 @@ class SubstepSolver(Solver):
     like h.
 
     Options: ``xpbd_substeps`` (>= 1, default ``DEFAULT_SUBSTEPS``), ``xpbd_iterations``
-    (>= 1, default 1; Macklin et al. 2019: more substeps beat more iterations).
+    (>= 1, default 1; Macklin et al. 2019: more substeps beat more iterations),
+    ``xpbd_relaxation`` (omega in (0, 2), default 1): every pass after a substep's first
+    moves each constraint by omega times its Gauss-Seidel step (successive
+    over-relaxation). The first pass stays plain, so a lone constraint (solved exactly by
+    it: the next pass's step is zero) keeps its exact static stretch at any omega, and the
+    converged solution of the substep is the same; what omega > 1 speeds up is the
+    coupled network's slow modes, which a few plain passes leave soft where
+    (k h^2 + c h) w is not small (docs/guide/integrators.md).
     """
 
     integrators = (Integrator.XPBD,)
-    option_names = ("xpbd_substeps", "xpbd_iterations")
+    option_names = ("xpbd_substeps", "xpbd_iterations", "xpbd_relaxation")
 
     def __init__(
-        self, model, integrator, *, threads=1, xpbd_substeps=DEFAULT_SUBSTEPS, xpbd_iterations=1
+        self,
+        model,
+        integrator,
+        *,
+        threads=1,
+        xpbd_substeps=DEFAULT_SUBSTEPS,
+        xpbd_iterations=1,
+        xpbd_relaxation=1.0,
     ):
         self.substeps = check_count("xpbd_substeps", xpbd_substeps)
         self.iterations_per_substep = check_count("xpbd_iterations", xpbd_iterations)
+        self.relaxation = check_relaxation(xpbd_relaxation)
         self.spring_order, self.colour_ptr = colour_springs(
             model.spring_indices, model.particle_count
         )
@@ -86,7 +111,11 @@ class SubstepSolver(Solver):
 
     @property
     def options(self) -> dict:
-        return {"xpbd_substeps": self.substeps, "xpbd_iterations": self.iterations_per_substep}
+        return {
+            "xpbd_substeps": self.substeps,
+            "xpbd_iterations": self.iterations_per_substep,
+            "xpbd_relaxation": self.relaxation,
+        }
 
     @classmethod
     def substep_limit(cls, mode: StiffestMode) -> float:
@@ -133,6 +162,7 @@ class SubstepSolver(Solver):
                 dt,
                 self.substeps,
                 self.iterations_per_substep,
+                self.relaxation,
                 control,
                 state,
                 limits,
