@@ -352,18 +352,34 @@ struct SmootherBlocks {
 struct TermTraits {
     const char* name = "";
     bool lane = false, projected = false, fused = false, energy = false, external = false,
-         flow = false, bound = false;
+         flow = false, bound = false, shared_rows = false, volume_mode = false;
 };
 
 /// A term's own part of the stability estimate (its `bound` form, terms/term.hpp): the
 /// largest Gershgorin rows of its stiffness against the masses by part, [damped, undamped,
 /// whole] [1/s^2] and its damping rate [1/s] (springs::BoundPart's order), which the
-/// estimate adds to the springs' (Weyl); and its damping per stiffness c / k [s], folded
-/// into [ratio_min, ratio_max].
+/// estimate adds to the other terms' (Weyl; the kSharedRows terms' take the largest of
+/// theirs, one Gershgorin bound on their sum); of those, `mode` [1/s^2], the eigenvalue of
+/// a kVolumeMode term's volume mode (the gas's rank-one P'(V) g g^T, included in parts 1
+/// and 2); its damping per stiffness c / k [s], folded into [ratio_min, ratio_max]; and
+/// pure_dampers, set where it has a damper without stiffness (c > 0, k = 0).
 struct TermBound {
     double parts[4] = {0.0, 0.0, 0.0, 0.0};
+    double mode = 0.0;
     double ratio_min = std::numeric_limits<double>::infinity();
     double ratio_max = -std::numeric_limits<double>::infinity();
+    bool pure_dampers = false;
+};
+
+/// What the terms' `bound` forms share (kernels.cpp: stiffness_bounds): scratch, the
+/// Gershgorin row sums the kSharedRows terms fill first, and the state at which the
+/// estimate took its linearisation, which softbody.stability's spectral part reuses.
+struct BoundScratch {
+    double* root_sum = nullptr;         // (N, 4) R_i by part, every add_row_sums form's
+    double* rows = nullptr;             // (N, 2) scratch of one bound form
+    double* body_pnet = nullptr;        // (B,) out: P - P_a at the largest scheduled gas [Pa]
+    double* body_dpdv = nullptr;        // (B,) out: P'(V) [Pa/m^3]
+    double* volume_gradient = nullptr;  // (N, 3) out: exact dV/dx [m^2], 0 off bodies
 };
 
 /// Outcome of a run of steps (softbody.solvers.Status).

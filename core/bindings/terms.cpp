@@ -281,6 +281,8 @@ nb::list term_table() {
         d["external"] = traits.external;
         d["flow"] = traits.flow;
         d["bound"] = traits.bound;
+        d["shared_rows"] = traits.shared_rows;
+        d["volume_mode"] = traits.volume_mode;
         out.append(d);
     }
     return out;
@@ -292,15 +294,10 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     check_shape(q, "q", {m.particles.count, 3});
     CoreControl c(m, control);
     const size_t n = static_cast<size_t>(m.particles.count), nb_ = static_cast<size_t>(m.bodies.count);
-    std::vector<double> spring_weight(4 * static_cast<size_t>(m.springs.count)),
-        attachment_weight(4 * static_cast<size_t>(m.attachments.count)), root_sum(4 * n),
-        pressure_row(n), term_rows(2 * n), pnet(nb_), dpdv(nb_), gradient(3 * n);
-    softbody::BoundBuffers w;
-    w.spring_weight = spring_weight.data();
-    w.attachment_weight = attachment_weight.data();
+    std::vector<double> root_sum(4 * n), rows(2 * n), pnet(nb_), dpdv(nb_), gradient(3 * n);
+    softbody::BoundScratch w;
     w.root_sum = root_sum.data();
-    w.pressure_row = pressure_row.data();
-    w.term_rows = term_rows.data();
+    w.rows = rows.data();
     w.body_pnet = pnet.data();
     w.body_dpdv = dpdv.data();
     w.volume_gradient = gradient.data();
@@ -311,16 +308,21 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     }
     auto parts = [](const double* v) { return nb::make_tuple(v[0], v[1], v[2], v[3]); };
     nb::dict out;
-    out["springs"] = parts(b.springs);
-    out["attachments"] = parts(b.attachments);
-    out["pressure_rows"] = b.pressure_rows;
-    out["gas_rank_one"] = b.gas_rank_one;
-    // every term with a bound form (TermTraits::bound), by name
+    // every term with a bound form (TermTraits::bound), by name; the traits that say how
+    // they combine (shared rows; a volume mode, its eigenvalue apart)
     const softbody::KernelTable& k = softbody::kernels();
-    nb::dict terms;
-    for (int t = 0; t < k.term_count; ++t)
-        if (k.terms[t].bound) terms[k.terms[t].name] = parts(b.terms[t]);
+    nb::dict terms, modes;
+    nb::list shared;
+    for (int t = 0; t < k.term_count; ++t) {
+        const softbody::TermTraits& traits = k.terms[t];
+        if (!traits.bound) continue;
+        terms[traits.name] = parts(b.terms[t].parts);
+        if (traits.shared_rows) shared.append(nb::str(traits.name));
+        if (traits.volume_mode) modes[traits.name] = b.terms[t].mode;
+    }
     out["terms"] = terms;
+    out["shared_rows"] = shared;
+    out["volume_modes"] = modes;
     out["damping_ratio"] = nb::make_tuple(b.ratio_min, b.ratio_max);
     out["pure_dampers"] = b.pure_dampers;
     out["body_pnet"] = to_numpy(std::move(pnet));
@@ -349,13 +351,18 @@ void bind_terms(nb::module_& mod) {
             "dicts of 'name' and the traits 'lane' (a vertex-major form), 'projected' "
             "(projective dynamics' local step), 'fused' (the fused symplectic pass), "
             "'energy' (has one), 'external' (its energy is work from outside the model), "
-            "'flow' (it moves gas), 'bound' (its own part of the stability estimate).");
+            "'flow' (it moves gas), 'bound' (its own part of the stability estimate), "
+            "'shared_rows' (its Gershgorin rows are shared with the other such terms: "
+            "their bound is the largest of theirs), 'volume_mode' (its bound holds a body's "
+            "volume mode, reported apart).");
     mod.def("stiffness_bounds", &stiffness_bounds, nb::arg("model"), nb::arg("control"),
             nb::arg("q").noconvert(),
-            "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'springs', "
-            "'attachments' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
-            "'pressure_rows', 'gas_rank_one' [1/s^2], 'terms' (each term with a bound form: "
-            "name -> its own parts, in the same order), 'damping_ratio' (min, max c / k [s]), "
+            "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'terms' "
+            "(each term with a bound form, in registry order: name -> (damped, transverse, "
+            "whole [1/s^2], damping [1/s])), 'shared_rows' (the names whose rows are shared: "
+            "their sum is bounded by the largest of theirs), 'volume_modes' (each "
+            "volume-mode term's name -> its volume mode's eigenvalue [1/s^2], included in its "
+            "parts), 'damping_ratio' (min, max c / k [s]), "
             "'pure_dampers', and the gas at its largest scheduled value: 'body_pnet' (B,) "
             "[Pa], 'body_dpdv' (B,) [Pa/m^3], 'volume_gradient' (N, 3) [m^2].");
     mod.def("eval_forces", &eval_forces, nb::arg("model"), nb::arg("control"), nb::arg("t"),

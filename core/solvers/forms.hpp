@@ -98,6 +98,14 @@ inline void smoother_blocks(const Model& m, const Control& c, const Linearizatio
     Terms::each([&](auto term, int) { decltype(term)::add_smoother_blocks(m, c, l, s); });
 }
 
+/// The Jacobi preconditioner's diagonal diag (N,) [kg] of M - h C - h^2 K at the
+/// linearisation l: m, then each term's share.
+inline void jacobi_diagonal(const Model& m, const Control& c, const Linearization& l, double h,
+                            double* diag) {
+    for (index i = 0; i < m.particles.count; ++i) diag[i] = m.particles.mass[i];
+    Terms::each([&](auto term, int) { decltype(term)::add_jacobi_diagonal(m, c, l, h, diag); });
+}
+
 /// Projective dynamics' local step: every projected term's part of the right-hand side
 /// rhs (N, 3) at the iterate x, its start x0 (N, 3), step h [s].
 inline void project(const Model& m, const Control& c, double h, const double* x,

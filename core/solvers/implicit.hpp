@@ -206,16 +206,10 @@ inline void prepare(const Model& m, const Control& c, double t, double h,
     if (mg != nullptr) prepare_blocks(m, c, h, w, *mg);
 }
 
-/// Jacobi's diagonal: mass + h (damping) + h^2 (axial stiffness) of each particle's springs,
-/// and the mean of the membrane's diagonal there.
-inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) {
-    for (index i = 0; i < m.particles.count; ++i) w.cg_diag[i] = m.particles.mass[i];
-    for (index s = 0; s < m.springs.count; ++s) {
-        const double d = h * m.springs.damping[s] + h * h * w.spring_a[s];
-        w.cg_diag[m.springs.indices[2 * s]] += d;
-        w.cg_diag[m.springs.indices[2 * s + 1]] += d;
-    }
-    membrane::add_jacobi_diagonal(m, h, w.q0, w.membrane_hessian, w.cg_diag);
+/// Jacobi's diagonal into w.cg_diag: each particle's mass and every term's share at the
+/// step's start (forms::jacobi_diagonal).
+inline void jacobi_diagonal(const Model& m, const Control& c, double h, const ImplicitBuffers& w) {
+    forms::jacobi_diagonal(m, c, at_start(w), h, w.cg_diag);
 }
 
 /// One backward Euler step, or with bdf2 one BDF2 step, from w.q0, w.v0 with w.f = f(x0, v0)
@@ -232,7 +226,7 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
         w.qs[k] = bdf2 ? (w.q0[k] - w.q_prev[k]) / 3.0 + h * w.v0[k] : h * w.v0[k];
     prepare(m, c, t, h, w, mg);
     apply_at_start(m, c, w, 0.0, 0.0, 1.0, w.qs, w.ky);  // K y for the right-hand side
-    if (mg == nullptr) jacobi_diagonal(m, h, w);
+    if (mg == nullptr) jacobi_diagonal(m, c, h, w);
     double rhs_norm = 0.0;
     for (index i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {

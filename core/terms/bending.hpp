@@ -195,8 +195,9 @@ struct Term : TermBase {
     static constexpr const char* kName = "bending";
     static constexpr bool kEnergy = true, kBound = true;
     /// The stability estimate: its rows are undamped stiffness (parts undamped and whole).
-    static void bound(const Model& m, const Control&, const double* q, double* rows,
+    static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
                       TermBound& out) {
+        double* rows = s.rows;
         std::fill(rows, rows + m.particles.count, 0.0);
         add_bound_rows(m, q, rows);
         for (index i = 0; i < m.particles.count; ++i) {

@@ -612,9 +612,9 @@ struct Term : TermBase {
     static constexpr const char* kName = "membrane";
     static constexpr bool kProjected = true, kEnergy = true, kBound = true;
     /// The stability estimate: bound_rows by part, and beta into the c / k range.
-    static void bound(const Model& m, const Control&, const double* q, double* rows,
+    static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
                       TermBound& out) {
-        bound_rows(m, q, rows, out.parts);
+        bound_rows(m, q, s.rows, out.parts);
         damping_ratios(m, out.ratio_min, out.ratio_max);
     }
     static bool active(const Model& m, const Control&) { return m.membranes.count > 0; }
@@ -631,6 +631,11 @@ struct Term : TermBase {
                                     const SmootherBlocks& s) {
         smoother_blocks(m, s.h, l.q, l.membrane_hessian, s.block, s.membrane_slot,
                         s.membrane_entry_count, s.membrane_coef);
+    }
+    /// Jacobi: the mean of each corner's diagonal block's diagonal.
+    static void add_jacobi_diagonal(const Model& m, const Control&, const Linearization& l,
+                                    double h, double* diag) {
+        membrane::add_jacobi_diagonal(m, h, l.q, l.membrane_hessian, diag);
     }
     static void project(const Model& m, const Control&, double h, const double* x,
                         const double* x0, double* rhs) {

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <cstring>
+#include <vector>
 
 #include "model.hpp"
 #include "simd.hpp"
@@ -405,7 +406,21 @@ inline void constrain(const Model& m, const ConstraintPass& p) {
 struct Term : TermBase {
     static constexpr const char* kName = "springs";
     static constexpr bool kLane = true, kProjected = true, kFused = true, kEnergy = true;
-    static constexpr bool kConstraint = true;
+    static constexpr bool kConstraint = true, kBound = true, kSharedRows = true;
+    /// The stability estimate: R_i, then the springs' rows against them and their c / k.
+    static void add_row_sums(const Model& m, const Control&, const double* q,
+                             const BoundScratch& s) {
+        std::vector<double> w(static_cast<size_t>(kBoundParts * m.springs.count));
+        bound_weights(m, q, w.data());
+        add_root_sums(m, w.data(), s.root_sum);
+    }
+    static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
+                      TermBound& out) {
+        std::vector<double> w(static_cast<size_t>(kBoundParts * m.springs.count));
+        bound_weights(m, q, w.data());
+        row_bounds(m, w.data(), s.root_sum, out.parts);
+        damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
+    }
     static void force(const Eval& e, double* f) { springs::force(e.m, e.q, e.qd, f); }
     static void prepare_constraints(const Model& m, const Control&, const ConstraintPass& p) {
         constraint_coefficients(m, p);
@@ -425,6 +440,15 @@ struct Term : TermBase {
                                     const SmootherBlocks& s) {
         smoother_blocks(m, s.h, l.spring_u, l.spring_a, l.spring_b, s.entry_ptr, s.entry_spring,
                         s.entry_coef, s.block);
+    }
+    /// Jacobi: h c + h^2 a (damping and axial stiffness) at both ends of every spring.
+    static void add_jacobi_diagonal(const Model& m, const Control&, const Linearization& l,
+                                    double h, double* diag) {
+        for (index s = 0; s < m.springs.count; ++s) {
+            const double d = h * m.springs.damping[s] + h * h * l.spring_a[s];
+            diag[m.springs.indices[2 * s]] += d;
+            diag[m.springs.indices[2 * s + 1]] += d;
+        }
     }
     static void project(const Model& m, const Control&, double h, const double* x,
                         const double* x0, double* rhs) {
