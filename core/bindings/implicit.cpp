@@ -186,7 +186,8 @@ public:
     std::tuple<int, Index, Index, double> simulate(
         bool bdf2, Index steps, double dt, nb::handle control, nb::handle state,
         nb::handle limits, double tolerance, Index max_iterations, bool history,
-        nb::handle progress) {
+        nb::handle progress, nb::handle previous_q, nb::handle previous_qd,
+        bool contacts_acted) {
         const softbody::Model& m = model_.model();
         if (!(std::isfinite(tolerance) && tolerance > 0.0 && tolerance < 1.0))
             fail("tolerance must lie in (0, 1)");
@@ -199,6 +200,24 @@ public:
         ip.tolerance = tolerance;
         ip.max_iterations = max_iterations;
         ip.history = history;
+        // BDF2's history: the step before the state's, in the caller's arrays (the State's
+        // own, softbody.sim.state.StepHistory), written there as the run steps; without
+        // them, this solver's scratch
+        const Index n = m.particles.count;
+        F64 prev_q, prev_qd;
+        if (previous_q.is_none() != previous_qd.is_none())
+            fail("previous_q and previous_qd must be given together");
+        if (!previous_q.is_none()) {
+            prev_q = writable(previous_q, "previous_q", {n, 3});
+            prev_qd = writable(previous_qd, "previous_qd", {n, 3});
+            w_.q_prev = prev_q.data();
+            w_.v_prev = prev_qd.data();
+        } else {
+            if (history) fail("a run with history needs previous_q and previous_qd");
+            w_.q_prev = buffers_.row(11);
+            w_.v_prev = buffers_.row(12);
+        }
+        flags_[0] = history && contacts_acted ? 1 : 0;
         const softbody::MultigridView* mg = multigrid_ ? &multigrid_->view : nullptr;
         RunPoll poll(run.params, progress);
         softbody::RunResult r;
@@ -233,6 +252,9 @@ public:
         return nb::ndarray<nb::numpy, double>(z, 2, shape, owner);
     }
 
+    /// Whether the last run's last step's contacts acted (BDF2 then takes its next step as
+    /// backward Euler): part of the history a caller keeps.
+    bool contacts_acted() const { return flags_[0] != 0; }
     /// (steps, CG iterations in all, most in one step) since the last clear_stats.
     std::tuple<Index, Index, Index> cg_stats() const { return {flags_[1], flags_[2], flags_[3]}; }
     void clear_stats() { flags_[1] = flags_[2] = flags_[3] = 0; }
@@ -290,6 +312,8 @@ void bind_implicit(nb::module_& mod) {
                      "(implicit steps, CG iterations in all, most in one step) since the last "
                      "clear_stats().")
         .def("clear_stats", &ImplicitSolver::clear_stats)
+        .def_prop_ro("contacts_acted", &ImplicitSolver::contacts_acted,
+                     "Whether the last run's last step's contacts acted (BDF2's history).")
         .def("apply_preconditioner", &ImplicitSolver::apply_preconditioner,
              nb::arg("control"), nb::arg("t"), nb::arg("h"), nb::arg("q").noconvert(),
              nb::arg("r").noconvert(),
@@ -298,10 +322,14 @@ void bind_implicit(nb::module_& mod) {
         .def("simulate", &ImplicitSolver::simulate, nb::arg("bdf2"), nb::arg("steps"),
              nb::arg("dt"), nb::arg("control"), nb::arg("state"), nb::arg("limits"),
              nb::arg("tolerance"), nb::arg("max_iterations"), nb::arg("history"),
-             nb::arg("progress") = nb::none(),
+             nb::arg("progress") = nb::none(), nb::arg("previous_q") = nb::none(),
+             nb::arg("previous_qd") = nb::none(), nb::arg("contacts_acted") = false,
              "Advance a softbody.State in place by backward Euler (or BDF2) from its time "
-             "(limits: a RunLimits); history: the solver holds the step before the state's. "
-             "Returns (status, steps_done, index, value). " RUN_POLL_DOC);
+             "(limits: a RunLimits). previous_q, previous_qd (N, 3): BDF2's history, the "
+             "start of the step before the state's, read when history is true (with "
+             "contacts_acted: that step's contacts acted) and written as the run steps (the "
+             "start of its last step). Returns (status, steps_done, index, value). "
+             RUN_POLL_DOC);
     mod.def("apply_multigrid", &apply_multigrid, nb::arg("model"), nb::arg("multigrid"),
             nb::arg("r").noconvert(), "z (N, 3) = one V-cycle of the hierarchy for r (N, 3).");
 }
