@@ -126,6 +126,15 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
     return out;
 }
 
+const char* check_stencil(int term, const Model& m, const Stencil& s, index map_length) {
+    const char* out = "is not a registered term with a stencil";
+    Terms::each([&](auto t, int k) {
+        using T = decltype(t);
+        if (k == term && T::kStencil) out = T::check_stencil(m, s, map_length);
+    });
+    return out;
+}
+
 }  // namespace
 
 const KernelTable& kernel_table() {
@@ -137,7 +146,7 @@ const KernelTable& kernel_table() {
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
                                    eval_energies, eval_flows, active_terms, membrane_blocks,
-                                   stiffness_bounds};
+                                   check_stencil, stiffness_bounds};
     return table;
 }
 

@@ -10,9 +10,6 @@
 
 namespace softbody {
 
-/// The most terms a registry holds (terms/registry.hpp checks it).
-constexpr int kMaxTerms = 16;
-
 /// Each registered term's energy at a state [J] (softbody.diagnostics.energies), in
 /// registry order: its total over the model and each body's share (a free particle's
 /// weight, a user's spring or an attachment of a free particle counts in the total only).
@@ -99,6 +96,10 @@ struct KernelTable {
     /// Every membrane triangle's clamped stiffness and damping blocks at q into out
     /// (Tm, kMembraneBlock): what Linearization::membrane_hessian holds.
     void (*membrane_blocks)(const Model&, const double* q, double* out);
+    /// Whether a smoother stencil fits registered term `term` (a kStencil term) of model
+    /// m: its map (map_length entries, s.map) checked by the term (ptr and neighbor are
+    /// checked by the caller); null when it fits, else what is wrong.
+    const char* (*check_stencil)(int term, const Model& m, const Stencil& s, index map_length);
     /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors
     /// (w: scratch, and the gas's state at the estimate, BoundScratch).
     StiffnessBounds (*stiffness_bounds)(const Model&, const Control&, const double* q,

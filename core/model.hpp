@@ -195,6 +195,24 @@ struct ExplicitBuffers {
 /// matrix A_l is CSR at rows a_row_offset[l] of a_indptr and entries a_nz_offset[l] of
 /// a_indices / a_data; P_l (level l to l + 1) likewise in p_*; its vectors sit at rows
 /// vec_offset[l] of x, b, r.
+/// The most terms a registry holds (terms/registry.hpp; kernels.cpp checks it).
+constexpr int kMaxTerms = 16;
+
+/// One registered term's off-diagonal blocks of the implicit system in the multigrid
+/// smoother (a kStencil term, terms/term.hpp): each particle's entries as CSR sorted by the
+/// neighbour j (Python builds them: softbody.solvers.multigrid.STENCILS), the term's own
+/// map from its couplings to entries (springs: each entry's spring (E,); membranes: each
+/// triangle's corner pair's entry (Tm, 3, 3), -1 on its diagonal), and each entry's
+/// coefficients (E, the term's kStencilWidth), scratch its add_smoother_blocks fills for
+/// the step and its add_entries reads.
+struct Stencil {
+    index count = 0;                  // E
+    const index* ptr = nullptr;       // (N + 1,)
+    const index* neighbor = nullptr;  // (E,)
+    const index* map = nullptr;       // the term's
+    double* coef = nullptr;           // (E, width)
+};
+
 struct MultigridView {
     index level_count = 0;     // L: sparse levels (prolongators)
     bool coarse_dense = false; // the coarsest level is solved by its Cholesky factor
@@ -212,24 +230,14 @@ struct MultigridView {
     const index* p_indices = nullptr;
     const double* p_data = nullptr;
     const double* coarse_cholesky = nullptr;  // (n_L, n_L) lower factor when coarse_dense
-    // each particle's springs ("entries"), sorted by the particle at the other end
-    const index* vertex_spring_ptr = nullptr;  // (N + 1,)
-    const index* vertex_spring = nullptr;      // (2 S,)
-    const index* vertex_neighbor = nullptr;    // (2 S,)
+    // the finest level's off-diagonal blocks, each kStencil term's at its registry position
+    Stencil stencils[kMaxTerms];
     // scratch
-    double* block = nullptr;       // (N, 3, 3) diagonal blocks of the true spring matrix
-    double* block_inv = nullptr;   // (N, 3, 3) inverse diagonal blocks of the true matrix
-    double* entry_coef = nullptr;  // (2 S, 5) u (3,), alpha, beta of each entry's spring
+    double* block = nullptr;       // (N, 3, 3) diagonal blocks of the true matrix
+    double* block_inv = nullptr;   // (N, 3, 3) their inverses
     double* x = nullptr;           // (sum n_l, 3) level solutions
     double* b = nullptr;           // (sum n_l, 3) level right-hand sides
     double* r = nullptr;           // (sum n_l, 3) level residuals
-    // each particle's membrane neighbours, sorted, and each membrane triangle's corner pairs'
-    // entries (-1 on its diagonal); membrane_coef (E, 3, 3) scratch: -A_ij of each entry
-    index membrane_entry_count = 0;            // E
-    const index* membrane_ptr = nullptr;       // (N + 1,)
-    const index* membrane_neighbor = nullptr;  // (E,)
-    const index* membrane_slot = nullptr;      // (Tm, 3, 3)
-    double* membrane_coef = nullptr;           // (E, 3, 3)
 };
 
 /// Scratch and history of the implicit schemes, owned by softbody::ImplicitSolver.
@@ -334,18 +342,12 @@ struct Linearization {
     double* membrane_hessian = nullptr;
 };
 
-/// The multigrid smoother's diagonal blocks and the per-entry spring coefficients
+/// The multigrid smoother's diagonal blocks and one term's off-diagonal entries
 /// (MultigridView's scratch), for step h [s].
 struct SmootherBlocks {
     double h = 0.0;
-    const index* entry_ptr = nullptr;    // (N + 1,) each particle's spring entries
-    const index* entry_spring = nullptr; // (2 S,)
-    double* entry_coef = nullptr;        // (2 S, 5) u (3,), alpha, beta
-    double* block = nullptr;             // (N, 3, 3) set to M, then each term adds its share
-    // the membranes' off-diagonal blocks: -A_ij per entry (MultigridView's membrane_*)
-    index membrane_entry_count = 0;
-    const index* membrane_slot = nullptr;  // (Tm, 3, 3) entry of each corner pair, -1 on a = b
-    double* membrane_coef = nullptr;       // (E, 3, 3)
+    double* block = nullptr;  // (N, 3, 3) set to M, then each term adds its share
+    Stencil entries;          // the term's own stencil (kStencil), its coef to fill; else empty
 };
 
 /// A registered term's name and traits (terms/term.hpp), for the bindings and Python.
@@ -353,6 +355,7 @@ struct TermTraits {
     const char* name = "";
     bool lane = false, projected = false, fused = false, energy = false, external = false,
          flow = false, bound = false, shared_rows = false, volume_mode = false;
+    int stencil_width = 0;  // numbers per smoother entry of a kStencil term, else 0
 };
 
 /// A term's own part of the stability estimate (its `bound` form, terms/term.hpp): the

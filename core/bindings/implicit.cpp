@@ -60,49 +60,45 @@ public:
                       "multigrid P level " + std::to_string(l));
         const Index coarse = v.level_size[levels];
         v.coarse_cholesky = v.coarse_dense ? f64(mg, "coarse_cholesky", {coarse, coarse}) : nullptr;
-        const Index entries = 2 * m.springs.count;
-        v.vertex_spring_ptr = i64(mg, "vertex_spring_ptr", {n + 1});
-        if (v.vertex_spring_ptr[0] != 0 || v.vertex_spring_ptr[n] != entries)
-            fail("multigrid vertex_spring_ptr must run from 0 to twice the spring count");
-        for (Index i = 0; i < n; ++i)
-            if (v.vertex_spring_ptr[i] > v.vertex_spring_ptr[i + 1])
-                fail("multigrid vertex_spring_ptr must not decrease");
-        v.vertex_spring = i64(mg, "vertex_spring", {entries});
-        v.vertex_neighbor = i64(mg, "vertex_neighbor", {entries});
-        check_indices(v.vertex_spring, entries, 0, m.springs.count, "multigrid vertex_spring");
-        check_indices(v.vertex_neighbor, entries, 0, n, "multigrid vertex_neighbor");
         const size_t n9 = static_cast<size_t>(9 * n), t3 = static_cast<size_t>(3 * total_);
-        scratch_ = {std::vector<double>(n9), std::vector<double>(n9),
-                    std::vector<double>(static_cast<size_t>(5 * entries)), std::vector<double>(t3),
+        scratch_ = {std::vector<double>(n9), std::vector<double>(n9), std::vector<double>(t3),
                     std::vector<double>(t3), std::vector<double>(t3)};
         v.block = scratch_[0].data();
         v.block_inv = scratch_[1].data();
-        v.entry_coef = scratch_[2].data();
-        v.x = scratch_[3].data();
-        v.b = scratch_[4].data();
-        v.r = scratch_[5].data();
-        // the membranes' entries: CSR over particles, neighbours in range, slots in range
-        v.membrane_ptr = i64(mg, "membrane_ptr", {n + 1});
-        const ConstI64 neighbor = keep(attribute<ConstI64>(mg, "membrane_neighbor", {-1}));
-        const Index e_count = static_cast<Index>(neighbor.shape(0));
-        if (v.membrane_ptr[0] != 0 || v.membrane_ptr[n] != e_count)
-            fail("multigrid membrane_ptr must run from 0 to the membrane entry count");
-        for (Index i = 0; i < n; ++i)
-            if (v.membrane_ptr[i] > v.membrane_ptr[i + 1])
-                fail("multigrid membrane_ptr must not decrease");
-        v.membrane_neighbor = neighbor.data();
-        check_indices(v.membrane_neighbor, e_count, 0, n, "multigrid membrane_neighbor");
-        v.membrane_slot = i64(mg, "membrane_slot", {m.membranes.count, 3, 3});
-        check_indices(v.membrane_slot, 9 * m.membranes.count, -1, e_count,
-                      "multigrid membrane_slot");
-        for (Index t = 0; t < m.membranes.count; ++t)
-            for (int a = 0; a < 3; ++a)
-                for (int b = 0; b < 3; ++b)
-                    if ((v.membrane_slot[9 * t + 3 * a + b] < 0) != (a == b))
-                        fail("multigrid membrane_slot must be -1 exactly on each diagonal");
-        v.membrane_entry_count = e_count;
-        membrane_coef_.assign(static_cast<size_t>(9 * e_count), 0.0);
-        v.membrane_coef = membrane_coef_.data();
+        v.x = scratch_[2].data();
+        v.b = scratch_[3].data();
+        v.r = scratch_[4].data();
+        // every kStencil term's smoother entries (mg.stencils[name]: ptr, neighbor, map):
+        // CSR over particles, neighbours in range, the map checked by the term
+        const softbody::KernelTable& k = softbody::kernels();
+        nb::dict stencils;
+        if (!nb::try_cast(mg.attr("stencils"), stencils))
+            fail("multigrid stencils must be a dict of term name -> stencil");
+        coef_.resize(static_cast<size_t>(k.term_count));
+        for (int t = 0; t < k.term_count; ++t) {
+            const int width = k.terms[t].stencil_width;
+            if (width == 0) continue;
+            const std::string name = k.terms[t].name;
+            const std::string what = "multigrid stencil " + name;
+            if (!stencils.contains(name.c_str())) fail(what + " is missing");
+            nb::handle st = stencils[name.c_str()];
+            softbody::Stencil& s = v.stencils[t];
+            s.ptr = i64(st, "ptr", {n + 1});
+            const ConstI64 neighbor = keep(attribute<ConstI64>(st, "neighbor", {-1}));
+            const ConstI64 map = keep(attribute<ConstI64>(st, "map", {-1}));
+            s.count = static_cast<Index>(neighbor.shape(0));
+            if (s.ptr[0] != 0 || s.ptr[n] != s.count)
+                fail(what + " ptr must run from 0 to its entry count");
+            for (Index i = 0; i < n; ++i)
+                if (s.ptr[i] > s.ptr[i + 1]) fail(what + " ptr must not decrease");
+            s.neighbor = neighbor.data();
+            check_indices(s.neighbor, s.count, 0, n, what + " neighbor");
+            s.map = map.data();
+            if (const char* error = k.check_stencil(t, m, s, static_cast<Index>(map.shape(0))))
+                fail(what + ": " + error);
+            coef_[static_cast<size_t>(t)].assign(static_cast<size_t>(width * s.count), 0.0);
+            s.coef = coef_[static_cast<size_t>(t)].data();
+        }
     }
 
     softbody::MultigridView view;
@@ -138,7 +134,7 @@ private:
 
     Index total_ = 0;
     std::vector<std::vector<double>> scratch_;
-    std::vector<double> membrane_coef_;
+    std::vector<std::vector<double>> coef_;  // each stencil's coefficients, by term
     std::vector<ConstF64> keep_f_;
     std::vector<ConstI64> keep_i_;
 };

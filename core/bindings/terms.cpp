@@ -283,6 +283,7 @@ nb::list term_table() {
         d["bound"] = traits.bound;
         d["shared_rows"] = traits.shared_rows;
         d["volume_mode"] = traits.volume_mode;
+        d["stencil_width"] = traits.stencil_width;
         out.append(d);
     }
     return out;
@@ -354,7 +355,8 @@ void bind_terms(nb::module_& mod) {
             "'flow' (it moves gas), 'bound' (its own part of the stability estimate), "
             "'shared_rows' (its Gershgorin rows are shared with the other such terms: "
             "their bound is the largest of theirs), 'volume_mode' (its bound holds a body's "
-            "volume mode, reported apart).");
+            "volume mode, reported apart), 'stencil_width' (numbers per entry of its blocks "
+            "between particles in the multigrid smoother; 0: none).");
     mod.def("stiffness_bounds", &stiffness_bounds, nb::arg("model"), nb::arg("control"),
             nb::arg("q").noconvert(),
             "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'terms' "

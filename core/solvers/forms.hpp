@@ -87,15 +87,50 @@ inline void apply_jacobians(const Model& m, const Control& c, const Linearizatio
     });
 }
 
-/// The smoother's diagonal blocks of M - h C - h^2 K: m I, then each term's share.
-inline void smoother_blocks(const Model& m, const Control& c, const Linearization& l,
-                            const SmootherBlocks& s) {
+/// The smoother's blocks of M - h C - h^2 K for step h [s]: its diagonal blocks into block
+/// (N, 3, 3), m I then each term's share, and each kStencil term's blocks between
+/// particles into its stencil (stencils: by registry position).
+inline void smoother_blocks(const Model& m, const Control& c, const Linearization& l, double h,
+                            double* block, const Stencil* stencils) {
     for (index i = 0; i < m.particles.count; ++i) {
-        double* d = s.block + 9 * i;
+        double* d = block + 9 * i;
         for (int k = 0; k < 9; ++k) d[k] = 0.0;
         d[0] = d[4] = d[8] = m.particles.mass[i];
     }
-    Terms::each([&](auto term, int) { decltype(term)::add_smoother_blocks(m, c, l, s); });
+    Terms::each([&](auto term, int k) {
+        using T = decltype(term);
+        SmootherBlocks s;
+        s.h = h;
+        s.block = block;
+        if (T::kStencil) s.entries = stencils[k];
+        T::add_smoother_blocks(m, c, l, s);
+    });
+}
+
+/// Which of particle i's smoother entries add_entries sums: those to particles j < i, to
+/// j > i (entries are sorted by j; none is i's own), or all.
+enum class Span { kEarlier, kLater, kAll };
+
+/// s += every kStencil term's entries of particle i (the span's) times x_j, in registry
+/// order (stencils: by registry position).
+template <Span kSpan>
+inline void add_entries(const Stencil* stencils, const double* x, index i, V3& s) {
+    Terms::each([&](auto term, int k) {
+        using T = decltype(term);
+        if constexpr (T::kStencil) {
+            const Stencil& st = stencils[k];
+            index first = st.ptr[i], last = st.ptr[i + 1];
+            if (kSpan != Span::kAll) {
+                index e = first;
+                while (e < last && st.neighbor[e] < i) ++e;
+                if (kSpan == Span::kEarlier)
+                    last = e;
+                else
+                    first = e;
+            }
+            T::add_entries(st, x, first, last, s);
+        }
+    });
 }
 
 /// The Jacobi preconditioner's diagonal diag (N,) [kg] of M - h C - h^2 K at the

@@ -611,6 +611,33 @@ inline void damping_ratios(const Model& m, double& lo, double& hi) {
 struct Term : TermBase {
     static constexpr const char* kName = "membrane";
     static constexpr bool kProjected = true, kEnergy = true, kBound = true;
+    // smoother entries: -A_ij (3 x 3, row-major) between corners (smoother_blocks)
+    static constexpr bool kStencil = true;
+    static constexpr int kStencilWidth = 9;
+    /// s += sum over entries of their block times x_j.
+    static void add_entries(const Stencil& st, const double* x, index first, index last,
+                            V3& s) {
+        for (index e = first; e < last; ++e) {
+            const index j = st.neighbor[e];
+            const double* c = st.coef + 9 * e;
+            const double xj0 = x[3 * j], xj1 = x[3 * j + 1], xj2 = x[3 * j + 2];
+            s.x += c[0] * xj0 + c[1] * xj1 + c[2] * xj2;
+            s.y += c[3] * xj0 + c[4] * xj1 + c[5] * xj2;
+            s.z += c[6] * xj0 + c[7] * xj1 + c[8] * xj2;
+        }
+    }
+    /// The map: each triangle's corner pair's entry (Tm, 3, 3), -1 exactly on a = b.
+    static const char* check_stencil(const Model& m, const Stencil& st, index map_length) {
+        if (map_length != 9 * m.membranes.count) return "map must have shape (Tm, 3, 3)";
+        for (index t = 0; t < m.membranes.count; ++t)
+            for (int a = 0; a < 3; ++a)
+                for (int b = 0; b < 3; ++b) {
+                    const index e = st.map[9 * t + 3 * a + b];
+                    if (e >= st.count || e < -1) return "map holds an entry out of range";
+                    if ((e < 0) != (a == b)) return "map must be -1 exactly on each diagonal";
+                }
+        return nullptr;
+    }
     /// The stability estimate: bound_rows by part, and beta into the c / k range.
     static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
                       TermBound& out) {
@@ -629,8 +656,8 @@ struct Term : TermBase {
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {
-        smoother_blocks(m, s.h, l.q, l.membrane_hessian, s.block, s.membrane_slot,
-                        s.membrane_entry_count, s.membrane_coef);
+        smoother_blocks(m, s.h, l.q, l.membrane_hessian, s.block, s.entries.map,
+                        s.entries.count, s.entries.coef);
     }
     /// Jacobi: the mean of each corner's diagonal block's diagonal.
     static void add_jacobi_diagonal(const Model& m, const Control&, const Linearization& l,

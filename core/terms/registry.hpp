@@ -51,7 +51,7 @@ inline const TermTraits* term_traits() {
         using T = decltype(term);
         traits[k] = {T::kName,   T::kLane,     T::kProjected, T::kFused,
                      T::kEnergy, T::kExternal, T::kFlow,      T::kBound,
-                     T::kSharedRows, T::kVolumeMode};
+                     T::kSharedRows, T::kVolumeMode, T::kStencil ? T::kStencilWidth : 0};
     });
     return traits;
 }

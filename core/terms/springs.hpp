@@ -407,6 +407,32 @@ struct Term : TermBase {
     static constexpr const char* kName = "springs";
     static constexpr bool kLane = true, kProjected = true, kFused = true, kEnergy = true;
     static constexpr bool kConstraint = true, kBound = true, kSharedRows = true;
+    // smoother entries: u (3,), alpha, beta of the entry's spring (smoother_blocks)
+    static constexpr bool kStencil = true;
+    static constexpr int kStencilWidth = 5;
+    /// s += sum over entries of (alpha u u^T + beta I) x_j.
+    static void add_entries(const Stencil& st, const double* x, index first, index last,
+                            V3& s) {
+        double s0 = s.x, s1 = s.y, s2 = s.z;
+        for (index e = first; e < last; ++e) {
+            const index j = st.neighbor[e];
+            const double* c = st.coef + 5 * e;
+            const double ux = c[0], uy = c[1], uz = c[2], beta = c[4];
+            const double xj0 = x[3 * j], xj1 = x[3 * j + 1], xj2 = x[3 * j + 2];
+            const double ax = c[3] * (ux * xj0 + uy * xj1 + uz * xj2);
+            s0 += ax * ux + beta * xj0;
+            s1 += ax * uy + beta * xj1;
+            s2 += ax * uz + beta * xj2;
+        }
+        s = {s0, s1, s2};
+    }
+    /// The map: each entry's spring, in [0, S).
+    static const char* check_stencil(const Model& m, const Stencil& st, index map_length) {
+        if (map_length != st.count) return "map must have one spring per entry";
+        for (index e = 0; e < st.count; ++e)
+            if (st.map[e] < 0 || st.map[e] >= m.springs.count) return "map holds a bad spring";
+        return nullptr;
+    }
     /// The stability estimate: R_i, then the springs' rows against them and their c / k.
     static void add_row_sums(const Model& m, const Control&, const double* q,
                              const BoundScratch& s) {
@@ -438,8 +464,8 @@ struct Term : TermBase {
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {
-        smoother_blocks(m, s.h, l.spring_u, l.spring_a, l.spring_b, s.entry_ptr, s.entry_spring,
-                        s.entry_coef, s.block);
+        smoother_blocks(m, s.h, l.spring_u, l.spring_a, l.spring_b, s.entries.ptr,
+                        s.entries.map, s.entries.coef, s.block);
     }
     /// Jacobi: h c + h^2 a (damping and axial stiffness) at both ends of every spring.
     static void add_jacobi_diagonal(const Model& m, const Control&, const Linearization& l,

@@ -18,7 +18,13 @@
 //   jacobian_product   out (N, 3) += alpha_c C p + alpha_k K p (C = df/dv, K = df/dx), the
 //               matrix-free product of backward Euler and BDF2, -K positive semi-definite
 //   add_smoother_blocks  the term's share of each particle's 3 x 3 diagonal block of
-//               M - h C - h^2 K (the multigrid smoother)
+//               M - h C - h^2 K (the multigrid smoother), and with kStencil its blocks
+//               between particles into its stencil's coefficients (s.entries)
+//   add_entries  (kStencil) the smoother's row sums: s += the term's entries first..last-1
+//               of its stencil (a particle's, sorted by neighbour j) times x_j, their
+//               blocks being those of -(M - h C - h^2 K)
+//   check_stencil (kStencil) whether a stencil's map (the term's own, map_length entries)
+//               fits the model: null, or what is wrong (the bindings check it once)
 //   add_jacobi_diagonal  the term's share of each particle's Jacobi preconditioner, one
 //               number per particle (N,) [kg] of M - h C - h^2 K (a mean of its diagonal block's
 //               diagonal, or the axial part of it)
@@ -48,6 +54,7 @@
 #pragma once
 
 #include "model.hpp"
+#include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS {
 
@@ -103,6 +110,10 @@ struct TermBase {
     // its bound holds a body's volume mode (TermBound::mode: the gas's P'(V) g g^T), which
     // softbody.stability reports apart (omega_gas, omega_pressure)
     static constexpr bool kVolumeMode = false;
+    // it couples particles in the multigrid smoother (blocks between them): a Stencil of
+    // kStencilWidth numbers per entry, filled by add_smoother_blocks, read by add_entries
+    static constexpr bool kStencil = false;
+    static constexpr int kStencilWidth = 0;
     // XPBD (solvers/substep.hpp) solves it by its `constrain` form, no force there
     static constexpr bool kConstraint = false;
     static bool active(const Model&, const Control&) { return true; }
@@ -115,6 +126,11 @@ struct TermBase {
                                  double* /*out*/) {}
     static void add_smoother_blocks(const Model&, const Control&, const Linearization&,
                                     const SmootherBlocks&) {}
+    static void add_entries(const Stencil&, const double* /*x*/, index /*first*/,
+                            index /*last*/, V3& /*s*/) {}
+    static const char* check_stencil(const Model&, const Stencil&, index /*map_length*/) {
+        return "has no stencil";
+    }
     static void add_jacobi_diagonal(const Model&, const Control&, const Linearization&,
                                     double /*h*/, double* /*diag*/) {}
     static void project(const Model&, const Control&, double /*h*/, const double* /*x*/,
