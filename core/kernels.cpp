@@ -126,6 +126,14 @@ StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double*
     return out;
 }
 
+index linearization_size(int term, const Model& m) {
+    index out = 0;
+    Terms::each([&](auto t, int k) {
+        if (k == term) out = decltype(t)::linearization_size(m);
+    });
+    return out;
+}
+
 const char* check_stencil(int term, const Model& m, const Stencil& s, index map_length) {
     const char* out = "is not a registered term with a stencil";
     Terms::each([&](auto t, int k) {
@@ -146,7 +154,7 @@ const KernelTable& kernel_table() {
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
                                    eval_energies, eval_flows, active_terms, membrane_blocks,
-                                   check_stencil, stiffness_bounds};
+                                   linearization_size, check_stencil, stiffness_bounds};
     return table;
 }
 

@@ -94,8 +94,11 @@ struct KernelTable {
     /// Bit k set: registered term k acts in a call with model m and control c.
     unsigned (*active_terms)(const Model& m, const Control& c);
     /// Every membrane triangle's clamped stiffness and damping blocks at q into out
-    /// (Tm, kMembraneBlock): what Linearization::membrane_hessian holds.
+    /// (Tm, kMembraneBlock): what the membranes' linearisation holds (Linearization::own).
     void (*membrane_blocks)(const Model&, const double* q, double* out);
+    /// How many doubles of scratch registered term `term` keeps for its linearisation in a
+    /// model (Linearization::scratch; 0: none).
+    index (*linearization_size)(int term, const Model& m);
     /// Whether a smoother stencil fits registered term `term` (a kStencil term) of model
     /// m: its map (map_length entries, s.map) checked by the term (ptr and neighbor are
     /// checked by the caller); null when it fits, else what is wrong.

@@ -249,13 +249,8 @@ struct ImplicitBuffers {
     double* qs = nullptr;     // (N, 3) y, the position change before dv; BDF2's contact check
     double* vs = nullptr;     // (N, 3) BDF2's contact check
     double* ky = nullptr;     // (N, 3) K y
-    double* spring_u = nullptr;  // (S, 3) spring directions
-    double* spring_a = nullptr;  // (S,) axial stiffness [N/m]
-    double* spring_b = nullptr;  // (S,) transverse stiffness [N/m]
-    double* body_dpdv = nullptr; // (B,) dP/dV [Pa/m^3]
-    double* body_pnet = nullptr; // (B,) P - P_ambient [Pa]
-    double* bending_gradient = nullptr;  // (H, 4, 3) each hinge's d theta / dx [1/m]
-    double* membrane_hessian = nullptr;  // (Tm, 42) membrane blocks (Linearization)
+    // each registered term's linearisation at the step's start (Linearization::scratch)
+    double* linearization[kMaxTerms] = {};
     double* cg_diag = nullptr;   // (N,) Jacobi preconditioner [kg]
     double* cg_r = nullptr;      // (N, 3) residual
     double* cg_z = nullptr;      // (N, 3) preconditioned residual
@@ -302,7 +297,7 @@ struct ProjectiveBuffers {
     ContactBuffers contact;
 };
 
-/// Doubles per membrane triangle in Linearization::membrane_hessian: two symmetric 6 x 6
+/// Doubles per membrane triangle in its linearisation (Linearization::own): two symmetric 6 x 6
 /// blocks by their upper triangles (terms/membrane.hpp).
 constexpr int kMembraneBlock = 42;
 
@@ -325,21 +320,16 @@ struct SubstepBuffers {
 };
 
 /// The implicit solvers' linearisation at a point q (N, 3): what `prepare` writes and
-/// `jacobian_product` / `add_smoother_blocks` read. The Python API's apply_jacobians passes
-/// the same arrays in.
+/// `jacobian_product` / `add_smoother_blocks` / `add_jacobi_diagonal` read. Each
+/// registered term keeps what it needs in its own scratch, its `linearization_size`
+/// doubles in its layout (terms/term.hpp), at scratch[k] for the term at registry position
+/// k; forms:: hands each term its own as `own` (null where the term has none: a term that
+/// can compute its part at q as it goes, bending and membranes, then does).
 struct Linearization {
-    const double* q = nullptr;    // (N, 3) the point [m]
-    double* spring_u = nullptr;   // (S, 3) spring directions
-    double* spring_a = nullptr;   // (S,) axial stiffness [N/m]
-    double* spring_b = nullptr;   // (S,) transverse stiffness [N/m]
-    const double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2]
-    double* body_dpdv = nullptr;  // (B,) dP/dV [Pa/m^3]
-    double* body_pnet = nullptr;  // (B,) P - P_ambient [Pa]
-    // (H, 4, 3) each hinge's d theta / dx [1/m], prepare's; null: each product computes it
-    double* bending_gradient = nullptr;
-    // (Tm, 42) each membrane triangle's clamped stiffness and damping blocks in F
-    // (terms/membrane.hpp); null: the product computes them at q as it goes
-    double* membrane_hessian = nullptr;
+    const double* q = nullptr;                // (N, 3) the point [m]
+    const double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2] (the gas state's at q)
+    double* const* scratch = nullptr;         // (kMaxTerms,) each term's scratch, or null
+    double* own = nullptr;                    // the term's own (set by forms:: per term)
 };
 
 /// The multigrid smoother's diagonal blocks and one term's off-diagonal entries

@@ -157,20 +157,15 @@ public:
         double** rows[] = {&w_.f, &w_.q0, &w_.v0, &w_.qs, &w_.vs, &w_.ky, &w_.cg_r,
                            &w_.cg_z, &w_.cg_p, &w_.cg_ap, &w_.cg_x, &w_.q_prev, &w_.v_prev};
         for (int k = 0; k < 13; ++k) *rows[k] = buffers_.row(k);
-        const size_t s = static_cast<size_t>(m.springs.count), b = static_cast<size_t>(m.bodies.count);
-        per_spring_ = {std::vector<double>(3 * s), std::vector<double>(s), std::vector<double>(s)};
-        per_body_ = {std::vector<double>(b), std::vector<double>(b)};
-        per_hinge_.assign(12 * static_cast<size_t>(m.bending.count), 0.0);
-        membrane_.assign(static_cast<size_t>(softbody::kMembraneBlock) *
-                             static_cast<size_t>(m.membranes.count), 0.0);
-        w_.membrane_hessian = membrane_.data();
+        // each registered term's linearisation at the step's start, as large as it asks
+        const softbody::KernelTable& k = softbody::kernels();
+        linearization_.resize(static_cast<size_t>(k.term_count));
+        for (int t = 0; t < k.term_count; ++t) {
+            std::vector<double>& own = linearization_[static_cast<size_t>(t)];
+            own.assign(static_cast<size_t>(k.linearization_size(t, m)), 0.0);
+            w_.linearization[t] = own.empty() ? nullptr : own.data();
+        }
         diag_.assign(static_cast<size_t>(m.particles.count), 0.0);
-        w_.spring_u = per_spring_[0].data();
-        w_.spring_a = per_spring_[1].data();
-        w_.spring_b = per_spring_[2].data();
-        w_.body_dpdv = per_body_[0].data();
-        w_.body_pnet = per_body_[1].data();
-        w_.bending_gradient = m.bending.count > 0 ? per_hinge_.data() : nullptr;
         w_.cg_diag = diag_.data();
         w_.contacts_acted = &flags_[0];
         w_.cg_stats = &flags_[1];
@@ -265,9 +260,8 @@ private:
     std::optional<CheckedMultigrid> multigrid_;
     Buffers buffers_;
     SolverThreads threads_;
-    std::vector<std::vector<double>> per_spring_, per_body_;
-    std::vector<double> per_hinge_;  // (H, 4, 3) the bending gradients at the step's start
-    std::vector<double> diag_, membrane_;
+    std::vector<std::vector<double>> linearization_;  // each term's, by registry position
+    std::vector<double> diag_;
     Index flags_[4] = {0, 0, 0, 0};  // contacts acted, then the CG statistics
     softbody::ImplicitBuffers w_;
 };

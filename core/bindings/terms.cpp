@@ -94,21 +94,31 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
     check_shape(pnet, "body_pnet", {nb_});
     check_shape(out, "out", {n, 3});
     CoreControl c(m, control);
-    // the product reads these arrays only (they stay the caller's)
-    softbody::Linearization l;
-    l.q = q.data();
-    l.spring_u = const_cast<double*>(u.data());
-    l.spring_a = const_cast<double*>(a.data());
-    l.spring_b = const_cast<double*>(b.data());
-    l.volume_gradient = gradient.data();
-    l.body_dpdv = const_cast<double*>(dpdv.data());
-    l.body_pnet = const_cast<double*>(pnet.data());
-    // the membrane's blocks from membrane_blocks(q), or computed at q as the product goes
+    // the terms' linearisations in their layouts (terms/*.hpp: linearization_size): the
+    // springs' u, a, b and the gas's P'(V), P - P_a copied from the caller's arrays; the
+    // membranes' blocks from membrane_blocks(q) (read in place), or, like the bending
+    // gradients, computed at q as the product goes
+    const softbody::KernelTable& k = softbody::kernels();
+    const int springs = term_position("springs"), gas = term_position("gas");
+    std::vector<double> spring_lin(static_cast<size_t>(k.linearization_size(springs, m)));
+    std::vector<double> gas_lin(static_cast<size_t>(k.linearization_size(gas, m)));
+    std::copy(u.data(), u.data() + 3 * s, spring_lin.begin());
+    std::copy(a.data(), a.data() + s, spring_lin.begin() + 3 * s);
+    std::copy(b.data(), b.data() + s, spring_lin.begin() + 4 * s);
+    std::copy(dpdv.data(), dpdv.data() + nb_, gas_lin.begin());
+    std::copy(pnet.data(), pnet.data() + nb_, gas_lin.begin() + nb_);
+    double* scratch[softbody::kMaxTerms] = {};
+    scratch[springs] = spring_lin.data();
+    scratch[gas] = gas_lin.data();
     if (membrane_hessian) {
         check_shape(*membrane_hessian, "membrane_hessian",
                     {m.membranes.count, softbody::kMembraneBlock});
-        l.membrane_hessian = const_cast<double*>(membrane_hessian->data());
+        scratch[term_position("membrane")] = const_cast<double*>(membrane_hessian->data());
     }
+    softbody::Linearization l;
+    l.q = q.data();
+    l.volume_gradient = gradient.data();
+    l.scratch = scratch;
     const unsigned skip = (attachments ? 0u : 1u << term_position("attachments")) |
                           (bending ? 0u : 1u << term_position("bending")) |
                           (membrane ? 0u : 1u << term_position("membrane"));
@@ -117,7 +127,7 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
                                         out.data());
 }
 
-/// Every membrane triangle's blocks at q (Linearization::membrane_hessian).
+/// Every membrane triangle's blocks at q (the membranes' linearisation).
 nb::ndarray<nb::numpy, double> membrane_blocks(const CoreModel& core, ConstF64 q) {
     const softbody::Model& m = core.model();
     check_shape(q, "q", {m.particles.count, 3});

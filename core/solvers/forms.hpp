@@ -67,9 +67,17 @@ inline bool all_fused(const Model& m, const Control& c) {
     return fused;
 }
 
-/// Every term's linearisation at e (l.q the point, e.gas the gas state there).
+/// l with the scratch of the term at registry position k as its own.
+inline Linearization own(const Linearization& l, int k) {
+    Linearization o = l;
+    o.own = l.scratch != nullptr ? l.scratch[k] : nullptr;
+    return o;
+}
+
+/// Every term's linearisation at e (l.q the point, e.gas the gas state there), into its
+/// own scratch.
 inline void prepare(const Eval& e, const Linearization& l) {
-    Terms::each([&](auto term, int) { decltype(term)::prepare(e, l); });
+    Terms::each([&](auto term, int k) { decltype(term)::prepare(e, own(l, k)); });
 }
 
 /// out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p for p (N, 3) at the linearisation l
@@ -83,7 +91,7 @@ inline void apply_jacobians(const Model& m, const Control& c, const Linearizatio
     }
     Terms::each([&](auto term, int k) {
         if (!(skip & (1u << k)))
-            decltype(term)::jacobian_product(m, c, l, alpha_c, alpha_k, p, out);
+            decltype(term)::jacobian_product(m, c, own(l, k), alpha_c, alpha_k, p, out);
     });
 }
 
@@ -103,7 +111,7 @@ inline void smoother_blocks(const Model& m, const Control& c, const Linearizatio
         s.h = h;
         s.block = block;
         if (T::kStencil) s.entries = stencils[k];
-        T::add_smoother_blocks(m, c, l, s);
+        T::add_smoother_blocks(m, c, own(l, k), s);
     });
 }
 
@@ -138,7 +146,9 @@ inline void add_entries(const Stencil* stencils, const double* x, index i, V3& s
 inline void jacobi_diagonal(const Model& m, const Control& c, const Linearization& l, double h,
                             double* diag) {
     for (index i = 0; i < m.particles.count; ++i) diag[i] = m.particles.mass[i];
-    Terms::each([&](auto term, int) { decltype(term)::add_jacobi_diagonal(m, c, l, h, diag); });
+    Terms::each([&](auto term, int k) {
+        decltype(term)::add_jacobi_diagonal(m, c, own(l, k), h, diag);
+    });
 }
 
 /// Projective dynamics' local step: every projected term's part of the right-hand side

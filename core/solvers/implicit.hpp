@@ -27,14 +27,8 @@ namespace softbody::SOFTBODY_KERNELS::implicit_solver {
 inline Linearization at_start(const ImplicitBuffers& w) {
     Linearization l;
     l.q = w.q0;
-    l.spring_u = w.spring_u;
-    l.spring_a = w.spring_a;
-    l.spring_b = w.spring_b;
     l.volume_gradient = w.gas.volume_gradient;
-    l.body_dpdv = w.body_dpdv;
-    l.body_pnet = w.body_pnet;
-    l.bending_gradient = w.bending_gradient;
-    l.membrane_hessian = w.membrane_hessian;
+    l.scratch = w.linearization;
     return l;
 }
 

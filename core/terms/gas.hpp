@@ -309,13 +309,16 @@ struct Term : TermBase {
         volume::evaluate(e.m, e.q, e.gas);
         return energies(e.m, e.c, e.t, e.gas, body);
     }
-    /// P'(V) and P - P_a from the gas state at the point (e.gas, refreshed there).
+    /// Linearisation: P'(V) (B,) [Pa/m^3], then P - P_a (B,) [Pa], from the gas state at
+    /// the point (e.gas, refreshed there).
+    static index linearization_size(const Model& m) { return 2 * m.bodies.count; }
     static void prepare(const Eval& e, const Linearization& l) {
-        pressure_slopes(e.m, e.gas, l.body_dpdv, l.body_pnet);
+        pressure_slopes(e.m, e.gas, l.own, l.own + e.m.bodies.count);
     }
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double, double alpha_k, const double* p, double* out) {
-        gas::jacobian_product(m, l.q, l.volume_gradient, l.body_dpdv, l.body_pnet, alpha_k, p, out);
+        gas::jacobian_product(m, l.q, l.volume_gradient, l.own, l.own + m.bodies.count, alpha_k,
+                              p, out);
     }
 };
 

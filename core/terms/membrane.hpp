@@ -37,7 +37,7 @@
 // Forms: force and energy (edge-major, per triangle; no lane form, so the vertex-major
 // pass does not cover it and a model with membranes takes the general step, not the
 // fused symplectic pass), prepare + jacobian_product (the 6 x 6 blocks per triangle
-// stored in Linearization::membrane_hessian, or computed on the fly where that is null),
+// stored in its linearisation (Linearization::own), or computed on the fly where that is null),
 // add_smoother_blocks (the triangle's 3 x 3 blocks of M - h C - h^2 K: its corners'
 // diagonal blocks, and the blocks between corners as the smoother's membrane entries;
 // the coarse levels see the membrane as a Laplacian: softbody.solvers.multigrid), project
@@ -58,7 +58,7 @@ namespace softbody::SOFTBODY_KERNELS::membrane {
 
 /// Entries of a symmetric 6 x 6 block stored as its upper triangle, row by row.
 constexpr int kSym6 = 21;
-/// Per triangle in Linearization::membrane_hessian: the clamped stiffness H_F+ then D_F.
+/// Per triangle in its linearisation (Linearization::own): the clamped stiffness H_F+ then D_F.
 constexpr int kBlock = 2 * kSym6;
 static_assert(kBlock == kMembraneBlock, "model.hpp's kMembraneBlock");
 
@@ -647,22 +647,24 @@ struct Term : TermBase {
     static bool active(const Model& m, const Control&) { return m.membranes.count > 0; }
     static void force(const Eval& e, double* f) { membrane::force(e.m, e.q, e.qd, f); }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
+    /// Linearisation: each triangle's clamped blocks (Tm, kBlock) (membrane::prepare).
+    static index linearization_size(const Model& m) { return kBlock * m.membranes.count; }
     static void prepare(const Eval& e, const Linearization& l) {
-        if (l.membrane_hessian != nullptr) membrane::prepare(e.m, l.q, l.membrane_hessian);
+        if (l.own != nullptr) membrane::prepare(e.m, l.q, l.own);
     }
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double alpha_c, double alpha_k, const double* p, double* out) {
-        membrane::jacobian_product(m, l.q, l.membrane_hessian, alpha_c, alpha_k, p, out);
+        membrane::jacobian_product(m, l.q, l.own, alpha_c, alpha_k, p, out);
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {
-        smoother_blocks(m, s.h, l.q, l.membrane_hessian, s.block, s.entries.map,
+        smoother_blocks(m, s.h, l.q, l.own, s.block, s.entries.map,
                         s.entries.count, s.entries.coef);
     }
     /// Jacobi: the mean of each corner's diagonal block's diagonal.
     static void add_jacobi_diagonal(const Model& m, const Control&, const Linearization& l,
                                     double h, double* diag) {
-        membrane::add_jacobi_diagonal(m, h, l.q, l.membrane_hessian, diag);
+        membrane::add_jacobi_diagonal(m, h, l.q, l.own, diag);
     }
     static void project(const Model& m, const Control&, double h, const double* x,
                         const double* x0, double* rhs) {

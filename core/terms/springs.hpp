@@ -455,23 +455,34 @@ struct Term : TermBase {
         springs::constrain(m, p);
     }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
+    /// Linearisation: u (S, 3), a (S,), b (S,) (prepare's), one after the other.
+    static index linearization_size(const Model& m) { return 5 * m.springs.count; }
+    static double* lin_u(const Model&, const Linearization& l) { return l.own; }
+    static double* lin_a(const Model& m, const Linearization& l) {
+        return l.own + 3 * m.springs.count;
+    }
+    static double* lin_b(const Model& m, const Linearization& l) {
+        return l.own + 4 * m.springs.count;
+    }
     static void prepare(const Eval& e, const Linearization& l) {
-        springs::prepare(e.m, l.q, l.spring_u, l.spring_a, l.spring_b);
+        springs::prepare(e.m, l.q, lin_u(e.m, l), lin_a(e.m, l), lin_b(e.m, l));
     }
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double alpha_c, double alpha_k, const double* p, double* out) {
-        springs::jacobian_product(m, l.spring_u, l.spring_a, l.spring_b, alpha_c, alpha_k, p, out);
+        springs::jacobian_product(m, lin_u(m, l), lin_a(m, l), lin_b(m, l), alpha_c, alpha_k, p,
+                                  out);
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {
-        smoother_blocks(m, s.h, l.spring_u, l.spring_a, l.spring_b, s.entries.ptr,
+        smoother_blocks(m, s.h, lin_u(m, l), lin_a(m, l), lin_b(m, l), s.entries.ptr,
                         s.entries.map, s.entries.coef, s.block);
     }
     /// Jacobi: h c + h^2 a (damping and axial stiffness) at both ends of every spring.
     static void add_jacobi_diagonal(const Model& m, const Control&, const Linearization& l,
                                     double h, double* diag) {
+        const double* a = lin_a(m, l);
         for (index s = 0; s < m.springs.count; ++s) {
-            const double d = h * m.springs.damping[s] + h * h * l.spring_a[s];
+            const double d = h * m.springs.damping[s] + h * h * a[s];
             diag[m.springs.indices[2 * s]] += d;
             diag[m.springs.indices[2 * s + 1]] += d;
         }

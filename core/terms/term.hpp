@@ -14,6 +14,8 @@
 //               term in projective dynamics (its projection stands for the force there)
 //   energy      the term's energy [J], each body's share added to body (B,); kEnergy says
 //               the term has one (dissipative and given forces have none)
+//   linearization_size  how many doubles of scratch its prepare keeps for its products at
+//               a point (Linearization::own, in the term's layout; 0: none)
 //   prepare     the implicit solvers' linearisation at the step's start (Linearization)
 //   jacobian_product   out (N, 3) += alpha_c C p + alpha_k K p (C = df/dv, K = df/dx), the
 //               matrix-free product of backward Euler and BDF2, -K positive semi-definite
@@ -120,6 +122,7 @@ struct TermBase {
     static void update(const Eval&, bool /*lanes_ran*/) {}
     static void force(const Eval&, double* /*f*/) {}
     static double energy(const Eval&, double* /*body*/) { return 0.0; }
+    static index linearization_size(const Model&) { return 0; }
     static void prepare(const Eval&, const Linearization&) {}
     static void jacobian_product(const Model&, const Control&, const Linearization&,
                                  double /*alpha_c*/, double /*alpha_k*/, const double* /*p*/,
