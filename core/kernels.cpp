@@ -36,7 +36,7 @@ void apply_preconditioner(const Model& m, const Control& c, double t, double h,
                           double* z) {
     forms::update(Eval{m, c, t, w.q0, w.v0, w.gas});
     implicit_solver::prepare(m, c, t, h, w, mg);
-    if (mg == nullptr) implicit_solver::jacobi_diagonal(m, h, w);
+    if (mg == nullptr) implicit_solver::jacobi_diagonal(m, c, h, w);
     implicit_solver::precondition(m, mg, w.cg_diag, r, z);
 }
 
@@ -104,37 +104,41 @@ void membrane_blocks(const Model& m, const double* q, double* out) {
     membrane::prepare(m, q, out);
 }
 
-// The estimate's Gershgorin bounds, term by term: the spring-like terms' row sums first
-// (a particle's row holds its springs and its attachments), the gas's rows and rank-one
-// part, then every registered term's own `bound` form.
+// The estimate's Gershgorin bounds, every registered term's `bound` form in registry order,
+// after every kSharedRows term's row sums (terms/term.hpp: add_row_sums).
 StiffnessBounds stiffness_bounds(const Model& m, const Control& c, const double* q,
-                                 const BoundBuffers& w) {
+                                 const BoundScratch& w) {
     StiffnessBounds out;
-    springs::bound_weights(m, q, w.spring_weight);
-    attachments::bound_weights(m, c, q, w.attachment_weight);
-    std::fill(w.root_sum, w.root_sum + springs::kBoundParts * m.particles.count, 0.0);
-    springs::add_root_sums(m, w.spring_weight, w.root_sum);
-    attachments::add_root_sums(m, w.attachment_weight, w.root_sum);
-    springs::row_bounds(m, w.spring_weight, w.root_sum, out.springs);
-    attachments::row_bounds(m, w.attachment_weight, w.root_sum, out.attachments);
-    springs::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
-    attachments::damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
-    std::fill(w.volume_gradient, w.volume_gradient + 3 * m.particles.count, 0.0);
-    gas::bound_slopes(m, q, w.body_pnet, w.body_dpdv, w.volume_gradient);
-    std::fill(w.pressure_row, w.pressure_row + m.particles.count, 0.0);
-    gas::add_pressure_rows(m, q, w.body_pnet, w.pressure_row);
-    for (index i = 0; i < m.particles.count; ++i)
-        out.pressure_rows = std::max(out.pressure_rows, w.pressure_row[i]);
-    out.gas_rank_one = gas::rank_one_bound(m, w.body_dpdv, w.volume_gradient);
-    // every other term with a bound form, in registry order
+    std::fill(w.root_sum, w.root_sum + 4 * m.particles.count, 0.0);
+    Terms::each([&](auto term, int) {
+        using T = decltype(term);
+        if (T::kBound && T::kSharedRows) T::add_row_sums(m, c, q, w);
+    });
     Terms::each([&](auto term, int k) {
         using T = decltype(term);
         if (!T::kBound) return;
-        TermBound b;
-        T::bound(m, c, q, w.term_rows, b);
-        for (int part = 0; part < 4; ++part) out.terms[k][part] = b.parts[part];
+        TermBound& b = out.terms[k];
+        T::bound(m, c, q, w, b);
         out.ratio_min = std::min(out.ratio_min, b.ratio_min);
         out.ratio_max = std::max(out.ratio_max, b.ratio_max);
+        out.pure_dampers = out.pure_dampers || b.pure_dampers;
+    });
+    return out;
+}
+
+index linearization_size(int term, const Model& m) {
+    index out = 0;
+    Terms::each([&](auto t, int k) {
+        if (k == term) out = decltype(t)::linearization_size(m);
+    });
+    return out;
+}
+
+const char* check_stencil(int term, const Model& m, const Stencil& s, index map_length) {
+    const char* out = "is not a registered term with a stencil";
+    Terms::each([&](auto t, int k) {
+        using T = decltype(t);
+        if (k == term && T::kStencil) out = T::check_stencil(m, s, map_length);
     });
     return out;
 }
@@ -150,7 +154,7 @@ const KernelTable& kernel_table() {
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
                                    eval_energies, eval_flows, active_terms, membrane_blocks,
-                                   stiffness_bounds};
+                                   linearization_size, check_stencil, stiffness_bounds};
     return table;
 }
 

@@ -10,9 +10,6 @@
 
 namespace softbody {
 
-/// The most terms a registry holds (terms/registry.hpp checks it).
-constexpr int kMaxTerms = 16;
-
 /// Each registered term's energy at a state [J] (softbody.diagnostics.energies), in
 /// registry order: its total over the model and each body's share (a free particle's
 /// weight, a user's spring or an attachment of a free particle counts in the total only).
@@ -22,34 +19,16 @@ struct TermEnergies {
     double* body = nullptr;  // (terms, B): term k's shares at body + k B
 };
 
-/// The stability estimate's Gershgorin pieces (softbody.stability.stiffest_mode), each
-/// term's own. Per part (springs::BoundPart: damped, transverse, whole, damping) the
-/// largest row bound of the springs and of the attachments, over row sums both add to
-/// [1/s^2] (damping: [1/s]); the gas's local pressure rows and its rank-one term [1/s^2];
-/// the bending hinges' rows [1/s^2]; the range of c / k [s] over springs and attachments with k > 0.
+/// The stability estimate's Gershgorin pieces (softbody.stability.stiffest_mode): every
+/// registered term's own (its `bound` form, TermBound: by part, damped, transverse,
+/// whole [1/s^2] and damping [1/s]; zero for a term without one), in registry order, and
+/// the range of c / k [s] over them all.
 struct StiffnessBounds {
-    double springs[4] = {0.0, 0.0, 0.0, 0.0};
-    double attachments[4] = {0.0, 0.0, 0.0, 0.0};
-    double pressure_rows = 0.0;  // max_i of the pressure term's rows
-    double gas_rank_one = 0.0;   // max over bodies of |P'(V)| sum_i |g_i|^2 / m_i
-    // each registered term's own bound by part (its `bound` form; 0 for the others)
-    double terms[kMaxTerms][4] = {};
-    // c / k [s]; +inf and -inf where no spring or attachment has k > 0
+    TermBound terms[kMaxTerms];
+    // c / k [s]; +inf and -inf where no term has a damped part with k > 0
     double ratio_min = std::numeric_limits<double>::infinity();
     double ratio_max = -std::numeric_limits<double>::infinity();
-    bool pure_dampers = false;  // some spring or attachment has c > 0 and k = 0
-};
-
-/// Scratch and outputs of KernelTable::stiffness_bounds.
-struct BoundBuffers {
-    double* spring_weight = nullptr;      // (S, 4) scratch
-    double* attachment_weight = nullptr;  // (A, 4) scratch
-    double* root_sum = nullptr;           // (N, 4) scratch
-    double* pressure_row = nullptr;       // (N,) scratch
-    double* term_rows = nullptr;          // (N, 2) scratch of the terms' `bound` forms
-    double* body_pnet = nullptr;          // (B,) out: P - P_a at the largest scheduled gas [Pa]
-    double* body_dpdv = nullptr;          // (B,) out: P'(V) [Pa/m^3]
-    double* volume_gradient = nullptr;    // (N, 3) out: exact dV/dx [m^2], 0 off bodies
+    bool pure_dampers = false;  // some term has a damper with c > 0 and k = 0
 };
 
 struct KernelTable {
@@ -115,11 +94,19 @@ struct KernelTable {
     /// Bit k set: registered term k acts in a call with model m and control c.
     unsigned (*active_terms)(const Model& m, const Control& c);
     /// Every membrane triangle's clamped stiffness and damping blocks at q into out
-    /// (Tm, kMembraneBlock): what Linearization::membrane_hessian holds.
+    /// (Tm, kMembraneBlock): what the membranes' linearisation holds (Linearization::own).
     void (*membrane_blocks)(const Model&, const double* q, double* out);
-    /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors.
+    /// How many doubles of scratch registered term `term` keeps for its linearisation in a
+    /// model (Linearization::scratch; 0: none).
+    index (*linearization_size)(int term, const Model& m);
+    /// Whether a smoother stencil fits registered term `term` (a kStencil term) of model
+    /// m: its map (map_length entries, s.map) checked by the term (ptr and neighbor are
+    /// checked by the caller); null when it fits, else what is wrong.
+    const char* (*check_stencil)(int term, const Model& m, const Stencil& s, index map_length);
+    /// The stability estimate's Gershgorin pieces at q, attachments at c's anchors
+    /// (w: scratch, and the gas's state at the estimate, BoundScratch).
     StiffnessBounds (*stiffness_bounds)(const Model&, const Control&, const double* q,
-                                        const BoundBuffers& w);
+                                        const BoundScratch& w);
 };
 
 namespace isa_scalar {

@@ -195,6 +195,24 @@ struct ExplicitBuffers {
 /// matrix A_l is CSR at rows a_row_offset[l] of a_indptr and entries a_nz_offset[l] of
 /// a_indices / a_data; P_l (level l to l + 1) likewise in p_*; its vectors sit at rows
 /// vec_offset[l] of x, b, r.
+/// The most terms a registry holds (terms/registry.hpp; kernels.cpp checks it).
+constexpr int kMaxTerms = 16;
+
+/// One registered term's off-diagonal blocks of the implicit system in the multigrid
+/// smoother (a kStencil term, terms/term.hpp): each particle's entries as CSR sorted by the
+/// neighbour j (Python builds them: softbody.solvers.multigrid.STENCILS), the term's own
+/// map from its couplings to entries (springs: each entry's spring (E,); membranes: each
+/// triangle's corner pair's entry (Tm, 3, 3), -1 on its diagonal), and each entry's
+/// coefficients (E, the term's kStencilWidth), scratch its add_smoother_blocks fills for
+/// the step and its add_entries reads.
+struct Stencil {
+    index count = 0;                  // E
+    const index* ptr = nullptr;       // (N + 1,)
+    const index* neighbor = nullptr;  // (E,)
+    const index* map = nullptr;       // the term's
+    double* coef = nullptr;           // (E, width)
+};
+
 struct MultigridView {
     index level_count = 0;     // L: sparse levels (prolongators)
     bool coarse_dense = false; // the coarsest level is solved by its Cholesky factor
@@ -212,24 +230,14 @@ struct MultigridView {
     const index* p_indices = nullptr;
     const double* p_data = nullptr;
     const double* coarse_cholesky = nullptr;  // (n_L, n_L) lower factor when coarse_dense
-    // each particle's springs ("entries"), sorted by the particle at the other end
-    const index* vertex_spring_ptr = nullptr;  // (N + 1,)
-    const index* vertex_spring = nullptr;      // (2 S,)
-    const index* vertex_neighbor = nullptr;    // (2 S,)
+    // the finest level's off-diagonal blocks, each kStencil term's at its registry position
+    Stencil stencils[kMaxTerms];
     // scratch
-    double* block = nullptr;       // (N, 3, 3) diagonal blocks of the true spring matrix
-    double* block_inv = nullptr;   // (N, 3, 3) inverse diagonal blocks of the true matrix
-    double* entry_coef = nullptr;  // (2 S, 5) u (3,), alpha, beta of each entry's spring
+    double* block = nullptr;       // (N, 3, 3) diagonal blocks of the true matrix
+    double* block_inv = nullptr;   // (N, 3, 3) their inverses
     double* x = nullptr;           // (sum n_l, 3) level solutions
     double* b = nullptr;           // (sum n_l, 3) level right-hand sides
     double* r = nullptr;           // (sum n_l, 3) level residuals
-    // each particle's membrane neighbours, sorted, and each membrane triangle's corner pairs'
-    // entries (-1 on its diagonal); membrane_coef (E, 3, 3) scratch: -A_ij of each entry
-    index membrane_entry_count = 0;            // E
-    const index* membrane_ptr = nullptr;       // (N + 1,)
-    const index* membrane_neighbor = nullptr;  // (E,)
-    const index* membrane_slot = nullptr;      // (Tm, 3, 3)
-    double* membrane_coef = nullptr;           // (E, 3, 3)
 };
 
 /// Scratch and history of the implicit schemes, owned by softbody::ImplicitSolver.
@@ -241,13 +249,8 @@ struct ImplicitBuffers {
     double* qs = nullptr;     // (N, 3) y, the position change before dv; BDF2's contact check
     double* vs = nullptr;     // (N, 3) BDF2's contact check
     double* ky = nullptr;     // (N, 3) K y
-    double* spring_u = nullptr;  // (S, 3) spring directions
-    double* spring_a = nullptr;  // (S,) axial stiffness [N/m]
-    double* spring_b = nullptr;  // (S,) transverse stiffness [N/m]
-    double* body_dpdv = nullptr; // (B,) dP/dV [Pa/m^3]
-    double* body_pnet = nullptr; // (B,) P - P_ambient [Pa]
-    double* bending_gradient = nullptr;  // (H, 4, 3) each hinge's d theta / dx [1/m]
-    double* membrane_hessian = nullptr;  // (Tm, 42) membrane blocks (Linearization)
+    // each registered term's linearisation at the step's start (Linearization::scratch)
+    double* linearization[kMaxTerms] = {};
     double* cg_diag = nullptr;   // (N,) Jacobi preconditioner [kg]
     double* cg_r = nullptr;      // (N, 3) residual
     double* cg_z = nullptr;      // (N, 3) preconditioned residual
@@ -294,7 +297,7 @@ struct ProjectiveBuffers {
     ContactBuffers contact;
 };
 
-/// Doubles per membrane triangle in Linearization::membrane_hessian: two symmetric 6 x 6
+/// Doubles per membrane triangle in its linearisation (Linearization::own): two symmetric 6 x 6
 /// blocks by their upper triangles (terms/membrane.hpp).
 constexpr int kMembraneBlock = 42;
 
@@ -320,53 +323,59 @@ struct SubstepBuffers {
 };
 
 /// The implicit solvers' linearisation at a point q (N, 3): what `prepare` writes and
-/// `jacobian_product` / `add_smoother_blocks` read. The Python API's apply_jacobians passes
-/// the same arrays in.
+/// `jacobian_product` / `add_smoother_blocks` / `add_jacobi_diagonal` read. Each
+/// registered term keeps what it needs in its own scratch, its `linearization_size`
+/// doubles in its layout (terms/term.hpp), at scratch[k] for the term at registry position
+/// k; forms:: hands each term its own as `own` (null where the term has none: a term that
+/// can compute its part at q as it goes, bending and membranes, then does).
 struct Linearization {
-    const double* q = nullptr;    // (N, 3) the point [m]
-    double* spring_u = nullptr;   // (S, 3) spring directions
-    double* spring_a = nullptr;   // (S,) axial stiffness [N/m]
-    double* spring_b = nullptr;   // (S,) transverse stiffness [N/m]
-    const double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2]
-    double* body_dpdv = nullptr;  // (B,) dP/dV [Pa/m^3]
-    double* body_pnet = nullptr;  // (B,) P - P_ambient [Pa]
-    // (H, 4, 3) each hinge's d theta / dx [1/m], prepare's; null: each product computes it
-    double* bending_gradient = nullptr;
-    // (Tm, 42) each membrane triangle's clamped stiffness and damping blocks in F
-    // (terms/membrane.hpp); null: the product computes them at q as it goes
-    double* membrane_hessian = nullptr;
+    const double* q = nullptr;                // (N, 3) the point [m]
+    const double* volume_gradient = nullptr;  // (N, 3) dV/dx [m^2] (the gas state's at q)
+    double* const* scratch = nullptr;         // (kMaxTerms,) each term's scratch, or null
+    double* own = nullptr;                    // the term's own (set by forms:: per term)
 };
 
-/// The multigrid smoother's diagonal blocks and the per-entry spring coefficients
+/// The multigrid smoother's diagonal blocks and one term's off-diagonal entries
 /// (MultigridView's scratch), for step h [s].
 struct SmootherBlocks {
     double h = 0.0;
-    const index* entry_ptr = nullptr;    // (N + 1,) each particle's spring entries
-    const index* entry_spring = nullptr; // (2 S,)
-    double* entry_coef = nullptr;        // (2 S, 5) u (3,), alpha, beta
-    double* block = nullptr;             // (N, 3, 3) set to M, then each term adds its share
-    // the membranes' off-diagonal blocks: -A_ij per entry (MultigridView's membrane_*)
-    index membrane_entry_count = 0;
-    const index* membrane_slot = nullptr;  // (Tm, 3, 3) entry of each corner pair, -1 on a = b
-    double* membrane_coef = nullptr;       // (E, 3, 3)
+    double* block = nullptr;  // (N, 3, 3) set to M, then each term adds its share
+    Stencil entries;          // the term's own stencil (kStencil), its coef to fill; else empty
 };
 
 /// A registered term's name and traits (terms/term.hpp), for the bindings and Python.
 struct TermTraits {
     const char* name = "";
     bool lane = false, projected = false, fused = false, energy = false, external = false,
-         flow = false, bound = false;
+         flow = false, bound = false, shared_rows = false, volume_mode = false;
+    int stencil_width = 0;  // numbers per smoother entry of a kStencil term, else 0
 };
 
 /// A term's own part of the stability estimate (its `bound` form, terms/term.hpp): the
 /// largest Gershgorin rows of its stiffness against the masses by part, [damped, undamped,
 /// whole] [1/s^2] and its damping rate [1/s] (springs::BoundPart's order), which the
-/// estimate adds to the springs' (Weyl); and its damping per stiffness c / k [s], folded
-/// into [ratio_min, ratio_max].
+/// estimate adds to the other terms' (Weyl; the kSharedRows terms' take the largest of
+/// theirs, one Gershgorin bound on their sum); of those, `mode` [1/s^2], the eigenvalue of
+/// a kVolumeMode term's volume mode (the gas's rank-one P'(V) g g^T, included in parts 1
+/// and 2); its damping per stiffness c / k [s], folded into [ratio_min, ratio_max]; and
+/// pure_dampers, set where it has a damper without stiffness (c > 0, k = 0).
 struct TermBound {
     double parts[4] = {0.0, 0.0, 0.0, 0.0};
+    double mode = 0.0;
     double ratio_min = std::numeric_limits<double>::infinity();
     double ratio_max = -std::numeric_limits<double>::infinity();
+    bool pure_dampers = false;
+};
+
+/// What the terms' `bound` forms share (kernels.cpp: stiffness_bounds): scratch, the
+/// Gershgorin row sums the kSharedRows terms fill first, and the state at which the
+/// estimate took its linearisation, which softbody.stability's spectral part reuses.
+struct BoundScratch {
+    double* root_sum = nullptr;         // (N, 4) R_i by part, every add_row_sums form's
+    double* rows = nullptr;             // (N, 2) scratch of one bound form
+    double* body_pnet = nullptr;        // (B,) out: P - P_a at the largest scheduled gas [Pa]
+    double* body_dpdv = nullptr;        // (B,) out: P'(V) [Pa/m^3]
+    double* volume_gradient = nullptr;  // (N, 3) out: exact dV/dx [m^2], 0 off bodies
 };
 
 /// Outcome of a run of steps (softbody.solvers.Status).

@@ -169,21 +169,28 @@ def test_the_core_refuses_an_inconsistent_multigrid_hierarchy():
     other = build_multigrid(ball_model(subdivisions=2))
     with pytest.raises(ValueError, match=r"level_size\[0\] must be the particle count"):
         _core.ImplicitSolver(core, multigrid=other)
+    springs = mg.stencils["springs"]
+
+    def bad_springs(**changes):
+        return _bad(mg, stencils={**mg.stencils, "springs": springs._replace(**changes)})
+
     cases = {
-        "vertex_neighbor": _bad(mg, vertex_neighbor=mg.vertex_neighbor + model.particle_count),
-        "vertex_spring": _bad(mg, vertex_spring=mg.vertex_spring - model.spring_count),
+        "stencil springs neighbor": bad_springs(neighbor=springs.neighbor + model.particle_count),
+        "springs: map holds a bad spring": bad_springs(map=springs.map - model.spring_count),
         "vec_offset": _bad(mg, vec_offset=mg.vec_offset + 1),
         "A level 0 columns": _bad(mg, a_indices=mg.a_indices * 1000),
         "P level 0": _bad(mg, p_nz_offset=mg.p_nz_offset + len(mg.p_indices)),
         "a_diag must have shape": _bad(mg, a_diag=mg.a_diag[:-1]),
         "coarse_cholesky must have shape": _bad(mg, coarse_cholesky=np.zeros((2, 2))),
-        "vertex_spring_ptr": _bad(mg, vertex_spring_ptr=mg.vertex_spring_ptr[::-1].copy()),
+        "stencil springs ptr": bad_springs(ptr=springs.ptr[::-1].copy()),
+        "stencil membrane is missing": _bad(mg, stencils={"springs": springs}),
     }
     for what, bad in cases.items():
         with pytest.raises(ValueError, match=what):
             _core.ImplicitSolver(core, multigrid=bad)
     with pytest.raises(ValueError, match="multigrid"):
-        _core.apply_multigrid(core, cases["vertex_neighbor"], np.zeros((model.particle_count, 3)))
+        _core.apply_multigrid(core, cases["stencil springs neighbor"],
+                              np.zeros((model.particle_count, 3)))  # fmt: skip
     solver = _core.ImplicitSolver(core, multigrid=mg)
     state = model.state()
     state.conform(model)  # the core takes a state that has met its model (its gas set)

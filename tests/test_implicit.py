@@ -149,10 +149,11 @@ def test_bdf2_is_second_order_on_two_mass_oscillator():
 
 
 def test_bdf2_history_follows_the_state():
-    """BDF2 uses the previous step: two calls of one step each equal one call of two
-    (the history carries over), and a simulator reused on a fresh state, or on a state
-    edited between calls, restarts with a backward Euler step exactly as a new simulator
-    does (bitwise)."""
+    """BDF2 uses the previous step, which the state carries (State.history): two calls of
+    one step each equal one call of two (the history carries over), and a simulator reused
+    on a fresh state, on a state whose positions were assigned, or on one edited in place
+    and marked (State.mark_edited), restarts with a backward Euler step exactly as a new
+    simulator does (bitwise)."""
     model = ball_model(subdivisions=1, stiffness=300.0, damping=0.5, gravity=(0.0, -9.81, 0.0))
     sim = sb.Simulator(model, integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12)
     a, b = model.state(), model.state()
@@ -166,11 +167,50 @@ def test_bdf2_history_follows_the_state():
     reference = model.state()
     sb.Simulator(model, integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12).run(reference, 3)
     assert np.array_equal(fresh.particle_q, reference.particle_q)
-    fresh.particle_q[:, 1] += 0.01  # edited in place: same object, same step count
-    copy = sb.State(fresh.particle_q.copy(), fresh.particle_qd.copy())
-    sim.run(fresh, 1)
-    sb.Simulator(model, integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12).run(copy, 1)
-    assert np.array_equal(fresh.particle_q, copy.particle_q)
+    for edit in ("assigned", "in place"):
+        if edit == "in place":  # the same history again, from a simulator as before
+            sim = sb.Simulator(model, integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12)
+            fresh = model.state()
+            sim.run(fresh, 3)
+        if edit == "assigned":
+            fresh.particle_q = fresh.particle_q + np.array([0.0, 0.01, 0.0])
+        else:
+            fresh.particle_q[:, 1] += 0.01  # no assignment: the state cannot see it
+            fresh.mark_edited()
+        copy = sb.State(fresh.particle_q.copy(), fresh.particle_qd.copy())
+        sim.run(fresh, 1)
+        sb.Simulator(model, integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12).run(copy, 1)
+        assert np.array_equal(fresh.particle_q, copy.particle_q), edit
+
+
+def test_bdf2_history_travels_with_the_state():
+    """The history is the state's, not the solver's: a simulator that stepped another state
+    in between, a copy of the state (State.copy), and a new simulator all go on from it
+    as one run of all the steps does (to 1e-12 m: CG's tolerance, its warm start being the
+    solver's; a backward Euler step instead is off by about 1e-4 m), and another scheme's
+    step or another dt ends it."""
+    model = ball_model(subdivisions=1, stiffness=300.0, damping=0.5, gravity=(0.0, -9.81, 0.0))
+    options = dict(integrator="bdf2", dt=1 / 60, implicit_tolerance=1e-12)
+    whole = model.state()
+    sb.Simulator(model, **options).run(whole, 4)
+    sim, other = sb.Simulator(model, **options), model.state()
+    a = model.state()
+    sim.run(a, 2)
+    sim.run(other, 1)  # the solver's core now holds `other`'s step
+    c = a.copy()
+    sim.run(a, 2)
+    sb.Simulator(model, **options).run(c, 2)
+    assert np.allclose(a.particle_q, whole.particle_q, rtol=0, atol=1e-12)
+    assert np.allclose(c.particle_q, whole.particle_q, rtol=0, atol=1e-12)
+    # the same steps, with another scheme's step or another dt before the last: no history
+    for interrupt in ("implicit_euler", "dt"):
+        s = model.state()
+        sim.run(s, 1)
+        if interrupt == "dt":
+            sb.Simulator(model, integrator="bdf2", dt=1 / 120, implicit_tolerance=1e-12).run(s, 1)
+        else:
+            sb.Simulator(model, integrator=interrupt, dt=1 / 60).run(s, 1)
+        assert s.history is None or not s.history.belongs_to(s, 1 / 60)
 
 
 @pytest.mark.parametrize("integrator", IMPLICIT)

@@ -209,3 +209,19 @@ def test_unknown_preconditioner_is_refused():
         sb.Simulator(
             ball_model(), integrator="implicit_euler", dt=DT, implicit_preconditioner="ilu"
         )
+
+
+def test_every_coupling_term_has_a_stencil():
+    """The smoother's stencil builders (softbody.solvers.multigrid.STENCILS) are exactly
+    the core's terms with blocks between particles in the smoother (stencil_width > 0,
+    softbody._core.term_table), in the registry's order, and a hierarchy holds one stencil
+    per such term whose map the core accepts: a coupling term without one would leave its
+    blocks out of the smoother (the core refuses such a hierarchy)."""
+    from softbody.solvers.multigrid import STENCILS
+
+    coupled = [t["name"] for t in _core.term_table() if t["stencil_width"] > 0]
+    assert list(STENCILS) == coupled
+    model = ball_model(subdivisions=2)
+    mg = build_multigrid(model)
+    assert list(mg.stencils) == coupled
+    assert _core.ImplicitSolver(core_model(model), multigrid=mg).uses_multigrid

@@ -203,3 +203,15 @@ def test_dissection_order_is_the_one_it_always_was(subdivisions):
         _core.plan_dissection_order(indptr, indices, np.zeros((2, 3)), 8)
     with pytest.raises(ValueError, match="strictly lower triangular"):
         _core.plan_supernodes(indptr, np.array([0, 1], dtype=np.int64), np.ones(2))
+
+
+def test_every_projected_term_gives_its_part_of_the_matrix():
+    """The global matrix's parts (softbody.solvers.factor.MATRIX_PARTS) are exactly the
+    core's projected terms (those whose projection stands for their force in projective
+    dynamics, softbody._core.term_table), in the registry's order: a projected term
+    without a part would leave its stiffness out of the factor."""
+    from softbody import _core
+    from softbody.solvers.factor import MATRIX_PARTS
+
+    projected = [t["name"] for t in _core.term_table() if t["projected"]]
+    assert list(MATRIX_PARTS) == projected

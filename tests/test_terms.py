@@ -496,8 +496,12 @@ def test_bound_pieces_match_the_numpy_formulas(name, simd):
     i, j = model.spring_indices.T
     st = _stretch(np.linalg.norm(q[j] - q[i], axis=1), model.spring_rest_length)
     transverse = 1.0 + 1.0 / np.sqrt(st[st > 0].min() if np.any(st > 0) else 1.0)
+    # the springs and attachments share their rows (bounded by the larger of theirs), the
+    # gas holds the volume mode (reported apart)
+    assert list(got["shared_rows"]) == ["springs", "attachments"]
+    assert list(got["volume_modes"]) == ["gas"]
     for term in ("springs", "attachments"):
-        for part, (g, w) in enumerate(zip(got[term], want[term], strict=True)):
+        for part, (g, w) in enumerate(zip(got["terms"][term], want[term], strict=True)):
             scale = w * (transverse if part == 1 else 1.0)
             _close(g, w, scale, f"{term} part {part}")
     np.testing.assert_array_equal(got["damping_ratio"], want["damping_ratio"])
@@ -525,10 +529,13 @@ def test_bound_pieces_match_the_numpy_formulas(name, simd):
     net = np.abs(want["body_pnet"])
     pressure_relative = np.max((np.abs(pressure) + net_error)[net > 0] / net[net > 0],
                                initial=1.0)  # fmt: skip
-    _close(got["pressure_rows"], want["pressure_rows"],
-           want["pressure_rows"] * pressure_relative, "pressure rows")  # fmt: skip
-    _close(got["gas_rank_one"], want["gas_rank_one"],
-           want["gas_rank_one"] * np.max(slope_relative, initial=1.0), "rank one")  # fmt: skip
+    # the gas's own bound: its pressure rows plus its volume mode (undamped and whole)
+    gas_parts, rank_one = got["terms"]["gas"], got["volume_modes"]["gas"]
+    assert gas_parts[0] == gas_parts[3] == 0.0 and gas_parts[1] == gas_parts[2]
+    rank_one_scale = want["gas_rank_one"] * np.max(slope_relative, initial=1.0)
+    _close(rank_one, want["gas_rank_one"], rank_one_scale, "rank one")
+    _close(gas_parts[1], want["pressure_rows"] + want["gas_rank_one"],
+           want["pressure_rows"] * pressure_relative + rank_one_scale, "pressure rows")  # fmt: skip
     # the gradients' round-off relative to |g| grows as a hinge's triangles thin; these
     # meshes' are near equilateral, so a few ULPS each, summed over a row's few hinges
     # (its own bound: parts undamped and whole; registered as a bound form, it is present
@@ -539,10 +546,10 @@ def test_bound_pieces_match_the_numpy_formulas(name, simd):
     assert (own[1] > 0.0) == (model.bending_hinges.shape[0] > 0)
     # every piece is there to be checked (the cloth has no attachment, and its gas no
     # rank-one term: an open surface's pressure does not change with its volume)
-    for piece in (*got["springs"], got["pressure_rows"]):
+    for piece in (*got["terms"]["springs"], want["pressure_rows"]):
         assert piece > 0.0
-    assert (got["attachments"][0] > 0.0) == (name != "cloth")
-    assert (got["gas_rank_one"] > 0.0) == (name != "cloth")
+    assert (got["terms"]["attachments"][0] > 0.0) == (name != "cloth")
+    assert (rank_one > 0.0) == (name != "cloth")
 
 
 @pytest.mark.parametrize("name", BOUND_MODELS)

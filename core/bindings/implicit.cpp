@@ -60,49 +60,45 @@ public:
                       "multigrid P level " + std::to_string(l));
         const Index coarse = v.level_size[levels];
         v.coarse_cholesky = v.coarse_dense ? f64(mg, "coarse_cholesky", {coarse, coarse}) : nullptr;
-        const Index entries = 2 * m.springs.count;
-        v.vertex_spring_ptr = i64(mg, "vertex_spring_ptr", {n + 1});
-        if (v.vertex_spring_ptr[0] != 0 || v.vertex_spring_ptr[n] != entries)
-            fail("multigrid vertex_spring_ptr must run from 0 to twice the spring count");
-        for (Index i = 0; i < n; ++i)
-            if (v.vertex_spring_ptr[i] > v.vertex_spring_ptr[i + 1])
-                fail("multigrid vertex_spring_ptr must not decrease");
-        v.vertex_spring = i64(mg, "vertex_spring", {entries});
-        v.vertex_neighbor = i64(mg, "vertex_neighbor", {entries});
-        check_indices(v.vertex_spring, entries, 0, m.springs.count, "multigrid vertex_spring");
-        check_indices(v.vertex_neighbor, entries, 0, n, "multigrid vertex_neighbor");
         const size_t n9 = static_cast<size_t>(9 * n), t3 = static_cast<size_t>(3 * total_);
-        scratch_ = {std::vector<double>(n9), std::vector<double>(n9),
-                    std::vector<double>(static_cast<size_t>(5 * entries)), std::vector<double>(t3),
+        scratch_ = {std::vector<double>(n9), std::vector<double>(n9), std::vector<double>(t3),
                     std::vector<double>(t3), std::vector<double>(t3)};
         v.block = scratch_[0].data();
         v.block_inv = scratch_[1].data();
-        v.entry_coef = scratch_[2].data();
-        v.x = scratch_[3].data();
-        v.b = scratch_[4].data();
-        v.r = scratch_[5].data();
-        // the membranes' entries: CSR over particles, neighbours in range, slots in range
-        v.membrane_ptr = i64(mg, "membrane_ptr", {n + 1});
-        const ConstI64 neighbor = keep(attribute<ConstI64>(mg, "membrane_neighbor", {-1}));
-        const Index e_count = static_cast<Index>(neighbor.shape(0));
-        if (v.membrane_ptr[0] != 0 || v.membrane_ptr[n] != e_count)
-            fail("multigrid membrane_ptr must run from 0 to the membrane entry count");
-        for (Index i = 0; i < n; ++i)
-            if (v.membrane_ptr[i] > v.membrane_ptr[i + 1])
-                fail("multigrid membrane_ptr must not decrease");
-        v.membrane_neighbor = neighbor.data();
-        check_indices(v.membrane_neighbor, e_count, 0, n, "multigrid membrane_neighbor");
-        v.membrane_slot = i64(mg, "membrane_slot", {m.membranes.count, 3, 3});
-        check_indices(v.membrane_slot, 9 * m.membranes.count, -1, e_count,
-                      "multigrid membrane_slot");
-        for (Index t = 0; t < m.membranes.count; ++t)
-            for (int a = 0; a < 3; ++a)
-                for (int b = 0; b < 3; ++b)
-                    if ((v.membrane_slot[9 * t + 3 * a + b] < 0) != (a == b))
-                        fail("multigrid membrane_slot must be -1 exactly on each diagonal");
-        v.membrane_entry_count = e_count;
-        membrane_coef_.assign(static_cast<size_t>(9 * e_count), 0.0);
-        v.membrane_coef = membrane_coef_.data();
+        v.x = scratch_[2].data();
+        v.b = scratch_[3].data();
+        v.r = scratch_[4].data();
+        // every kStencil term's smoother entries (mg.stencils[name]: ptr, neighbor, map):
+        // CSR over particles, neighbours in range, the map checked by the term
+        const softbody::KernelTable& k = softbody::kernels();
+        nb::dict stencils;
+        if (!nb::try_cast(mg.attr("stencils"), stencils))
+            fail("multigrid stencils must be a dict of term name -> stencil");
+        coef_.resize(static_cast<size_t>(k.term_count));
+        for (int t = 0; t < k.term_count; ++t) {
+            const int width = k.terms[t].stencil_width;
+            if (width == 0) continue;
+            const std::string name = k.terms[t].name;
+            const std::string what = "multigrid stencil " + name;
+            if (!stencils.contains(name.c_str())) fail(what + " is missing");
+            nb::handle st = stencils[name.c_str()];
+            softbody::Stencil& s = v.stencils[t];
+            s.ptr = i64(st, "ptr", {n + 1});
+            const ConstI64 neighbor = keep(attribute<ConstI64>(st, "neighbor", {-1}));
+            const ConstI64 map = keep(attribute<ConstI64>(st, "map", {-1}));
+            s.count = static_cast<Index>(neighbor.shape(0));
+            if (s.ptr[0] != 0 || s.ptr[n] != s.count)
+                fail(what + " ptr must run from 0 to its entry count");
+            for (Index i = 0; i < n; ++i)
+                if (s.ptr[i] > s.ptr[i + 1]) fail(what + " ptr must not decrease");
+            s.neighbor = neighbor.data();
+            check_indices(s.neighbor, s.count, 0, n, what + " neighbor");
+            s.map = map.data();
+            if (const char* error = k.check_stencil(t, m, s, static_cast<Index>(map.shape(0))))
+                fail(what + ": " + error);
+            coef_[static_cast<size_t>(t)].assign(static_cast<size_t>(width * s.count), 0.0);
+            s.coef = coef_[static_cast<size_t>(t)].data();
+        }
     }
 
     softbody::MultigridView view;
@@ -138,7 +134,7 @@ private:
 
     Index total_ = 0;
     std::vector<std::vector<double>> scratch_;
-    std::vector<double> membrane_coef_;
+    std::vector<std::vector<double>> coef_;  // each stencil's coefficients, by term
     std::vector<ConstF64> keep_f_;
     std::vector<ConstI64> keep_i_;
 };
@@ -161,20 +157,15 @@ public:
         double** rows[] = {&w_.f, &w_.q0, &w_.v0, &w_.qs, &w_.vs, &w_.ky, &w_.cg_r,
                            &w_.cg_z, &w_.cg_p, &w_.cg_ap, &w_.cg_x, &w_.q_prev, &w_.v_prev};
         for (int k = 0; k < 13; ++k) *rows[k] = buffers_.row(k);
-        const size_t s = static_cast<size_t>(m.springs.count), b = static_cast<size_t>(m.bodies.count);
-        per_spring_ = {std::vector<double>(3 * s), std::vector<double>(s), std::vector<double>(s)};
-        per_body_ = {std::vector<double>(b), std::vector<double>(b)};
-        per_hinge_.assign(12 * static_cast<size_t>(m.bending.count), 0.0);
-        membrane_.assign(static_cast<size_t>(softbody::kMembraneBlock) *
-                             static_cast<size_t>(m.membranes.count), 0.0);
-        w_.membrane_hessian = membrane_.data();
+        // each registered term's linearisation at the step's start, as large as it asks
+        const softbody::KernelTable& k = softbody::kernels();
+        linearization_.resize(static_cast<size_t>(k.term_count));
+        for (int t = 0; t < k.term_count; ++t) {
+            std::vector<double>& own = linearization_[static_cast<size_t>(t)];
+            own.assign(static_cast<size_t>(k.linearization_size(t, m)), 0.0);
+            w_.linearization[t] = own.empty() ? nullptr : own.data();
+        }
         diag_.assign(static_cast<size_t>(m.particles.count), 0.0);
-        w_.spring_u = per_spring_[0].data();
-        w_.spring_a = per_spring_[1].data();
-        w_.spring_b = per_spring_[2].data();
-        w_.body_dpdv = per_body_[0].data();
-        w_.body_pnet = per_body_[1].data();
-        w_.bending_gradient = m.bending.count > 0 ? per_hinge_.data() : nullptr;
         w_.cg_diag = diag_.data();
         w_.contacts_acted = &flags_[0];
         w_.cg_stats = &flags_[1];
@@ -186,7 +177,8 @@ public:
     std::tuple<int, Index, Index, double> simulate(
         bool bdf2, Index steps, double dt, nb::handle control, nb::handle state,
         nb::handle limits, double tolerance, Index max_iterations, bool history,
-        nb::handle progress) {
+        nb::handle progress, nb::handle previous_q, nb::handle previous_qd,
+        bool contacts_acted) {
         const softbody::Model& m = model_.model();
         if (!(std::isfinite(tolerance) && tolerance > 0.0 && tolerance < 1.0))
             fail("tolerance must lie in (0, 1)");
@@ -199,6 +191,24 @@ public:
         ip.tolerance = tolerance;
         ip.max_iterations = max_iterations;
         ip.history = history;
+        // BDF2's history: the step before the state's, in the caller's arrays (the State's
+        // own, softbody.sim.state.StepHistory), written there as the run steps; without
+        // them, this solver's scratch
+        const Index n = m.particles.count;
+        F64 prev_q, prev_qd;
+        if (previous_q.is_none() != previous_qd.is_none())
+            fail("previous_q and previous_qd must be given together");
+        if (!previous_q.is_none()) {
+            prev_q = writable(previous_q, "previous_q", {n, 3});
+            prev_qd = writable(previous_qd, "previous_qd", {n, 3});
+            w_.q_prev = prev_q.data();
+            w_.v_prev = prev_qd.data();
+        } else {
+            if (history) fail("a run with history needs previous_q and previous_qd");
+            w_.q_prev = buffers_.row(11);
+            w_.v_prev = buffers_.row(12);
+        }
+        flags_[0] = history && contacts_acted ? 1 : 0;
         const softbody::MultigridView* mg = multigrid_ ? &multigrid_->view : nullptr;
         RunPoll poll(run.params, progress);
         softbody::RunResult r;
@@ -233,6 +243,9 @@ public:
         return nb::ndarray<nb::numpy, double>(z, 2, shape, owner);
     }
 
+    /// Whether the last run's last step's contacts acted (BDF2 then takes its next step as
+    /// backward Euler): part of the history a caller keeps.
+    bool contacts_acted() const { return flags_[0] != 0; }
     /// (steps, CG iterations in all, most in one step) since the last clear_stats.
     std::tuple<Index, Index, Index> cg_stats() const { return {flags_[1], flags_[2], flags_[3]}; }
     void clear_stats() { flags_[1] = flags_[2] = flags_[3] = 0; }
@@ -247,9 +260,8 @@ private:
     std::optional<CheckedMultigrid> multigrid_;
     Buffers buffers_;
     SolverThreads threads_;
-    std::vector<std::vector<double>> per_spring_, per_body_;
-    std::vector<double> per_hinge_;  // (H, 4, 3) the bending gradients at the step's start
-    std::vector<double> diag_, membrane_;
+    std::vector<std::vector<double>> linearization_;  // each term's, by registry position
+    std::vector<double> diag_;
     Index flags_[4] = {0, 0, 0, 0};  // contacts acted, then the CG statistics
     softbody::ImplicitBuffers w_;
 };
@@ -290,6 +302,8 @@ void bind_implicit(nb::module_& mod) {
                      "(implicit steps, CG iterations in all, most in one step) since the last "
                      "clear_stats().")
         .def("clear_stats", &ImplicitSolver::clear_stats)
+        .def_prop_ro("contacts_acted", &ImplicitSolver::contacts_acted,
+                     "Whether the last run's last step's contacts acted (BDF2's history).")
         .def("apply_preconditioner", &ImplicitSolver::apply_preconditioner,
              nb::arg("control"), nb::arg("t"), nb::arg("h"), nb::arg("q").noconvert(),
              nb::arg("r").noconvert(),
@@ -298,10 +312,14 @@ void bind_implicit(nb::module_& mod) {
         .def("simulate", &ImplicitSolver::simulate, nb::arg("bdf2"), nb::arg("steps"),
              nb::arg("dt"), nb::arg("control"), nb::arg("state"), nb::arg("limits"),
              nb::arg("tolerance"), nb::arg("max_iterations"), nb::arg("history"),
-             nb::arg("progress") = nb::none(),
+             nb::arg("progress") = nb::none(), nb::arg("previous_q") = nb::none(),
+             nb::arg("previous_qd") = nb::none(), nb::arg("contacts_acted") = false,
              "Advance a softbody.State in place by backward Euler (or BDF2) from its time "
-             "(limits: a RunLimits); history: the solver holds the step before the state's. "
-             "Returns (status, steps_done, index, value). " RUN_POLL_DOC);
+             "(limits: a RunLimits). previous_q, previous_qd (N, 3): BDF2's history, the "
+             "start of the step before the state's, read when history is true (with "
+             "contacts_acted: that step's contacts acted) and written as the run steps (the "
+             "start of its last step). Returns (status, steps_done, index, value). "
+             RUN_POLL_DOC);
     mod.def("apply_multigrid", &apply_multigrid, nb::arg("model"), nb::arg("multigrid"),
             nb::arg("r").noconvert(), "z (N, 3) = one V-cycle of the hierarchy for r (N, 3).");
 }

@@ -94,21 +94,31 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
     check_shape(pnet, "body_pnet", {nb_});
     check_shape(out, "out", {n, 3});
     CoreControl c(m, control);
-    // the product reads these arrays only (they stay the caller's)
-    softbody::Linearization l;
-    l.q = q.data();
-    l.spring_u = const_cast<double*>(u.data());
-    l.spring_a = const_cast<double*>(a.data());
-    l.spring_b = const_cast<double*>(b.data());
-    l.volume_gradient = gradient.data();
-    l.body_dpdv = const_cast<double*>(dpdv.data());
-    l.body_pnet = const_cast<double*>(pnet.data());
-    // the membrane's blocks from membrane_blocks(q), or computed at q as the product goes
+    // the terms' linearisations in their layouts (terms/*.hpp: linearization_size): the
+    // springs' u, a, b and the gas's P'(V), P - P_a copied from the caller's arrays; the
+    // membranes' blocks from membrane_blocks(q) (read in place), or, like the bending
+    // gradients, computed at q as the product goes
+    const softbody::KernelTable& k = softbody::kernels();
+    const int springs = term_position("springs"), gas = term_position("gas");
+    std::vector<double> spring_lin(static_cast<size_t>(k.linearization_size(springs, m)));
+    std::vector<double> gas_lin(static_cast<size_t>(k.linearization_size(gas, m)));
+    std::copy(u.data(), u.data() + 3 * s, spring_lin.begin());
+    std::copy(a.data(), a.data() + s, spring_lin.begin() + 3 * s);
+    std::copy(b.data(), b.data() + s, spring_lin.begin() + 4 * s);
+    std::copy(dpdv.data(), dpdv.data() + nb_, gas_lin.begin());
+    std::copy(pnet.data(), pnet.data() + nb_, gas_lin.begin() + nb_);
+    double* scratch[softbody::kMaxTerms] = {};
+    scratch[springs] = spring_lin.data();
+    scratch[gas] = gas_lin.data();
     if (membrane_hessian) {
         check_shape(*membrane_hessian, "membrane_hessian",
                     {m.membranes.count, softbody::kMembraneBlock});
-        l.membrane_hessian = const_cast<double*>(membrane_hessian->data());
+        scratch[term_position("membrane")] = const_cast<double*>(membrane_hessian->data());
     }
+    softbody::Linearization l;
+    l.q = q.data();
+    l.volume_gradient = gradient.data();
+    l.scratch = scratch;
     const unsigned skip = (attachments ? 0u : 1u << term_position("attachments")) |
                           (bending ? 0u : 1u << term_position("bending")) |
                           (membrane ? 0u : 1u << term_position("membrane"));
@@ -117,7 +127,7 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
                                         out.data());
 }
 
-/// Every membrane triangle's blocks at q (Linearization::membrane_hessian).
+/// Every membrane triangle's blocks at q (the membranes' linearisation).
 nb::ndarray<nb::numpy, double> membrane_blocks(const CoreModel& core, ConstF64 q) {
     const softbody::Model& m = core.model();
     check_shape(q, "q", {m.particles.count, 3});
@@ -281,6 +291,9 @@ nb::list term_table() {
         d["external"] = traits.external;
         d["flow"] = traits.flow;
         d["bound"] = traits.bound;
+        d["shared_rows"] = traits.shared_rows;
+        d["volume_mode"] = traits.volume_mode;
+        d["stencil_width"] = traits.stencil_width;
         out.append(d);
     }
     return out;
@@ -292,15 +305,10 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     check_shape(q, "q", {m.particles.count, 3});
     CoreControl c(m, control);
     const size_t n = static_cast<size_t>(m.particles.count), nb_ = static_cast<size_t>(m.bodies.count);
-    std::vector<double> spring_weight(4 * static_cast<size_t>(m.springs.count)),
-        attachment_weight(4 * static_cast<size_t>(m.attachments.count)), root_sum(4 * n),
-        pressure_row(n), term_rows(2 * n), pnet(nb_), dpdv(nb_), gradient(3 * n);
-    softbody::BoundBuffers w;
-    w.spring_weight = spring_weight.data();
-    w.attachment_weight = attachment_weight.data();
+    std::vector<double> root_sum(4 * n), rows(2 * n), pnet(nb_), dpdv(nb_), gradient(3 * n);
+    softbody::BoundScratch w;
     w.root_sum = root_sum.data();
-    w.pressure_row = pressure_row.data();
-    w.term_rows = term_rows.data();
+    w.rows = rows.data();
     w.body_pnet = pnet.data();
     w.body_dpdv = dpdv.data();
     w.volume_gradient = gradient.data();
@@ -311,16 +319,21 @@ nb::dict stiffness_bounds(const CoreModel& core, nb::handle control, ConstF64 q)
     }
     auto parts = [](const double* v) { return nb::make_tuple(v[0], v[1], v[2], v[3]); };
     nb::dict out;
-    out["springs"] = parts(b.springs);
-    out["attachments"] = parts(b.attachments);
-    out["pressure_rows"] = b.pressure_rows;
-    out["gas_rank_one"] = b.gas_rank_one;
-    // every term with a bound form (TermTraits::bound), by name
+    // every term with a bound form (TermTraits::bound), by name; the traits that say how
+    // they combine (shared rows; a volume mode, its eigenvalue apart)
     const softbody::KernelTable& k = softbody::kernels();
-    nb::dict terms;
-    for (int t = 0; t < k.term_count; ++t)
-        if (k.terms[t].bound) terms[k.terms[t].name] = parts(b.terms[t]);
+    nb::dict terms, modes;
+    nb::list shared;
+    for (int t = 0; t < k.term_count; ++t) {
+        const softbody::TermTraits& traits = k.terms[t];
+        if (!traits.bound) continue;
+        terms[traits.name] = parts(b.terms[t].parts);
+        if (traits.shared_rows) shared.append(nb::str(traits.name));
+        if (traits.volume_mode) modes[traits.name] = b.terms[t].mode;
+    }
     out["terms"] = terms;
+    out["shared_rows"] = shared;
+    out["volume_modes"] = modes;
     out["damping_ratio"] = nb::make_tuple(b.ratio_min, b.ratio_max);
     out["pure_dampers"] = b.pure_dampers;
     out["body_pnet"] = to_numpy(std::move(pnet));
@@ -349,13 +362,19 @@ void bind_terms(nb::module_& mod) {
             "dicts of 'name' and the traits 'lane' (a vertex-major form), 'projected' "
             "(projective dynamics' local step), 'fused' (the fused symplectic pass), "
             "'energy' (has one), 'external' (its energy is work from outside the model), "
-            "'flow' (it moves gas), 'bound' (its own part of the stability estimate).");
+            "'flow' (it moves gas), 'bound' (its own part of the stability estimate), "
+            "'shared_rows' (its Gershgorin rows are shared with the other such terms: "
+            "their bound is the largest of theirs), 'volume_mode' (its bound holds a body's "
+            "volume mode, reported apart), 'stencil_width' (numbers per entry of its blocks "
+            "between particles in the multigrid smoother; 0: none).");
     mod.def("stiffness_bounds", &stiffness_bounds, nb::arg("model"), nb::arg("control"),
             nb::arg("q").noconvert(),
-            "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'springs', "
-            "'attachments' -> (damped, transverse, whole [1/s^2], damping [1/s]), "
-            "'pressure_rows', 'gas_rank_one' [1/s^2], 'terms' (each term with a bound form: "
-            "name -> its own parts, in the same order), 'damping_ratio' (min, max c / k [s]), "
+            "The stability estimate's Gershgorin pieces at q (N, 3): a dict of 'terms' "
+            "(each term with a bound form, in registry order: name -> (damped, transverse, "
+            "whole [1/s^2], damping [1/s])), 'shared_rows' (the names whose rows are shared: "
+            "their sum is bounded by the largest of theirs), 'volume_modes' (each "
+            "volume-mode term's name -> its volume mode's eigenvalue [1/s^2], included in its "
+            "parts), 'damping_ratio' (min, max c / k [s]), "
             "'pure_dampers', and the gas at its largest scheduled value: 'body_pnet' (B,) "
             "[Pa], 'body_dpdv' (B,) [Pa/m^3], 'volume_gradient' (N, 3) [m^2].");
     mod.def("eval_forces", &eval_forces, nb::arg("model"), nb::arg("control"), nb::arg("t"),

@@ -67,9 +67,17 @@ inline bool all_fused(const Model& m, const Control& c) {
     return fused;
 }
 
-/// Every term's linearisation at e (l.q the point, e.gas the gas state there).
+/// l with the scratch of the term at registry position k as its own.
+inline Linearization own(const Linearization& l, int k) {
+    Linearization o = l;
+    o.own = l.scratch != nullptr ? l.scratch[k] : nullptr;
+    return o;
+}
+
+/// Every term's linearisation at e (l.q the point, e.gas the gas state there), into its
+/// own scratch.
 inline void prepare(const Eval& e, const Linearization& l) {
-    Terms::each([&](auto term, int) { decltype(term)::prepare(e, l); });
+    Terms::each([&](auto term, int k) { decltype(term)::prepare(e, own(l, k)); });
 }
 
 /// out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p for p (N, 3) at the linearisation l
@@ -83,19 +91,64 @@ inline void apply_jacobians(const Model& m, const Control& c, const Linearizatio
     }
     Terms::each([&](auto term, int k) {
         if (!(skip & (1u << k)))
-            decltype(term)::jacobian_product(m, c, l, alpha_c, alpha_k, p, out);
+            decltype(term)::jacobian_product(m, c, own(l, k), alpha_c, alpha_k, p, out);
     });
 }
 
-/// The smoother's diagonal blocks of M - h C - h^2 K: m I, then each term's share.
-inline void smoother_blocks(const Model& m, const Control& c, const Linearization& l,
-                            const SmootherBlocks& s) {
+/// The smoother's blocks of M - h C - h^2 K for step h [s]: its diagonal blocks into block
+/// (N, 3, 3), m I then each term's share, and each kStencil term's blocks between
+/// particles into its stencil (stencils: by registry position).
+inline void smoother_blocks(const Model& m, const Control& c, const Linearization& l, double h,
+                            double* block, const Stencil* stencils) {
     for (index i = 0; i < m.particles.count; ++i) {
-        double* d = s.block + 9 * i;
+        double* d = block + 9 * i;
         for (int k = 0; k < 9; ++k) d[k] = 0.0;
         d[0] = d[4] = d[8] = m.particles.mass[i];
     }
-    Terms::each([&](auto term, int) { decltype(term)::add_smoother_blocks(m, c, l, s); });
+    Terms::each([&](auto term, int k) {
+        using T = decltype(term);
+        SmootherBlocks s;
+        s.h = h;
+        s.block = block;
+        if (T::kStencil) s.entries = stencils[k];
+        T::add_smoother_blocks(m, c, own(l, k), s);
+    });
+}
+
+/// Which of particle i's smoother entries add_entries sums: those to particles j < i, to
+/// j > i (entries are sorted by j; none is i's own), or all.
+enum class Span { kEarlier, kLater, kAll };
+
+/// s += every kStencil term's entries of particle i (the span's) times x_j, in registry
+/// order (stencils: by registry position).
+template <Span kSpan>
+inline void add_entries(const Stencil* stencils, const double* x, index i, V3& s) {
+    Terms::each([&](auto term, int k) {
+        using T = decltype(term);
+        if constexpr (T::kStencil) {
+            const Stencil& st = stencils[k];
+            index first = st.ptr[i], last = st.ptr[i + 1];
+            if (kSpan != Span::kAll) {
+                index e = first;
+                while (e < last && st.neighbor[e] < i) ++e;
+                if (kSpan == Span::kEarlier)
+                    last = e;
+                else
+                    first = e;
+            }
+            T::add_entries(st, x, first, last, s);
+        }
+    });
+}
+
+/// The Jacobi preconditioner's diagonal diag (N,) [kg] of M - h C - h^2 K at the
+/// linearisation l: m, then each term's share.
+inline void jacobi_diagonal(const Model& m, const Control& c, const Linearization& l, double h,
+                            double* diag) {
+    for (index i = 0; i < m.particles.count; ++i) diag[i] = m.particles.mass[i];
+    Terms::each([&](auto term, int k) {
+        decltype(term)::add_jacobi_diagonal(m, c, own(l, k), h, diag);
+    });
 }
 
 /// Projective dynamics' local step: every projected term's part of the right-hand side

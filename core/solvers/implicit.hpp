@@ -5,10 +5,11 @@
 //     (M - h C - h^2 K) dv = h (f0 + K y) [+ M (v0 - v_-1) / 3 for BDF2],   v1 = v0 + dv,
 // with C = df/dv, K = df/dx at the start, h = dt and y = dt v0 (backward Euler) or
 // h = 2/3 dt and y = (x0 - x_-1) / 3 + h v0 (BDF2, Choi & Ko 2002); then x1 = x0 + dt v1,
-// or x1 = (4 x0 - x_-1) / 3 + h v1. The products C p and K p come term by term (springs,
-// attachments, grab, gas, membranes); the preconditioner is one multigrid V-cycle (the
-// true spring and membrane blocks smoothed on the finest level, the Laplacian hierarchy
-// below) or Jacobi. The
+// or x1 = (4 x0 - x_-1) / 3 + h v1. The products C p and K p come term by term
+// (forms::apply_jacobians); the preconditioner is one multigrid V-cycle (the true blocks
+// smoothed on the finest level: every term's diagonal share and every kStencil term's
+// blocks between particles; the Laplacian hierarchy below) or Jacobi (every term's
+// add_jacobi_diagonal). The
 // start forces are vertex-major on the SIMD paths, term by term on the scalar one.
 #pragma once
 
@@ -26,14 +27,8 @@ namespace softbody::SOFTBODY_KERNELS::implicit_solver {
 inline Linearization at_start(const ImplicitBuffers& w) {
     Linearization l;
     l.q = w.q0;
-    l.spring_u = w.spring_u;
-    l.spring_a = w.spring_a;
-    l.spring_b = w.spring_b;
     l.volume_gradient = w.gas.volume_gradient;
-    l.body_dpdv = w.body_dpdv;
-    l.body_pnet = w.body_pnet;
-    l.bending_gradient = w.bending_gradient;
-    l.membrane_hessian = w.membrane_hessian;
+    l.scratch = w.linearization;
     return l;
 }
 
@@ -73,63 +68,8 @@ inline void invert_3x3(const double* a, double* out) {
 /// The finest-level smoother's blocks for step h: each term's share, then the inverses.
 inline void prepare_blocks(const Model& m, const Control& c, double h, const ImplicitBuffers& w,
                            const MultigridView& mg) {
-    SmootherBlocks blocks;
-    blocks.h = h;
-    blocks.entry_ptr = mg.vertex_spring_ptr;
-    blocks.entry_spring = mg.vertex_spring;
-    blocks.entry_coef = mg.entry_coef;
-    blocks.block = mg.block;
-    blocks.membrane_entry_count = mg.membrane_entry_count;
-    blocks.membrane_slot = mg.membrane_slot;
-    blocks.membrane_coef = mg.membrane_coef;
-    forms::smoother_blocks(m, c, at_start(w), blocks);
+    forms::smoother_blocks(m, c, at_start(w), h, mg.block, mg.stencils);
     for (index i = 0; i < m.particles.count; ++i) invert_3x3(mg.block + 9 * i, mg.block_inv + 9 * i);
-}
-
-/// Sum over entries first..last-1 of their spring block (alpha u u^T + beta I) times x_j.
-inline V3 entries_sum(const MultigridView& mg, const double* x, index first, index last) {
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0;
-    for (index e = first; e < last; ++e) {
-        const index j = mg.vertex_neighbor[e];
-        const double* c = mg.entry_coef + 5 * e;
-        const double ux = c[0], uy = c[1], uz = c[2], beta = c[4];
-        const double xj0 = x[3 * j], xj1 = x[3 * j + 1], xj2 = x[3 * j + 2];
-        const double ax = c[3] * (ux * xj0 + uy * xj1 + uz * xj2);
-        s0 += ax * ux + beta * xj0;
-        s1 += ax * uy + beta * xj1;
-        s2 += ax * uz + beta * xj2;
-    }
-    return {s0, s1, s2};
-}
-
-/// Particle i's first entry to a particle j > i (entries are sorted by j).
-inline index first_later_entry(const MultigridView& mg, index i) {
-    index e = mg.vertex_spring_ptr[i];
-    const index end = mg.vertex_spring_ptr[i + 1];
-    while (e < end && mg.vertex_neighbor[e] < i) ++e;
-    return e;
-}
-
-/// s += the membrane entries first..last-1 of their blocks (-A_ij) times x_j; s unchanged
-/// (bit for bit) when there are none.
-inline void add_membrane_entries(const MultigridView& mg, const double* x, index first,
-                                 index last, V3& s) {
-    for (index e = first; e < last; ++e) {
-        const index j = mg.membrane_neighbor[e];
-        const double* c = mg.membrane_coef + 9 * e;
-        const double xj0 = x[3 * j], xj1 = x[3 * j + 1], xj2 = x[3 * j + 2];
-        s.x += c[0] * xj0 + c[1] * xj1 + c[2] * xj2;
-        s.y += c[3] * xj0 + c[4] * xj1 + c[5] * xj2;
-        s.z += c[6] * xj0 + c[7] * xj1 + c[8] * xj2;
-    }
-}
-
-/// Particle i's first membrane entry to a particle j > i.
-inline index first_later_membrane(const MultigridView& mg, index i) {
-    index e = mg.membrane_ptr[i];
-    const index end = mg.membrane_ptr[i + 1];
-    while (e < end && mg.membrane_neighbor[e] < i) ++e;
-    return e;
 }
 
 /// x_i = D_i^-1 (s + b_i), D_i particle i's diagonal block.
@@ -160,8 +100,8 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
             store(mg.x, i, {0.0, 0.0, 0.0});
             continue;
         }
-        V3 s = entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], first_later_entry(mg, i));
-        add_membrane_entries(mg, mg.x, mg.membrane_ptr[i], first_later_membrane(mg, i), s);
+        V3 s{0.0, 0.0, 0.0};
+        forms::add_entries<forms::Span::kEarlier>(mg.stencils, mg.x, i, s);
         solve_row(mg, i, s, r);
     }
     // its residual: row i's equation held when x_i was set, with x_j = 0 for j > i, so what
@@ -171,8 +111,8 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
             store(mg.r, i, {0.0, 0.0, 0.0});
             continue;
         }
-        V3 s = entries_sum(mg, mg.x, first_later_entry(mg, i), mg.vertex_spring_ptr[i + 1]);
-        add_membrane_entries(mg, mg.x, first_later_membrane(mg, i), mg.membrane_ptr[i + 1], s);
+        V3 s{0.0, 0.0, 0.0};
+        forms::add_entries<forms::Span::kLater>(mg.stencils, mg.x, i, s);
         store(mg.r, i, s);
     }
     if (mg.level_count > 0) {  // coarse correction with the Laplacian hierarchy
@@ -191,8 +131,8 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
         if (inv_mass[i] == 0.0) store(mg.x, i, {0.0, 0.0, 0.0});
     for (index i = n - 1; i >= 0; --i) {  // backward sweep; pinned rows stay 0
         if (inv_mass[i] == 0.0) continue;
-        V3 s = entries_sum(mg, mg.x, mg.vertex_spring_ptr[i], mg.vertex_spring_ptr[i + 1]);
-        add_membrane_entries(mg, mg.x, mg.membrane_ptr[i], mg.membrane_ptr[i + 1], s);
+        V3 s{0.0, 0.0, 0.0};
+        forms::add_entries<forms::Span::kAll>(mg.stencils, mg.x, i, s);
         solve_row(mg, i, s, r);
     }
     for (index k = 0; k < 3 * n; ++k) z[k] = mg.x[k];
@@ -206,16 +146,10 @@ inline void prepare(const Model& m, const Control& c, double t, double h,
     if (mg != nullptr) prepare_blocks(m, c, h, w, *mg);
 }
 
-/// Jacobi's diagonal: mass + h (damping) + h^2 (axial stiffness) of each particle's springs,
-/// and the mean of the membrane's diagonal there.
-inline void jacobi_diagonal(const Model& m, double h, const ImplicitBuffers& w) {
-    for (index i = 0; i < m.particles.count; ++i) w.cg_diag[i] = m.particles.mass[i];
-    for (index s = 0; s < m.springs.count; ++s) {
-        const double d = h * m.springs.damping[s] + h * h * w.spring_a[s];
-        w.cg_diag[m.springs.indices[2 * s]] += d;
-        w.cg_diag[m.springs.indices[2 * s + 1]] += d;
-    }
-    membrane::add_jacobi_diagonal(m, h, w.q0, w.membrane_hessian, w.cg_diag);
+/// Jacobi's diagonal into w.cg_diag: each particle's mass and every term's share at the
+/// step's start (forms::jacobi_diagonal).
+inline void jacobi_diagonal(const Model& m, const Control& c, double h, const ImplicitBuffers& w) {
+    forms::jacobi_diagonal(m, c, at_start(w), h, w.cg_diag);
 }
 
 /// One backward Euler step, or with bdf2 one BDF2 step, from w.q0, w.v0 with w.f = f(x0, v0)
@@ -232,7 +166,7 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
         w.qs[k] = bdf2 ? (w.q0[k] - w.q_prev[k]) / 3.0 + h * w.v0[k] : h * w.v0[k];
     prepare(m, c, t, h, w, mg);
     apply_at_start(m, c, w, 0.0, 0.0, 1.0, w.qs, w.ky);  // K y for the right-hand side
-    if (mg == nullptr) jacobi_diagonal(m, h, w);
+    if (mg == nullptr) jacobi_diagonal(m, c, h, w);
     double rhs_norm = 0.0;
     for (index i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {

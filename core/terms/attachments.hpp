@@ -9,6 +9,8 @@
 // the springs, and its row sqrt(w) R_i / m_i).
 #pragma once
 
+#include <vector>
+
 #include "model.hpp"
 #include "terms/springs.hpp"
 #include "terms/term.hpp"
@@ -195,7 +197,23 @@ inline void constrain(const Model& m, const Control& c, const ConstraintPass& p)
 struct Term : TermBase {
     static constexpr const char* kName = "attachments";
     static constexpr bool kProjected = true, kEnergy = true, kConstraint = true;
+    static constexpr bool kBound = true, kSharedRows = true;
     static bool active(const Model& m, const Control&) { return m.attachments.count > 0; }
+    /// The stability estimate: R_i at the tied particles (shared with the springs' rows),
+    /// then the attachments' rows against them and their c / k; anchors from c.
+    static void add_row_sums(const Model& m, const Control& c, const double* q,
+                             const BoundScratch& s) {
+        std::vector<double> w(static_cast<size_t>(springs::kBoundParts * m.attachments.count));
+        bound_weights(m, c, q, w.data());
+        add_root_sums(m, w.data(), s.root_sum);
+    }
+    static void bound(const Model& m, const Control& c, const double* q, const BoundScratch& s,
+                      TermBound& out) {
+        std::vector<double> w(static_cast<size_t>(springs::kBoundParts * m.attachments.count));
+        bound_weights(m, c, q, w.data());
+        row_bounds(m, w.data(), s.root_sum, out.parts);
+        damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
+    }
     static void constrain(const Model& m, const Control& c, const ConstraintPass& p) {
         attachments::constrain(m, c, p);
     }

@@ -25,7 +25,7 @@
 // 12-vector of the four gradients), the exact Hessian less its part 2 k (theta - theta0)
 // d2theta/dx2, which is indefinite: -K is positive semi-definite, and exact where every
 // hinge is at its rest angle; prepare stores the gradients at the linearisation's point
-// (Linearization::bending_gradient). add_bound_rows: the stability estimate's Gershgorin
+// (its linearisation, Linearization::own). add_bound_rows: the stability estimate's Gershgorin
 // rows. No projection: the dihedral angle is not a quadratic constraint, and projective
 // dynamics steps this force explicitly inside its iterations, as it does the gas. No
 // damping.
@@ -190,13 +190,14 @@ inline void add_bound_rows(const Model& m, const double* q, double* rows) {
 
 /// The registered term (terms/registry.hpp): its forms for the solvers. prepare stores the
 /// gradients at the linearisation's point where the solver gives room for them
-/// (l.bending_gradient); the products compute them at l.q where it does not.
+/// (its linearisation, l.own: (H, 4, 3)); the products compute them at l.q where it does not.
 struct Term : TermBase {
     static constexpr const char* kName = "bending";
     static constexpr bool kEnergy = true, kBound = true;
     /// The stability estimate: its rows are undamped stiffness (parts undamped and whole).
-    static void bound(const Model& m, const Control&, const double* q, double* rows,
+    static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
                       TermBound& out) {
+        double* rows = s.rows;
         std::fill(rows, rows + m.particles.count, 0.0);
         add_bound_rows(m, q, rows);
         for (index i = 0; i < m.particles.count; ++i) {
@@ -207,16 +208,18 @@ struct Term : TermBase {
     static bool active(const Model& m, const Control&) { return m.bending.count > 0; }
     static void force(const Eval& e, double* f) { bending::force(e.m, e.q, f); }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
+    /// Linearisation: each hinge's d theta / dx (H, 4, 3) [1/m].
+    static index linearization_size(const Model& m) { return 12 * m.bending.count; }
     static void prepare(const Eval& e, const Linearization& l) {
-        if (l.bending_gradient != nullptr) gradients(e.m, l.q, l.bending_gradient);
+        if (l.own != nullptr) gradients(e.m, l.q, l.own);
     }
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double, double alpha_k, const double* p, double* out) {
-        bending::jacobian_product(m, l.q, l.bending_gradient, alpha_k, p, out);
+        bending::jacobian_product(m, l.q, l.own, alpha_k, p, out);
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {
-        smoother_blocks(m, l.q, l.bending_gradient, s.h, s.block);
+        smoother_blocks(m, l.q, l.own, s.h, s.block);
     }
 };
 

@@ -17,6 +17,8 @@
 // takes the pressure explicitly within its iteration.
 #pragma once
 
+#include <algorithm>
+
 #include "model.hpp"
 #include "simd.hpp"
 #include "terms/term.hpp"
@@ -280,7 +282,22 @@ inline double rank_one_bound(const Model& m, const double* dpdv, const double* g
 /// vertex-major pass did not sum when it ran), dV/dx and the pressures every force reads.
 struct Term : TermBase {
     static constexpr const char* kName = "gas";
-    static constexpr bool kFused = true, kEnergy = true;
+    static constexpr bool kFused = true, kEnergy = true, kBound = true, kVolumeMode = true;
+    /// The stability estimate: the local pressure rows, and the volume mode (out.mode)
+    /// added to them (undamped and whole parts), at the largest scheduled gas; the gas's
+    /// state there into s.body_pnet, body_dpdv, volume_gradient.
+    static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
+                      TermBound& out) {
+        const index n = m.particles.count;
+        std::fill(s.volume_gradient, s.volume_gradient + 3 * n, 0.0);
+        bound_slopes(m, q, s.body_pnet, s.body_dpdv, s.volume_gradient);
+        std::fill(s.rows, s.rows + n, 0.0);
+        add_pressure_rows(m, q, s.body_pnet, s.rows);
+        double rows = 0.0;
+        for (index i = 0; i < n; ++i) rows = std::max(rows, s.rows[i]);
+        out.mode = rank_one_bound(m, s.body_dpdv, s.volume_gradient);
+        out.parts[1] = out.parts[2] = rows + out.mode;
+    }
     static void update(const Eval& e, bool lanes_ran) {
         volume::evaluate(e.m, e.q, e.gas, lanes_ran);
         pressures(e.m, e.c, e.t, e.gas);
@@ -292,13 +309,16 @@ struct Term : TermBase {
         volume::evaluate(e.m, e.q, e.gas);
         return energies(e.m, e.c, e.t, e.gas, body);
     }
-    /// P'(V) and P - P_a from the gas state at the point (e.gas, refreshed there).
+    /// Linearisation: P'(V) (B,) [Pa/m^3], then P - P_a (B,) [Pa], from the gas state at
+    /// the point (e.gas, refreshed there).
+    static index linearization_size(const Model& m) { return 2 * m.bodies.count; }
     static void prepare(const Eval& e, const Linearization& l) {
-        pressure_slopes(e.m, e.gas, l.body_dpdv, l.body_pnet);
+        pressure_slopes(e.m, e.gas, l.own, l.own + e.m.bodies.count);
     }
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double, double alpha_k, const double* p, double* out) {
-        gas::jacobian_product(m, l.q, l.volume_gradient, l.body_dpdv, l.body_pnet, alpha_k, p, out);
+        gas::jacobian_product(m, l.q, l.volume_gradient, l.own, l.own + m.bodies.count, alpha_k,
+                              p, out);
     }
 };
 

@@ -37,7 +37,7 @@
 // Forms: force and energy (edge-major, per triangle; no lane form, so the vertex-major
 // pass does not cover it and a model with membranes takes the general step, not the
 // fused symplectic pass), prepare + jacobian_product (the 6 x 6 blocks per triangle
-// stored in Linearization::membrane_hessian, or computed on the fly where that is null),
+// stored in its linearisation (Linearization::own), or computed on the fly where that is null),
 // add_smoother_blocks (the triangle's 3 x 3 blocks of M - h C - h^2 K: its corners'
 // diagonal blocks, and the blocks between corners as the smoother's membrane entries;
 // the coarse levels see the membrane as a Laplacian: softbody.solvers.multigrid), project
@@ -58,7 +58,7 @@ namespace softbody::SOFTBODY_KERNELS::membrane {
 
 /// Entries of a symmetric 6 x 6 block stored as its upper triangle, row by row.
 constexpr int kSym6 = 21;
-/// Per triangle in Linearization::membrane_hessian: the clamped stiffness H_F+ then D_F.
+/// Per triangle in its linearisation (Linearization::own): the clamped stiffness H_F+ then D_F.
 constexpr int kBlock = 2 * kSym6;
 static_assert(kBlock == kMembraneBlock, "model.hpp's kMembraneBlock");
 
@@ -611,26 +611,60 @@ inline void damping_ratios(const Model& m, double& lo, double& hi) {
 struct Term : TermBase {
     static constexpr const char* kName = "membrane";
     static constexpr bool kProjected = true, kEnergy = true, kBound = true;
+    // smoother entries: -A_ij (3 x 3, row-major) between corners (smoother_blocks)
+    static constexpr bool kStencil = true;
+    static constexpr int kStencilWidth = 9;
+    /// s += sum over entries of their block times x_j.
+    static void add_entries(const Stencil& st, const double* x, index first, index last,
+                            V3& s) {
+        for (index e = first; e < last; ++e) {
+            const index j = st.neighbor[e];
+            const double* c = st.coef + 9 * e;
+            const double xj0 = x[3 * j], xj1 = x[3 * j + 1], xj2 = x[3 * j + 2];
+            s.x += c[0] * xj0 + c[1] * xj1 + c[2] * xj2;
+            s.y += c[3] * xj0 + c[4] * xj1 + c[5] * xj2;
+            s.z += c[6] * xj0 + c[7] * xj1 + c[8] * xj2;
+        }
+    }
+    /// The map: each triangle's corner pair's entry (Tm, 3, 3), -1 exactly on a = b.
+    static const char* check_stencil(const Model& m, const Stencil& st, index map_length) {
+        if (map_length != 9 * m.membranes.count) return "map must have shape (Tm, 3, 3)";
+        for (index t = 0; t < m.membranes.count; ++t)
+            for (int a = 0; a < 3; ++a)
+                for (int b = 0; b < 3; ++b) {
+                    const index e = st.map[9 * t + 3 * a + b];
+                    if (e >= st.count || e < -1) return "map holds an entry out of range";
+                    if ((e < 0) != (a == b)) return "map must be -1 exactly on each diagonal";
+                }
+        return nullptr;
+    }
     /// The stability estimate: bound_rows by part, and beta into the c / k range.
-    static void bound(const Model& m, const Control&, const double* q, double* rows,
+    static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
                       TermBound& out) {
-        bound_rows(m, q, rows, out.parts);
+        bound_rows(m, q, s.rows, out.parts);
         damping_ratios(m, out.ratio_min, out.ratio_max);
     }
     static bool active(const Model& m, const Control&) { return m.membranes.count > 0; }
     static void force(const Eval& e, double* f) { membrane::force(e.m, e.q, e.qd, f); }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
+    /// Linearisation: each triangle's clamped blocks (Tm, kBlock) (membrane::prepare).
+    static index linearization_size(const Model& m) { return kBlock * m.membranes.count; }
     static void prepare(const Eval& e, const Linearization& l) {
-        if (l.membrane_hessian != nullptr) membrane::prepare(e.m, l.q, l.membrane_hessian);
+        if (l.own != nullptr) membrane::prepare(e.m, l.q, l.own);
     }
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double alpha_c, double alpha_k, const double* p, double* out) {
-        membrane::jacobian_product(m, l.q, l.membrane_hessian, alpha_c, alpha_k, p, out);
+        membrane::jacobian_product(m, l.q, l.own, alpha_c, alpha_k, p, out);
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {
-        smoother_blocks(m, s.h, l.q, l.membrane_hessian, s.block, s.membrane_slot,
-                        s.membrane_entry_count, s.membrane_coef);
+        smoother_blocks(m, s.h, l.q, l.own, s.block, s.entries.map,
+                        s.entries.count, s.entries.coef);
+    }
+    /// Jacobi: the mean of each corner's diagonal block's diagonal.
+    static void add_jacobi_diagonal(const Model& m, const Control&, const Linearization& l,
+                                    double h, double* diag) {
+        membrane::add_jacobi_diagonal(m, h, l.q, l.own, diag);
     }
     static void project(const Model& m, const Control&, double h, const double* x,
                         const double* x0, double* rhs) {

@@ -50,7 +50,8 @@ inline const TermTraits* term_traits() {
     Terms::each([](auto term, int k) {
         using T = decltype(term);
         traits[k] = {T::kName,   T::kLane,     T::kProjected, T::kFused,
-                     T::kEnergy, T::kExternal, T::kFlow,      T::kBound};
+                     T::kEnergy, T::kExternal, T::kFlow,      T::kBound,
+                     T::kSharedRows, T::kVolumeMode, T::kStencil ? T::kStencilWidth : 0};
     });
     return traits;
 }

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <cstring>
+#include <vector>
 
 #include "model.hpp"
 #include "simd.hpp"
@@ -417,7 +418,47 @@ inline void constrain(const Model& m, const ConstraintPass& p) {
 struct Term : TermBase {
     static constexpr const char* kName = "springs";
     static constexpr bool kLane = true, kProjected = true, kFused = true, kEnergy = true;
-    static constexpr bool kConstraint = true;
+    static constexpr bool kConstraint = true, kBound = true, kSharedRows = true;
+    // smoother entries: u (3,), alpha, beta of the entry's spring (smoother_blocks)
+    static constexpr bool kStencil = true;
+    static constexpr int kStencilWidth = 5;
+    /// s += sum over entries of (alpha u u^T + beta I) x_j.
+    static void add_entries(const Stencil& st, const double* x, index first, index last,
+                            V3& s) {
+        double s0 = s.x, s1 = s.y, s2 = s.z;
+        for (index e = first; e < last; ++e) {
+            const index j = st.neighbor[e];
+            const double* c = st.coef + 5 * e;
+            const double ux = c[0], uy = c[1], uz = c[2], beta = c[4];
+            const double xj0 = x[3 * j], xj1 = x[3 * j + 1], xj2 = x[3 * j + 2];
+            const double ax = c[3] * (ux * xj0 + uy * xj1 + uz * xj2);
+            s0 += ax * ux + beta * xj0;
+            s1 += ax * uy + beta * xj1;
+            s2 += ax * uz + beta * xj2;
+        }
+        s = {s0, s1, s2};
+    }
+    /// The map: each entry's spring, in [0, S).
+    static const char* check_stencil(const Model& m, const Stencil& st, index map_length) {
+        if (map_length != st.count) return "map must have one spring per entry";
+        for (index e = 0; e < st.count; ++e)
+            if (st.map[e] < 0 || st.map[e] >= m.springs.count) return "map holds a bad spring";
+        return nullptr;
+    }
+    /// The stability estimate: R_i, then the springs' rows against them and their c / k.
+    static void add_row_sums(const Model& m, const Control&, const double* q,
+                             const BoundScratch& s) {
+        std::vector<double> w(static_cast<size_t>(kBoundParts * m.springs.count));
+        bound_weights(m, q, w.data());
+        add_root_sums(m, w.data(), s.root_sum);
+    }
+    static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
+                      TermBound& out) {
+        std::vector<double> w(static_cast<size_t>(kBoundParts * m.springs.count));
+        bound_weights(m, q, w.data());
+        row_bounds(m, w.data(), s.root_sum, out.parts);
+        damping_ratios(m, out.ratio_min, out.ratio_max, out.pure_dampers);
+    }
     static void force(const Eval& e, double* f) { springs::force(e.m, e.q, e.qd, f); }
     static void prepare_constraints(const Model& m, const Control&, const ConstraintPass& p) {
         constraint_coefficients(m, p);
@@ -426,17 +467,37 @@ struct Term : TermBase {
         springs::constrain(m, p);
     }
     static double energy(const Eval& e, double* body) { return energies(e.m, e.q, body); }
+    /// Linearisation: u (S, 3), a (S,), b (S,) (prepare's), one after the other.
+    static index linearization_size(const Model& m) { return 5 * m.springs.count; }
+    static double* lin_u(const Model&, const Linearization& l) { return l.own; }
+    static double* lin_a(const Model& m, const Linearization& l) {
+        return l.own + 3 * m.springs.count;
+    }
+    static double* lin_b(const Model& m, const Linearization& l) {
+        return l.own + 4 * m.springs.count;
+    }
     static void prepare(const Eval& e, const Linearization& l) {
-        springs::prepare(e.m, l.q, l.spring_u, l.spring_a, l.spring_b);
+        springs::prepare(e.m, l.q, lin_u(e.m, l), lin_a(e.m, l), lin_b(e.m, l));
     }
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double alpha_c, double alpha_k, const double* p, double* out) {
-        springs::jacobian_product(m, l.spring_u, l.spring_a, l.spring_b, alpha_c, alpha_k, p, out);
+        springs::jacobian_product(m, lin_u(m, l), lin_a(m, l), lin_b(m, l), alpha_c, alpha_k, p,
+                                  out);
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {
-        smoother_blocks(m, s.h, l.spring_u, l.spring_a, l.spring_b, s.entry_ptr, s.entry_spring,
-                        s.entry_coef, s.block);
+        smoother_blocks(m, s.h, lin_u(m, l), lin_a(m, l), lin_b(m, l), s.entries.ptr,
+                        s.entries.map, s.entries.coef, s.block);
+    }
+    /// Jacobi: h c + h^2 a (damping and axial stiffness) at both ends of every spring.
+    static void add_jacobi_diagonal(const Model& m, const Control&, const Linearization& l,
+                                    double h, double* diag) {
+        const double* a = lin_a(m, l);
+        for (index s = 0; s < m.springs.count; ++s) {
+            const double d = h * m.springs.damping[s] + h * h * a[s];
+            diag[m.springs.indices[2 * s]] += d;
+            diag[m.springs.indices[2 * s + 1]] += d;
+        }
     }
     static void project(const Model& m, const Control&, double h, const double* x,
                         const double* x0, double* rhs) {

@@ -14,21 +14,35 @@
 //               term in projective dynamics (its projection stands for the force there)
 //   energy      the term's energy [J], each body's share added to body (B,); kEnergy says
 //               the term has one (dissipative and given forces have none)
+//   linearization_size  how many doubles of scratch its prepare keeps for its products at
+//               a point (Linearization::own, in the term's layout; 0: none)
 //   prepare     the implicit solvers' linearisation at the step's start (Linearization)
 //   jacobian_product   out (N, 3) += alpha_c C p + alpha_k K p (C = df/dv, K = df/dx), the
 //               matrix-free product of backward Euler and BDF2, -K positive semi-definite
 //   add_smoother_blocks  the term's share of each particle's 3 x 3 diagonal block of
-//               M - h C - h^2 K (the multigrid smoother)
+//               M - h C - h^2 K (the multigrid smoother), and with kStencil its blocks
+//               between particles into its stencil's coefficients (s.entries)
+//   add_entries  (kStencil) the smoother's row sums: s += the term's entries first..last-1
+//               of its stencil (a particle's, sorted by neighbour j) times x_j, their
+//               blocks being those of -(M - h C - h^2 K)
+//   check_stencil (kStencil) whether a stencil's map (the term's own, map_length entries)
+//               fits the model: null, or what is wrong (the bindings check it once)
+//   add_jacobi_diagonal  the term's share of each particle's Jacobi preconditioner, one
+//               number per particle (N,) [kg] of M - h C - h^2 K (a mean of its diagonal block's
+//               diagonal, or the axial part of it)
 //   project     projective dynamics' local step: the term's part of the global step's
 //               right-hand side at the iterate (a kProjected term's matrix part is in the
 //               factor Python builds)
 //   flow        a gas-flow term's molar flows into and out of the bodies' gas at e, added
 //               to e.gas's flow_in, flow_in_t and flow_out (terms/flows.hpp), which every
 //               scheme integrates into the gas state (solvers/gas_state.hpp)
+//   add_row_sums  the stability estimate, first pass (kSharedRows terms): the term's
+//               Gershgorin weights sqrt(w) by part added into s.root_sum (N, 4) at its
+//               particles, the row sums R_i that every kSharedRows term's rows then share
 //   bound       the stability estimate: the term's own Gershgorin bound by part at positions
-//               q (TermBound), added to the springs' (kBound says it has one; rows (N, 2)
-//               scratch). Springs, attachments and the gas, whose rows and rank-one part
-//               combine, are composed in kernels.cpp: stiffness_bounds
+//               q (TermBound), after every add_row_sums (kBound says it has one; s.rows
+//               (N, 2) its scratch); kernels.cpp: stiffness_bounds calls it for every term,
+//               softbody.stability adds them (Weyl), the kSharedRows ones by their largest
 //   prepare_constraints  what XPBD's constraint pass needs for a substep h, once per run
 //   constrain   XPBD's pass over the term's constraints (solvers/substep.hpp): positions
 //               p.rows moved in place by each constraint's Delta lambda (kConstraint terms;
@@ -38,11 +52,11 @@
 //               general step)
 //
 // Forms the vertex-major pass fuses (lanes) stay in each term's file beside these
-// (gravity::lane_force, springs::lane_pair, gas::lane_face); the stability estimate's
-// Gershgorin pieces too (kernels.cpp composes them).
+// (gravity::lane_force, springs::lane_pair, gas::lane_face).
 #pragma once
 
 #include "model.hpp"
+#include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS {
 
@@ -94,22 +108,43 @@ struct TermBase {
     static constexpr bool kExternal = false;
     static constexpr bool kFlow = false;  // it moves gas (its `flow` form), no force
     static constexpr bool kBound = false;  // it has a `bound` form
+    // its Gershgorin rows are a particle's rows shared with the other kSharedRows terms (a
+    // spring's and an attachment's at one particle): it has `add_row_sums`, and the
+    // estimate bounds their sum by the largest of their `bound`s
+    static constexpr bool kSharedRows = false;
+    // its bound holds a body's volume mode (TermBound::mode: the gas's P'(V) g g^T), which
+    // softbody.stability reports apart (omega_gas, omega_pressure)
+    static constexpr bool kVolumeMode = false;
+    // it couples particles in the multigrid smoother (blocks between them): a Stencil of
+    // kStencilWidth numbers per entry, filled by add_smoother_blocks, read by add_entries
+    static constexpr bool kStencil = false;
+    static constexpr int kStencilWidth = 0;
     // XPBD (solvers/substep.hpp) solves it by its `constrain` form, no force there
     static constexpr bool kConstraint = false;
     static bool active(const Model&, const Control&) { return true; }
     static void update(const Eval&, bool /*lanes_ran*/) {}
     static void force(const Eval&, double* /*f*/) {}
     static double energy(const Eval&, double* /*body*/) { return 0.0; }
+    static index linearization_size(const Model&) { return 0; }
     static void prepare(const Eval&, const Linearization&) {}
     static void jacobian_product(const Model&, const Control&, const Linearization&,
                                  double /*alpha_c*/, double /*alpha_k*/, const double* /*p*/,
                                  double* /*out*/) {}
     static void add_smoother_blocks(const Model&, const Control&, const Linearization&,
                                     const SmootherBlocks&) {}
+    static void add_entries(const Stencil&, const double* /*x*/, index /*first*/,
+                            index /*last*/, V3& /*s*/) {}
+    static const char* check_stencil(const Model&, const Stencil&, index /*map_length*/) {
+        return "has no stencil";
+    }
+    static void add_jacobi_diagonal(const Model&, const Control&, const Linearization&,
+                                    double /*h*/, double* /*diag*/) {}
     static void project(const Model&, const Control&, double /*h*/, const double* /*x*/,
                         const double* /*x0*/, double* /*rhs*/) {}
     static void flow(const Eval&) {}
-    static void bound(const Model&, const Control&, const double* /*q*/, double* /*rows*/,
+    static void add_row_sums(const Model&, const Control&, const double* /*q*/,
+                             const BoundScratch&) {}
+    static void bound(const Model&, const Control&, const double* /*q*/, const BoundScratch&,
                       TermBound&) {}
     static void prepare_constraints(const Model&, const Control&, const ConstraintPass&) {}
     static void constrain(const Model&, const Control&, const ConstraintPass&) {}

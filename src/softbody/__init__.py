@@ -46,7 +46,7 @@ from softbody.mesh import (
     validate_mesh,
 )
 from softbody.render.recorder import Recorder
-from softbody.sim import Control, Model, ModelBuilder, Simulator, State
+from softbody.sim import Control, Model, ModelBuilder, Simulator, State, StepHistory
 from softbody.stability import stable_dt
 from softbody.volume import VolumeMethod
 
@@ -89,6 +89,7 @@ __all__ = [
     "Simulator",
     "StabilityWarning",
     "State",
+    "StepHistory",
     "TriMesh",
     "VolumeMethod",
     "body_area",

@@ -24,12 +24,11 @@ Gershgorin on 3 x 3 blocks, a triangle's block (a, b) of norm at most |H_F| |g_a
 (|H_F| the spectral radius of its F-Hessian at the given positions, so at their stretch),
 and added to the springs' bounds (Weyl); their damping rate likewise.
 
-Each term computes its own pieces of these bounds in its file of the compiled core
-(``core/terms/springs.hpp``, ``attachments.hpp``, ``gas.hpp``: ``bound_weights``,
-``add_root_sums``, ``row_bounds``, ``damping_ratios``; ``bound_slopes``,
-``add_pressure_rows``, ``rank_one_bound``; and every other term's ``bound`` form, such as
-``membrane.hpp``'s and ``bending.hpp``'s, by part), returned by
-``softbody._core.stiffness_bounds`` (the bound forms under ``"terms"``, by name);
+Each term computes its own pieces of these bounds in its file of the compiled core, its
+``bound`` form (``core/terms/*.hpp``: the springs' and attachments' rows against the row
+sums both add by their ``add_row_sums``, the gas's pressure rows and rank-one volume mode,
+the membranes' and bending's rows), by part, returned by ``softbody._core.stiffness_bounds``
+(under ``"terms"``, by name, with the traits that say how they combine);
 :func:`stiffest_mode` adds and compares them.
 
 Gershgorin bounds hold for any spring directions but overestimate: on a triangle mesh
@@ -209,17 +208,20 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
     (:func:`spectral_bounds`), about half the Gershgorin bound on a triangle mesh.
     """
     q = model.particle_q if q is None else np.asarray(q, dtype=np.float64)
-    # each term's Gershgorin pieces from its own file of the core (core/terms/): springs
-    # and attachments share the row sums R_i, so the two terms' rows are bounded together
+    # each term's Gershgorin pieces from its own file of the core (core/terms/), by name:
+    # the terms whose rows are shared (springs and attachments: one row per particle holds
+    # both) are bounded together, by the largest of theirs; the terms with a volume mode
+    # (the gas: its local pressure rows and that mode) are reported apart; every other
+    # term's own bound adds (Weyl): the membranes' (damped), material bending's (undamped)
     pieces = _core.stiffness_bounds(core_model(model), control_data(model), kernel_array(q))
-    springs, attached = pieces["springs"], pieces["attachments"]
-    # springs and attachments share their rows; every other term's own bound adds (Weyl):
-    # the membranes' (damped), material bending's (undamped), by part
-    own = np.sum([parts for parts in pieces["terms"].values()], axis=0) if pieces["terms"] else (
-        np.zeros(4)
-    )  # fmt: skip
+    terms, modes = pieces["terms"], pieces["volume_modes"]
+    shared = [terms[name] for name in pieces["shared_rows"]]
+    rows = [max(part) for part in zip(*shared, strict=True)] if shared else [0.0] * 4
+    alone = {name: parts for name, parts in terms.items()
+             if name not in modes and name not in pieces["shared_rows"]}  # fmt: skip
+    own = np.sum(list(alone.values()), axis=0) if alone else np.zeros(4)
     w2_damped, w2_transverse, w2_springs, damping_rate = (
-        max(s, a) + float(t) for s, a, t in zip(springs, attached, own, strict=True)
+        r + float(t) for r, t in zip(rows, own, strict=True)
     )
     low, high = pieces["damping_ratio"]
     beta = (low, high) if low <= high else (0.0, 0.0)  # no spring with stiffness: none
@@ -227,9 +229,10 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
         beta = (beta[0], np.inf)
     body_pnet, body_dpdv = pieces["body_pnet"], pieces["body_dpdv"]
     volume_gradient = pieces["volume_gradient"]
-    rank_one = pieces["gas_rank_one"]
+    # the volume-mode terms' whole bound (its rows and the mode) and the mode alone
+    rank_one = float(sum(modes.values()))
+    w2_pressure = float(sum(terms[name][1] for name in modes))
     # Weyl: the largest eigenvalue of a sum is at most the sum of the largest eigenvalues
-    w2_pressure = pieces["pressure_rows"] + rank_one
     w2_undamped = w2_transverse + w2_pressure
     w2_total = min(w2_damped + w2_undamped, w2_springs + w2_pressure)
     if spectral and model.particle_count > 0:
@@ -250,8 +253,8 @@ def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) 
         damping_rate,
         float(np.sqrt(w2_pressure)),
         float(np.sqrt(rank_one)),
-        {name: float(np.sqrt(parts[2])) for name, parts in pieces["terms"].items()},
-        {name: float(parts[3]) for name, parts in pieces["terms"].items()},
+        {name: float(np.sqrt(parts[2])) for name, parts in alone.items()},
+        {name: float(parts[3]) for name, parts in alone.items()},
     )
 
 

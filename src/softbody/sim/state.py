@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,12 +37,60 @@ def kernel_input(a, dtype=np.float64) -> np.ndarray:
 
 
 @dataclass(eq=False)
+class StepHistory:
+    """A multistep scheme's memory of the step before a state's (BDF2: that step's start),
+    which the state carries (:attr:`State.history`) so that any solver of that scheme can
+    go on from it. It belongs to the state while the state's ``step_count`` and
+    :attr:`State.version` are the ones recorded here and the step is ``dt``; otherwise the
+    scheme starts over (BDF2: a backward Euler step)."""
+
+    dt: float
+    """The step [s] it was taken with."""
+    step_count: int
+    """The state's step count it belongs to."""
+    version: int
+    """The state's :attr:`State.version` it belongs to."""
+    particle_q: np.ndarray
+    """Positions at the previous step's start [m], shape (N, 3) (the core writes them)."""
+    particle_qd: np.ndarray
+    """Velocities at the previous step's start [m/s], shape (N, 3)."""
+    contacts_acted: bool = False
+    """Whether contacts moved a particle in the last step (BDF2 then steps as backward
+    Euler: it would read a projection as motion)."""
+
+    def belongs_to(self, state: State, dt: float) -> bool:
+        """Whether this is ``state``'s history for a step of ``dt`` [s]: no write the
+        state saw since (its version), no step taken by another scheme, the same dt."""
+        return (
+            self.dt == dt
+            and self.step_count == state.step_count
+            and self.version == state.version
+            and self.particle_q.shape == state.particle_q.shape
+        )
+
+    def copy(self) -> StepHistory:
+        """An independent copy."""
+        return StepHistory(self.dt, self.step_count, self.version, self.particle_q.copy(),
+                           self.particle_qd.copy(), self.contacts_acted)  # fmt: skip
+
+
+# assignments that change what a state is, which end a multistep scheme's history
+_TRACKED = frozenset({"particle_q", "particle_qd"})
+
+
+@dataclass(eq=False)
 class State:
     """Positions and velocities of all particles at one instant.
 
     Volumes, pressures and energies are derived from it by
     :func:`softbody.body_volume`, :func:`softbody.body_pressure` and :func:`softbody.energies`.
     ``Simulator.step`` advances a state in place.
+
+    A state carries the history a multistep scheme keeps (:attr:`history`: BDF2's previous
+    step), valid while nothing else writes the state. Assigning ``particle_q`` or
+    ``particle_qd`` is seen (it bumps :attr:`version`, and the next BDF2 step is backward
+    Euler); an edit in place (``state.particle_q[i] = ...``) is not, since no array is
+    compared: call :meth:`mark_edited` after one, or BDF2 reads the edit as motion.
     """
 
     particle_q: np.ndarray
@@ -82,6 +130,26 @@ class State:
     vent_open: np.ndarray | None = None
     """1.0 for each vent that has opened (at its opening pressure or time; it stays open),
     else 0.0, shape (V,). None until the state meets its model (all closed)."""
+    history: StepHistory | None = field(default=None, repr=False)
+    """A multistep scheme's history (:class:`StepHistory`; BDF2 writes it), or None: the
+    next BDF2 step is backward Euler. :meth:`copy` copies it."""
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+        if name in _TRACKED:
+            object.__setattr__(self, "_version", self.__dict__.get("_version", 0) + 1)
+
+    @property
+    def version(self) -> int:
+        """A counter of the writes this state sees: assigning ``particle_q`` or
+        ``particle_qd``, and :meth:`mark_edited`. A solver's history records it and holds
+        only while it is unchanged."""
+        return self.__dict__.get("_version", 0)
+
+    def mark_edited(self) -> None:
+        """Say that an array was edited in place (which no assignment shows): bumps
+        :attr:`version`, so the next BDF2 step starts over with backward Euler."""
+        object.__setattr__(self, "_version", self.version + 1)
 
     def __post_init__(self):
         if self.collider_q is None:
@@ -144,8 +212,9 @@ class State:
             setattr(self, name, array)
 
     def copy(self) -> State:
-        """An independent copy."""
-        return State(
+        """An independent copy, its history with it (a solver goes on from the copy as
+        from this state)."""
+        out = State(
             self.particle_q.copy(),
             self.particle_qd.copy(),
             self.time,
@@ -157,7 +226,10 @@ class State:
             None if self.body_gas_moles is None else self.body_gas_moles.copy(),
             None if self.body_gas_temperature is None else self.body_gas_temperature.copy(),
             None if self.vent_open is None else self.vent_open.copy(),
+            None if self.history is None else self.history.copy(),
         )
+        object.__setattr__(out, "_version", self.version)
+        return out
 
     def __repr__(self) -> str:
         return (

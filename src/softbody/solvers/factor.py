@@ -86,41 +86,64 @@ class Projective(NamedTuple):
         return self.nonzeros
 
 
-def system_matrix(model, dt: float) -> sp.csc_matrix:
-    """The global step's matrix M / dt^2 + sum_s (k + c / dt) A_s^T A_s + attachments'
-    (k + c / dt) on their diagonal, with pinned particles' rows and columns replaced by
-    the identity; (N, N) CSC [kg/s^2]."""
-    n = model.particle_count
-    free = model.particle_inv_mass > 0.0
+def _spring_part(model, dt: float, free: np.ndarray, diag: np.ndarray):
+    """The springs' (k + c / dt) A_s^T A_s: their weights added into diag (N,) at free
+    ends, and their off-diagonal entries (rows, cols, values) between free ends."""
     i, j = model.spring_indices[:, 0], model.spring_indices[:, 1]
     wgt = model.spring_stiffness + model.spring_damping / dt
     both = free[i] & free[j]
-    rows = np.concatenate([i[both], j[both]])
-    cols = np.concatenate([j[both], i[both]])
-    off = np.concatenate([-wgt[both], -wgt[both]])
-    diag = np.where(free, model.particle_mass / dt**2, 1.0)
     np.add.at(diag, i[free[i]], wgt[free[i]])
     np.add.at(diag, j[free[j]], wgt[free[j]])
+    return (np.concatenate([i[both], j[both]]), np.concatenate([j[both], i[both]]),
+            np.concatenate([-wgt[both], -wgt[both]]))  # fmt: skip
+
+
+def _attachment_part(model, dt: float, free: np.ndarray, diag: np.ndarray):
+    """The attachments' k + c / dt on their free particles' diagonal; no other entry."""
     a = model.attachment_particle
     att = model.attachment_stiffness + model.attachment_damping / dt
     np.add.at(diag, a[free[a]], att[free[a]])
-    rows = np.concatenate([rows, np.arange(n)])
-    cols = np.concatenate([cols, np.arange(n)])
-    values = np.concatenate([off, diag])
-    if model.membrane_count:
-        r, c, v = _membrane_entries(model, dt, free)
-        rows, cols, values = (np.concatenate(x) for x in ((rows, r), (cols, c), (values, v)))
-    return sp.csc_matrix((values, (rows, cols)), shape=(n, n))
+    return _NO_ENTRIES
 
 
-def _membrane_entries(model, dt: float, free: np.ndarray):
+def _membrane_part(model, dt: float, free: np.ndarray, diag: np.ndarray):
     """The membranes' W_t (1 + beta / dt) g_a . g_b entries (rows, cols, values) between
     free corners (module docstring; core/terms/membrane.hpp: projective_weight)."""
+    if not model.membrane_count:
+        return _NO_ENTRIES
     from softbody.membrane import scalar_blocks
 
     rows, cols, stiffness, damping = scalar_blocks(model, projective=True)
     keep = free[rows] & free[cols]
     return rows[keep], cols[keep], (stiffness + damping / dt)[keep]
+
+
+_NO_ENTRIES = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros(0))
+
+MATRIX_PARTS = {
+    "springs": _spring_part,
+    "attachments": _attachment_part,
+    "membrane": _membrane_part,
+}
+"""Each projected term's part of the global matrix (the core's terms with the trait
+``projected``, ``softbody._core.term_table``; a test holds the two sets equal), by name in
+the registry's order: ``part(model, dt, free, diag)`` adds its diagonal into ``diag`` (N,)
+and returns its other entries (rows, cols, values) [kg/s^2] between free particles."""
+
+
+def system_matrix(model, dt: float) -> sp.csc_matrix:
+    """The global step's matrix M / dt^2 + every projected term's part
+    (:data:`MATRIX_PARTS`: sum_s (k + c / dt) A_s^T A_s, attachments' (k + c / dt) on their
+    diagonal, the membranes' weights), with pinned particles' rows and columns replaced by
+    the identity; (N, N) CSC [kg/s^2]."""
+    n = model.particle_count
+    free = model.particle_inv_mass > 0.0
+    diag = np.where(free, model.particle_mass / dt**2, 1.0)
+    parts = [part(model, dt, free, diag) for part in MATRIX_PARTS.values()]
+    # the diagonal after the first part's entries (the order scipy sums duplicates in)
+    entries = [parts[0], (np.arange(n), np.arange(n), diag), *parts[1:]]
+    rows, cols, values = (np.concatenate(x) for x in zip(*entries, strict=True))
+    return sp.csc_matrix((values, (rows, cols)), shape=(n, n))
 
 
 def build_projective(model, dt: float) -> Projective:

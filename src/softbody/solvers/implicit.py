@@ -4,13 +4,12 @@ Laplacian (:mod:`softbody.solvers.multigrid`) or Jacobi as the preconditioner.""
 
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
 
 from softbody import _core
 from softbody.integrators import Integrator
-from softbody.solvers.base import RunLimits, RunResult, Solver
+from softbody.sim.state import StepHistory
+from softbody.solvers.base import RunLimits, RunResult, Solver, Status
 from softbody.solvers.multigrid import build_multigrid, set_multigrid_step
 
 PRECONDITIONERS = ("multigrid", "jacobi")
@@ -36,8 +35,10 @@ class ImplicitSolver(Solver):
     Options: ``implicit_tolerance`` (CG's relative residual, in (0, 1)),
     ``implicit_max_iterations`` (>= 1; a step that reaches it keeps the last iterate) and
     ``implicit_preconditioner`` (``"multigrid"``, built once here, or ``"jacobi"``).
-    BDF2 reads the step before a run's first (its history) when the state is the one it
-    left, unedited, at the same dt; otherwise that step is backward Euler.
+    BDF2 reads the step before a run's first from the state's history
+    (:attr:`~softbody.State.history`, which it writes as it steps) when that belongs to
+    the state (no step by another scheme, no write the state saw: ``State.version``) at the
+    same dt; otherwise that step is backward Euler.
     """
 
     integrators = (Integrator.IMPLICIT_EULER, Integrator.BDF2)
@@ -50,11 +51,6 @@ class ImplicitSolver(Solver):
         self.tolerance, self.max_iterations, self.preconditioner = options
         self._multigrid = build_multigrid(model) if implicit_preconditioner == "multigrid" else None
         self._multigrid_step = None
-        # BDF2's history: which state, at which step and dt, the core's previous step
-        # belongs to, and that state's arrays then (to see edits between calls)
-        self._history: tuple | None = None
-        self._q_end = np.zeros((model.particle_count, 3))
-        self._v_end = np.zeros((model.particle_count, 3))
         self._stats = [0, 0, 0]  # steps, CG iterations, most in one step (this run)
         super().__init__(model, integrator, threads=threads)
 
@@ -92,8 +88,7 @@ class ImplicitSolver(Solver):
 
     def start_hash(self, entries: int) -> None:
         self._collect_stats()
-        super().start_hash(entries)
-        self._history = None  # a new core holds no previous step
+        super().start_hash(entries)  # BDF2's history is the state's: it carries over
 
     def begin_run(self) -> None:
         self._stats = [0, 0, 0]
@@ -109,17 +104,6 @@ class ImplicitSolver(Solver):
         acc[0], acc[1], acc[2] = acc[0] + steps, acc[1] + total, max(acc[2], most)
         self._core.clear_stats()
 
-    def _has_history(self, state, dt: float) -> bool:
-        ref = self._history
-        return (
-            self.integrator == Integrator.BDF2
-            and ref is not None
-            and ref[0]() is state
-            and ref[1:] == (state.step_count, dt)
-            and np.array_equal(state.particle_q, self._q_end)
-            and np.array_equal(state.particle_qd, self._v_end)
-        )
-
     def _simulate(self, state, steps, dt, control, limits: RunLimits, progress) -> RunResult:
         bdf2 = self.integrator == Integrator.BDF2
         # the system matrix's step: dt for backward Euler, 2/3 dt for BDF2
@@ -127,15 +111,32 @@ class ImplicitSolver(Solver):
         if self._multigrid is not None and self._multigrid_step != h:
             set_multigrid_step(self._multigrid, h)
             self._multigrid_step = h
-        history = self._has_history(state, dt)
+        if not bdf2:
+            return self._result(
+                self._core.simulate(
+                    False, steps, dt, control, state, limits, self.tolerance,
+                    self.max_iterations, False, progress,
+                )
+            )  # fmt: skip
+        # BDF2's history travels with the state: read when it is this state's, and written
+        # by the run into its arrays (a new history's, or the old one's reused)
+        history = state.history
+        use = history is not None and history.belongs_to(state, dt)
+        if history is None or history.particle_q.shape != state.particle_q.shape:
+            history = StepHistory(dt, state.step_count, state.version,
+                                  np.zeros_like(state.particle_q),
+                                  np.zeros_like(state.particle_qd))  # fmt: skip
         result = self._result(
             self._core.simulate(
-                bdf2, steps, dt, control, state, limits, self.tolerance, self.max_iterations,
-                history, progress,
+                True, steps, dt, control, state, limits, self.tolerance, self.max_iterations,
+                use, progress, history.particle_q, history.particle_qd,
+                use and history.contacts_acted,
             )
         )  # fmt: skip
-        if bdf2 and (result.steps_done > 0 or history):
-            self._history = (weakref.ref(state), state.step_count, dt)
-            self._q_end[:] = state.particle_q
-            self._v_end[:] = state.particle_qd
+        if result.status in (Status.OK, Status.STOPPED) and (result.steps_done > 0 or use):
+            history.dt, history.step_count, history.version = dt, state.step_count, state.version
+            history.contacts_acted = self._core.contacts_acted
+            state.history = history
+        else:  # no whole step, or a failed one: its arrays hold no previous step
+            state.history = None
         return result

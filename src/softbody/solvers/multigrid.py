@@ -14,7 +14,7 @@ and damping as Laplacians, W_t G_t^T G_t and beta W_t G_t^T G_t with W_t the mea
 the small-strain stiffness over in-plane deformations (``softbody.membrane.scalar_blocks``;
 the largest, 2 (G_s + lam_s), needed 20-50% more iterations, a tenth of it more still),
 so a membrane-only body coarsens along its triangles; the finest level's smoother holds
-their true blocks, diagonal and between neighbours (``membrane_entries``;
+their true blocks, diagonal and between neighbours (``membrane_stencil``;
 core/terms/membrane.hpp). A bounds every spring's true stiffness block from above
 (axial k, transverse k max(0, 1 - L0/L) <= k), so A^-1 captures the stiff part and
 CG is left with a spectrum of width about 1/strain, not omega_max dt.
@@ -74,21 +74,14 @@ class Multigrid(NamedTuple):
     p_indices: np.ndarray
     p_data: np.ndarray
     coarse_cholesky: np.ndarray  # (n_L, n_L)
-    vertex_spring_ptr: np.ndarray  # (N + 1,) CSR of each particle's springs ("entries")
-    vertex_spring: np.ndarray  # (2 S,) spring of each entry
-    vertex_neighbor: np.ndarray  # (2 S,) particle at the entry spring's other end
     block: np.ndarray  # (N, 3, 3) scratch: finest-level diagonal blocks of the true matrix
     block_inv: np.ndarray  # (N, 3, 3) scratch: their inverses
-    entry_coef: np.ndarray  # (2 S, 5) scratch: u (3,), alpha, beta of each entry's spring
     x: np.ndarray  # (sum n_l, 3) scratch: level solutions
     b: np.ndarray  # (sum n_l, 3) scratch: level right-hand sides
     r: np.ndarray  # (sum n_l, 3) scratch: level residuals
-    # each particle's membrane neighbours (particles sharing a membrane triangle), sorted,
-    # and for every membrane triangle's corner pair (a, b) its entry (-1 for a = b): the
-    # smoother's off-diagonal membrane blocks (core/terms/membrane.hpp)
-    membrane_ptr: np.ndarray  # (N + 1,) int64
-    membrane_neighbor: np.ndarray  # (E,) int64
-    membrane_slot: np.ndarray  # (Tm, 3, 3) int64
+    # the finest level's blocks between particles: each coupling term's Stencil by name
+    # (STENCILS), whose coefficients the core fills per step (core/terms/*.hpp)
+    stencils: dict
 
     @property
     def sizes(self) -> list[int]:
@@ -96,9 +89,60 @@ class Multigrid(NamedTuple):
         return [int(n) for n in self.level_size]
 
 
+class Stencil(NamedTuple):
+    """One term's entries in the finest level's smoother: each particle's neighbours as
+    CSR sorted by the neighbour (so those to higher-numbered particles are a suffix, which
+    the smoother's residual reads alone), and the term's map from its couplings to entries
+    (core/terms/NAME.hpp: ``check_stencil`` says what it holds)."""
+
+    ptr: np.ndarray  # (N + 1,) int64
+    neighbor: np.ndarray  # (E,) int64
+    map: np.ndarray  # int64, flat: the term's own
+
+
+def spring_stencil(model) -> Stencil:
+    """Each particle's springs as entries sorted by the particle at the other end; map:
+    each entry's spring (2 S,)."""
+    n = model.particle_count
+    ends = model.spring_indices.reshape(-1).astype(np.int64)
+    order = np.lexsort((ends[np.arange(ends.shape[0]) ^ 1], ends))
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    ptr[1:] = np.cumsum(np.bincount(ends, minlength=n))
+    # the other end: entry 2 s + e of the flattened pairs sits opposite 2 s + 1 - e
+    return Stencil(ptr, ends[order ^ 1].astype(np.int64), (order // 2).astype(np.int64))
+
+
+def membrane_stencil(model) -> Stencil:
+    """Each particle's membrane neighbours (particles sharing a membrane triangle), sorted;
+    map: the entry of every membrane triangle's ordered corner pair (a, b), (Tm, 3, 3)
+    flattened, -1 where a = b (its diagonal block)."""
+    n = model.particle_count
+    tri = model.membrane_indices.reshape(-1, 3)
+    i = np.repeat(tri, 3, axis=1).reshape(-1, 3, 3)  # i[t, a, b] = tri[t, a]
+    j = np.repeat(tri[:, None, :], 3, axis=1)  # j[t, a, b] = tri[t, b]
+    off = ~np.eye(3, dtype=bool)[None].repeat(len(tri), axis=0)
+    keys = i[off] * n + j[off]
+    unique, inverse = np.unique(keys, return_inverse=True)
+    slot = np.full((len(tri), 3, 3), -1, dtype=np.int64)
+    slot[off] = inverse
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    ptr[1:] = np.cumsum(np.bincount(unique // n, minlength=n))
+    return Stencil(ptr, (unique % n).astype(np.int64), slot.reshape(-1))
+
+
+STENCILS = {
+    "springs": spring_stencil,
+    "membrane": membrane_stencil,
+}
+"""Each term that couples particles in the smoother (the core's terms with a
+``stencil_width``, ``softbody._core.term_table``; a test holds the two sets equal): its
+stencil's builder, ``builder(model) -> Stencil``, by name."""
+
+
 def empty_multigrid() -> Multigrid:
     """A zero-level placeholder for simulators that do not use the preconditioner."""
     i0, f0 = np.zeros(1, dtype=np.int64), np.zeros(0)
+    none = Stencil(np.zeros(1, dtype=np.int64), i0[:0], i0[:0])
     return Multigrid(
         0,
         0,
@@ -119,37 +163,13 @@ def empty_multigrid() -> Multigrid:
         i0[:0],
         f0,
         np.zeros((0, 0)),
-        i0,
-        i0[:0],
-        i0[:0],
         np.zeros((0, 3, 3)),
         np.zeros((0, 3, 3)),
-        np.zeros((0, 5)),
         np.zeros((0, 3)),
         np.zeros((0, 3)),
         np.zeros((0, 3)),
-        np.zeros(1, dtype=np.int64),
-        i0[:0],
-        np.zeros((0, 3, 3), dtype=np.int64),
+        dict.fromkeys(STENCILS, none),
     )
-
-
-def membrane_entries(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(ptr (N + 1,), neighbor (E,), slot (Tm, 3, 3)): each particle's membrane neighbours
-    as CSR sorted by the neighbour, and the entry of every membrane triangle's ordered
-    corner pair (a, b), -1 where a = b (its diagonal block)."""
-    n = model.particle_count
-    tri = model.membrane_indices.reshape(-1, 3)
-    i = np.repeat(tri, 3, axis=1).reshape(-1, 3, 3)  # i[t, a, b] = tri[t, a]
-    j = np.repeat(tri[:, None, :], 3, axis=1)  # j[t, a, b] = tri[t, b]
-    off = ~np.eye(3, dtype=bool)[None].repeat(len(tri), axis=0)
-    keys = i[off] * n + j[off]
-    unique, inverse = np.unique(keys, return_inverse=True)
-    slot = np.full((len(tri), 3, 3), -1, dtype=np.int64)
-    slot[off] = inverse
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    ptr[1:] = np.cumsum(np.bincount(unique // n, minlength=n))
-    return ptr, (unique % n).astype(np.int64), slot
 
 
 def _aggregate(indptr, indices, out):
@@ -282,13 +302,6 @@ def build_multigrid(model) -> Multigrid:
         return np.concatenate([np.asarray(a, dtype=dtype) for a in arrays] or [np.zeros(0, dtype)])
 
     total = int(vec_offset[-1])
-    ends = model.spring_indices.reshape(-1).astype(np.int64)
-    # each particle's entries sorted by the particle at the other end, so the springs to
-    # higher-numbered particles are a suffix (the smoother's residual reads only those)
-    order = np.lexsort((ends[np.arange(ends.shape[0]) ^ 1], ends))
-    vertex_spring_ptr = np.zeros(n + 1, dtype=np.int64)
-    vertex_spring_ptr[1:] = np.cumsum(np.bincount(ends, minlength=n))
-    s_count = model.spring_count
     nz = int(sum(lv[0].nnz for lv in levels))
     mg = Multigrid(
         len(prolongators),
@@ -310,17 +323,12 @@ def build_multigrid(model) -> Multigrid:
         cat([p.indices for p in prolongators], np.int64),
         cat([p.data for p in prolongators], np.float64),
         np.zeros((int(sizes[-1]), int(sizes[-1])) if coarse_dense else (0, 0)),
-        vertex_spring_ptr,
-        (order // 2).astype(np.int64),
-        # the other end: entry 2 s + e of the flattened pairs sits opposite 2 s + 1 - e
-        ends[order ^ 1].astype(np.int64),
         np.zeros((n, 3, 3)),
         np.zeros((n, 3, 3)),
-        np.zeros((2 * s_count, 5)),
         np.zeros((total, 3)),
         np.zeros((total, 3)),
         np.zeros((total, 3)),
-        *membrane_entries(model),
+        {name: build(model) for name, build in STENCILS.items()},
     )
     return mg
 
