@@ -1,5 +1,5 @@
 """Implicit steps of balloons fed with gas keep them from spinning up
-(core/solvers/implicit.hpp, turn_to_end_forces).
+(core/solvers/implicit.hpp, keep_own_torque).
 
 A body's own forces (its membrane, springs, gas) turn with it, so they exert no torque and
 its angular momentum L is constant. The linearised backward Euler step takes K = df/dx at
@@ -8,7 +8,7 @@ f_i x v1_i with the start's f. A balloon whose gas grew since the last step (an 
 an orifice) starts every step out of balance, f_i = a m_i x_i outward, its stiff volume
 mode settling within the step; the step then multiplies a spin by 1 / (1 - h^2 a) (2 % a
 step for the tank-fed balloon at 2 ms), whatever CG's tolerance, which only seeds it. The
-step now turns each free body so that L changes as with the forces at the step's end.
+step now takes that torque back with a rotation of each free body (keep_own_torque).
 
 References: L constant for a body under its own forces only; uniform inflation's kinetic
 energy 1/2 m (R0 ds/dt)^2 (each vertex of an icosphere lies at R0 from its centre and
@@ -116,16 +116,16 @@ def test_the_two_balloons_scene_fills_without_tangential_motion():
     assert np.all(tangential < 1e-4 * uniform)
 
 
-@pytest.mark.parametrize("integrator", ["implicit_euler", "bdf2"])
-def test_a_spinning_balloon_fed_with_gas_keeps_its_angular_momentum(integrator):
+@pytest.mark.parametrize(("integrator", "within"), [("implicit_euler", 1e-6), ("bdf2", 5e-3)])
+def test_a_spinning_balloon_fed_with_gas_keeps_its_angular_momentum(integrator, within):
     """A free 162-vertex neo-Hookean balloon (R0 = 0.1 m, undamped, 10 g) spinning at
     1 rad/s about a tilted axis, its air fed by an inflator at 2 g/s, 2 ms steps for
-    0.5 s: its own forces exert no torque, so its angular momentum stays what it was, here
-    to 1 % (measured 0.30 % implicit Euler, 0.23 % BDF2, as it loses spin: 0.10 % of it is
-    backward Euler's own damping of a spin, h^2 omega^2 a step, measured alone without the
-    inflator, the rest what the turn leaves of the step's error, which is second order in
-    h^2 a). Before, each step multiplied the spin by 1 / (1 - h^2 a), a = 2,000 / s^2 from
-    the air added since the step before: 13 times over the 0.5 s."""
+    0.5 s: its own forces exert no torque, so its angular momentum stays what it was. Implicit
+    Euler keeps it to 1e-6 (measured 3e-9: x1 - x0 = dt v1, so a step changes it by its
+    forces' torque alone, and the step takes their linearisation's back); BDF2 to 5e-3
+    (measured 6.5e-4: its x1 - x0 is not along v1, an O(dt^2) change a step). Before, each
+    step multiplied the spin by 1 / (1 - h^2 a), a = 2,000 / s^2 from the air added since
+    the step before: 13 times over the 0.5 s."""
     builder = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
     builder.add_soft_body(
         sb.icosphere(2, radius=0.1), mass=0.01, membrane=sb.Membrane.neo_hookean(MU, H),
@@ -141,4 +141,4 @@ def test_a_spinning_balloon_fed_with_gas_keeps_its_angular_momentum(integrator):
     sim = sb.Simulator(model, integrator=integrator, dt=2e-3)
     sim.advance(state, 0.5, progress=False)
     end = spin(model, state, 0)[0]
-    assert np.linalg.norm(end - start) < 1e-2 * np.linalg.norm(start)
+    assert np.linalg.norm(end - start) < within * np.linalg.norm(start)
