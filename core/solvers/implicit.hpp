@@ -13,6 +13,9 @@
 // start forces are vertex-major on the SIMD paths, term by term on the scalar one.
 #pragma once
 
+#include <string_view>
+#include <vector>
+
 #include "model.hpp"
 #include "solvers/common.hpp"
 #include "solvers/forms.hpp"
@@ -152,10 +155,91 @@ inline void jacobi_diagonal(const Model& m, const Control& c, double h, const Im
     forms::jacobi_diagonal(m, c, at_start(w), h, w.cg_diag);
 }
 
+/// The terms whose forces come from outside a body (anchors, the grab, air drag): their
+/// bits, for forms::apply_jacobians' skip.
+inline unsigned outside_terms() {
+    unsigned skip = 0;
+    Terms::each([&](auto term, int k) {
+        const std::string_view name = decltype(term)::kName;
+        if (name == "attachments" || name == "grab" || name == "drag") skip |= 1u << k;
+    });
+    return skip;
+}
+
+/// dv (w.cg_x) turned, body by body, so that the body's own forces (springs, gas, bending,
+/// membranes) leave its angular momentum as it was: the torque of their linearised change
+/// over the step, h sum_i (x_i - c) x (K dx)_i (dx = y + h dv the step's position change,
+/// w.qs = y, c the body's mass centre), taken back by a rotation, I omega = -that torque,
+/// dv_i += omega x (x_i - c), I the body's inertia about c (the rotation's M). Their
+/// damping's torque, sum_i x_i x (C p)_i, is 0 as is (it does not act on rigid motion).
+/// Bodies with a pinned particle, or joined to another body by a spring, take torque from
+/// outside through their own terms and are left as they are.
+///
+/// Why: forces a body exerts on itself have no torque at any x, but their product K p
+/// does where the start is out of balance: they turn with the body, so sum_i x_i x (K p)_i
+/// = sum_i f_i x p_i with f the start's force. A balloon whose gas grew since the last step
+/// (an inflator, an orifice, a schedule) starts each step with every vertex pushed out,
+/// f_i = a m_i x_i, its stiff volume mode settling within the step, and that torque spins
+/// it up by 1 / (1 - h^2 a) a step (2 % a step for a tank-fed balloon at 2 ms steps,
+/// whatever CG's tolerance: its residual only seeds the spin). With the turn, backward
+/// Euler keeps a free body's angular momentum to round-off (x1 - x0 = dt v1, so
+/// sum_i m_i x1_i x v1_i = sum_i m_i x0_i x v1_i); BDF2 to its own step's error.
+inline void keep_own_torque(const Model& m, const Control& c, double h,
+                            const ImplicitBuffers& w) {
+    const index n3 = 3 * m.particles.count;
+    const double* inv_mass = m.particles.inv_mass;
+    const double* mass = m.particles.mass;
+    std::vector<unsigned char> joined(static_cast<size_t>(m.bodies.count), 0);
+    for (index s = 0; s < m.springs.count; ++s) {
+        const index a = m.particles.body[m.springs.indices[2 * s]];
+        const index b = m.particles.body[m.springs.indices[2 * s + 1]];
+        if (a != b) {
+            if (a >= 0) joined[static_cast<size_t>(a)] = 1;
+            if (b >= 0) joined[static_cast<size_t>(b)] = 1;
+        }
+    }
+    for (index k = 0; k < n3; ++k) w.cg_p[k] = w.qs[k] + h * w.cg_x[k];  // dx
+    forms::apply_jacobians(m, c, at_start(w), 0.0, 0.0, 1.0, w.cg_p, w.cg_ap, outside_terms());
+    for (index b = 0; b < m.bodies.count; ++b) {
+        if (joined[static_cast<size_t>(b)]) continue;
+        const index first = m.bodies.particle_range[2 * b], last = m.bodies.particle_range[2 * b + 1];
+        double total = 0.0;
+        V3 centre = {0.0, 0.0, 0.0};
+        bool held = false;
+        for (index i = first; i < last; ++i) {
+            held = held || inv_mass[i] == 0.0;
+            total += mass[i];
+            centre = centre + mass[i] * load(w.q0, i);
+        }
+        if (held || !(total > 0.0)) continue;
+        centre = (1.0 / total) * centre;
+        V3 torque = {0.0, 0.0, 0.0};
+        double inertia[9] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0}, inverse[9];
+        for (index i = first; i < last; ++i) {
+            const V3 r = load(w.q0, i) - centre;
+            torque = torque + cross(r, load(w.cg_ap, i));
+            const double rr = dot(r, r);
+            for (int k = 0; k < 3; ++k)
+                for (int l = 0; l < 3; ++l)
+                    inertia[3 * k + l] += mass[i] * ((k == l ? rr : 0.0) - (&r.x)[k] * (&r.x)[l]);
+        }
+        invert_3x3(inertia, inverse);
+        const V3 tau = (-h) * torque;
+        const V3 omega = {inverse[0] * tau.x + inverse[1] * tau.y + inverse[2] * tau.z,
+                          inverse[3] * tau.x + inverse[4] * tau.y + inverse[5] * tau.z,
+                          inverse[6] * tau.x + inverse[7] * tau.y + inverse[8] * tau.z};
+        if (!(std::isfinite(omega.x) && std::isfinite(omega.y) && std::isfinite(omega.z)))
+            continue;  // no inertia about some axis (a body on a line): no rotation to turn
+        for (index i = first; i < last; ++i)
+            add_to(w.cg_x, i, cross(omega, load(w.q0, i) - centre));
+    }
+}
+
 /// One backward Euler step, or with bdf2 one BDF2 step, from w.q0, w.v0 with w.f = f(x0, v0)
 /// into q, qd; BDF2 reads the previous step's start in w.q_prev, w.v_prev, and both leave
 /// this step's start there. dv is solved from the last step's dv (w.cg_x) when that is
-/// closer. Returns the CG iterations used.
+/// closer, then turned so that each free body's own forces keep its angular momentum
+/// (keep_own_torque). Returns the CG iterations used.
 inline index step(const Model& m, const Control& c, double t, double dt, double* q, double* qd,
                   const ImplicitBuffers& w, const MultigridView* mg, double tolerance,
                   index max_iterations, bool bdf2) {
@@ -229,6 +313,7 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
             for (index k = 0; k < 3 * n; ++k) w.cg_p[k] = w.cg_z[k] + beta * w.cg_p[k];
         }
     }
+    keep_own_torque(m, c, h, w);
     for (index i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {
             const index r = 3 * i + k;
