@@ -13,7 +13,6 @@
 // start forces are vertex-major on the SIMD paths, term by term on the scalar one.
 #pragma once
 
-#include <string_view>
 #include <vector>
 
 #include "model.hpp"
@@ -155,13 +154,12 @@ inline void jacobi_diagonal(const Model& m, const Control& c, double h, const Im
     forms::jacobi_diagonal(m, c, at_start(w), h, w.cg_diag);
 }
 
-/// The terms whose forces come from outside a body (anchors, the grab, air drag): their
-/// bits, for forms::apply_jacobians' skip.
+/// The terms whose forces come from outside a body (kFromOutside: anchors, the grab, the
+/// air): their bits, for forms::apply_jacobians' skip.
 inline unsigned outside_terms() {
     unsigned skip = 0;
     Terms::each([&](auto term, int k) {
-        const std::string_view name = decltype(term)::kName;
-        if (name == "attachments" || name == "grab" || name == "drag") skip |= 1u << k;
+        if (decltype(term)::kFromOutside) skip |= 1u << k;
     });
     return skip;
 }

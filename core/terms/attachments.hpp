@@ -197,7 +197,7 @@ inline void constrain(const Model& m, const Control& c, const ConstraintPass& p)
 struct Term : TermBase {
     static constexpr const char* kName = "attachments";
     static constexpr bool kProjected = true, kEnergy = true, kConstraint = true;
-    static constexpr bool kBound = true, kSharedRows = true;
+    static constexpr bool kBound = true, kSharedRows = true, kFromOutside = true;
     static bool active(const Model& m, const Control&) { return m.attachments.count > 0; }
     /// The stability estimate: R_i at the tied particles (shared with the springs' rows),
     /// then the attachments' rows against them and their c / k; anchors from c.

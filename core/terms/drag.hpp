@@ -102,6 +102,7 @@ inline double power(const Model& m, const Control& c, const double* q, const dou
 /// The registered term (terms/registry.hpp): a force every solver takes explicitly.
 struct Term : TermBase {
     static constexpr const char* kName = "drag";
+    static constexpr bool kFromOutside = true;  // the air
     static bool active(const Model& m, const Control&) { return drag::active(m); }
     static void force(const Eval& e, double* f) { drag::force(e.m, e.c, e.q, e.qd, f); }
 };

@@ -69,7 +69,7 @@ struct Term : TermBase {
 
 struct GrabTerm : TermBase {
     static constexpr const char* kName = "grab";
-    static constexpr bool kEnergy = true, kExternal = true;
+    static constexpr bool kEnergy = true, kExternal = true, kFromOutside = true;
     static bool active(const Model&, const Control& c) { return c.grab_particle >= 0; }
     static void force(const Eval& e, double* f) { grab_force(e.c, e.q, e.qd, f); }
     /// The grab spring's energy [J], added to the grabbed particle's body.

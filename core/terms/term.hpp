@@ -106,6 +106,10 @@ struct TermBase {
     // its energy is work done from outside the model (the grab spring: the user's hand),
     // which softbody.diagnostics leaves out of the model's total
     static constexpr bool kExternal = false;
+    // its force comes from outside the body it acts on (an anchor, the user's hand, the
+    // air), so it may turn a free body: the implicit step's keep_own_torque leaves its
+    // torque in (a body's own forces exert none)
+    static constexpr bool kFromOutside = false;
     static constexpr bool kFlow = false;  // it moves gas (its `flow` form), no force
     static constexpr bool kBound = false;  // it has a `bound` form
     // its Gershgorin rows are a particle's rows shared with the other kSharedRows terms (a
