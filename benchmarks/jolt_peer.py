@@ -151,6 +151,27 @@ def ensure_peer_venv(python: str, venv: Path) -> Path:
     return peer
 
 
+def peer_version(peer: Path) -> str:
+    """culverin's version string as the peer's Python at ``peer`` reports it (its Jolt
+    build: precision, threading); PeerError where that Python cannot import culverin and
+    NumPy, or holds another version than CULVERIN pins."""
+    probe = "import culverin, numpy; print(culverin.__version__)"
+    try:
+        out = subprocess.run([str(peer), "-c", probe], capture_output=True, text=True)
+    except OSError as error:
+        raise PeerError(f"cannot run the peer's Python {peer} ({error.strerror})") from None
+    if out.returncode != 0:
+        lines = out.stderr.strip().splitlines() or ["no output"]
+        raise PeerError(
+            f"{peer} cannot import culverin and numpy ({lines[-1]}); install {CULVERIN} and"
+            " numpy there, or leave out --peer-venv to let the script make its environment"
+        )
+    version = out.stdout.strip()
+    if version.split()[0] != CULVERIN.split("==")[1]:
+        raise PeerError(f"{peer} has culverin {version.split()[0]}; the race pins {CULVERIN}")
+    return version
+
+
 def fewest_valid(counts: Sequence[int], drop: Callable[[int], dict | None]) -> tuple[dict, list]:
     """Try ``drop(count)`` for each of ``counts``, fewest first, until one is ``ok`` (valid
     and the bounce kept); ``drop`` returns None where the count is too slow to run. Returns
@@ -395,8 +416,8 @@ def main() -> None:
     parser.add_argument(
         "--peer-venv",
         type=Path,
-        default=PEER_VENV,
-        help=f"the peer's environment (made with {CULVERIN} where missing)",
+        help=f"an environment holding {CULVERIN} and numpy, used as it is (by default the"
+        f" script makes {PEER_VENV.relative_to(HERE.parent)} once)",
     )
     parser.add_argument(
         "--jolt-threads",
@@ -422,14 +443,20 @@ def main() -> None:
         "--plot-only", action="store_true", help="redraw the plot from results/jolt_peer.json"
     )
     args = parser.parse_args()
+    if not 0 <= args.min_subdivisions <= args.max_subdivisions:
+        parser.error("the sizes need 0 <= --min-subdivisions <= --max-subdivisions")
     if args.plot_only:
         plot(json.loads((RESULTS / "jolt_peer.json").read_text()), RESULTS / "jolt_peer.png")
         return
     try:
-        python = args.peer_python or find_peer_python(python_candidates())
-        if args.peer_python and (python_version(python) or (0, 0)) < PEER_PYTHON_MIN:
-            raise PeerError(f"--peer-python {python} is not Python >= 3.12")
-        peer = ensure_peer_venv(python, args.peer_venv)
+        if args.peer_venv is not None:
+            peer = args.peer_venv / "bin" / "python"
+        else:
+            python = args.peer_python or find_peer_python(python_candidates())
+            if args.peer_python and (python_version(python) or (0, 0)) < PEER_PYTHON_MIN:
+                raise PeerError(f"--peer-python {python} is not Python >= 3.12")
+            peer = ensure_peer_venv(python, PEER_VENV)
+        build = peer_version(peer)
     except PeerError as error:
         sys.exit(f"error: {error}")
     rows = []
@@ -439,6 +466,7 @@ def main() -> None:
         "threads": {"softbody": 1, "jolt_workers": args.jolt_threads},
         "dtype": "float64 (softbody); float32 vertices, float64 world (Jolt)",
         "peer": CULVERIN,
+        "peer_build": build,
         "frame_s": FRAME,
         "drop_s": FRAMES * FRAME,
         "jolt_iterations_tried": list(JOLT_ITERATIONS),

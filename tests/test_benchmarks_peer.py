@@ -167,3 +167,12 @@ def test_speed_ratio_takes_the_fastest_passing_run():
     assert jolt_peer.speed_ratio(softbody, jolt) == pytest.approx(2.0)
     assert jolt_peer.speed_ratio(softbody, {**jolt, "ok": False}) is None
     assert jolt_peer.speed_ratio({"b": softbody["b"]}, jolt) is None
+
+
+def test_a_peer_without_culverin_is_a_one_line_error(tmp_path):
+    """A peer environment that cannot import culverin (this test's own Python) or does not
+    exist gives PeerError naming the pin and what to do, not a traceback."""
+    with pytest.raises(jolt_peer.PeerError, match=r"cannot import culverin.*culverin==0\.15\.0"):
+        jolt_peer.peer_version(Path(sys.executable))
+    with pytest.raises(jolt_peer.PeerError, match="cannot run the peer's Python"):
+        jolt_peer.peer_version(tmp_path / "venv" / "bin" / "python")
