@@ -5,14 +5,16 @@ The drop of ``benchmarks/ball_drop.py``: an icosphere of radius 1 m and 1 kg, sp
 with restitution 0.5 and friction 0.1, gravity 9.81 m/s^2, 2 s in 1/60 s frames. The same
 mesh, masses and settings go to Jolt Physics through its Python binding culverin
 (CULVERIN, pinned), which needs Python >= 3.12: the script makes a virtual environment for
-it once (``benchmarks/.peers/jolt-venv``, git-ignored; ``--peer-venv`` names another)
-and runs ``benchmarks/peers/jolt_drop.py`` in it, one process per drop. culverin is never
-a dependency of softbody. Jolt's side: edge compliance 1/500 m/N, pressure 300 (Jolt's
-pressure is n R T [J]), no bend constraints (softbody's ball has edge springs only),
-vertex radius 0 and linear damping 0 (softbody's contact has no thickness and the drop
-no drag; Jolt has no spring damping to match softbody's 0.5 N s/m), its solver iterations
-(each a substep with one pass over the edges) tried 10, 20, 40, ... fewest first until
-its drop is valid and rebounds >= 0.9 m, on ``--jolt-threads`` worker threads.
+it once (``benchmarks/.peers/jolt-venv``, git-ignored; ``--peer-venv`` names an existing
+one, used as it is) and runs ``benchmarks/peers/jolt_drop.py`` in it, one process per
+drop. culverin is never a dependency of softbody. Jolt's side: edge compliance
+1/500 m/N, pressure 300 (Jolt's pressure is n R T [J]), no bend constraints (softbody's
+ball has edge springs only), vertex radius 0 and linear damping 0 (softbody's contact has
+no thickness and the drop no drag; Jolt has no spring damping to match softbody's
+0.5 N s/m), its solver iterations (each a substep with one pass over the edges) tried 10,
+20, 40, ... fewest first until its drop is valid and rebounds >= 0.9 m, on
+``--jolt-threads`` worker threads (default: the cores), and timed again on one worker at
+the iterations found (the same drop).
 
 softbody on one thread: XPBD at its default substeps ("xpbd"), XPBD at the fewest
 substeps of XPBD_SUBSTEPS that are valid and rebound >= 0.9 m ("xpbd fewest valid"),
@@ -25,11 +27,13 @@ volume within [0.7, 1.5] of its start every frame, the centre of mass rising aft
 lowest point, and at the end the internal kinetic energy (velocities from the last two
 frames' positions, for both engines) below 5% of m g h; a race entry also needs a
 rebound >= 0.9 m. Speed is simulated seconds per wall second of the stepping calls alone
-(2 s over their summed wall time). After the searches, ``--rounds`` more timing rounds
-alternate the engines (softbody first, then Jolt first, ...) wherever a drop takes at most
+(2 s over their summed wall time). After the searches, ``--rounds`` timing rounds
+alternate the engines (Jolt first, then softbody first, ...) wherever a drop takes at most
 ROUND_BUDGET seconds; each entry keeps its best time. The ratio softbody / Jolt per size
-is taken between the fastest softbody run that passes with the bounce kept and Jolt at its
-fewest valid iterations, from the same run.
+compares the fastest softbody run that passes with the bounce kept with Jolt at its
+fewest valid iterations: taken within each round (the load of the shared machine changes
+from minute to minute) and the median of the rounds reported, the ratio of the best times
+beside it.
 
 Writes results/jolt_peer.{json,png}; after each size, results/jolt_peer.partial.json.
 Usage: python benchmarks/jolt_peer.py [--max-subdivisions 6] [--peer-python PATH]
@@ -73,7 +77,7 @@ FRAME = 1.0 / 60.0
 FRAMES = 120
 #: the drop energy m g h [J] of the 1 kg ball from 1 m
 DROP_ENERGY = 1.0 * 9.81 * 1.0
-#: the extra alternating timing rounds time only drops faster than this [s]
+#: the alternating timing rounds time only drops faster than this [s]
 ROUND_BUDGET = 30.0
 PARTIAL = RESULTS / "jolt_peer.partial.json"
 
@@ -190,13 +194,26 @@ def fewest_valid(counts: Sequence[int], drop: Callable[[int], dict | None]) -> t
             "ok": entry["ok"],
             "rebound_m": entry["rebound_m"],
             "volume_ratio_range": entry["volume_ratio_range"],
-            "simulated_per_wall_second": entry["simulated_per_wall_second"],
+            "simulated_per_wall_second": entry.get("simulated_per_wall_second"),
         })  # fmt: skip
         if entry["ok"]:
             break
     if entry is None:
         return {"ok": None, "skipped": "slower than the budget"}, tries
     return entry, tries
+
+
+def paired_ratios(rates: dict[str, list[float]], passing: Sequence[str], jolt: str) -> list:
+    """Per timing round, softbody's rate over Jolt's in that round: the fastest of the
+    ``passing`` runs' rates (simulated seconds per wall second) over the rate of the Jolt
+    entry ``jolt``; ``rates`` maps each entry to its rates, one per round it was timed in.
+    Rounds where Jolt or no passing run was timed are left out."""
+    out = []
+    for k, jolt_rate in enumerate(rates.get(jolt, [])):
+        mine = [rates[name][k] for name in passing if len(rates.get(name, [])) > k]
+        if mine:
+            out.append(max(mine) / jolt_rate)
+    return out
 
 
 def speed_ratio(softbody: dict, jolt: dict) -> float | None:
@@ -241,7 +258,15 @@ class SoftbodyDrop:
         return (time.perf_counter() - t0) / n * FRAMES
 
     def drop(self) -> dict:
-        """The 2 s drop: the checks and the wall time of the stepping calls."""
+        """The 2 s drop: the checks and the wall time of the stepping calls; a drop that
+        blows up (SimulationError) fails, with no speed."""
+        try:
+            return self._drop()
+        except sb.SimulationError as error:
+            return {**self.settings(), "error": str(error), "rebound_m": None,
+                    "volume_ratio_range": [None, None], "valid": False, "ok": False}  # fmt: skip
+
+    def _drop(self) -> dict:
         model, state = self.model, self.model.state()
         x = state.particle_q.copy()
         heights = [sb.body_center_of_mass(model, state)[0, 1]]
@@ -343,8 +368,11 @@ def race_size(s: int, peer: Path, folder: Path, args: argparse.Namespace) -> dic
 
     def xpbd_drop(substeps: int) -> dict | None:
         run = SoftbodyDrop(model, "xpbd fewest valid", substeps)
-        if run.estimate() > args.budget:
-            return None
+        try:
+            if run.estimate() > args.budget:
+                return None
+        except sb.SimulationError:
+            pass  # it blows up within its first frames: drop() records that
         entry = run.drop()
         report(n, f"xpbd {substeps} substeps", entry)
         return entry
@@ -360,7 +388,10 @@ def race_size(s: int, peer: Path, folder: Path, args: argparse.Namespace) -> dic
     row["softbody"]["xpbd fewest valid"] = {**entry, "tries": tries}
     for name in ("xpbd", "implicit_euler", "velocity_verlet"):
         run = SoftbodyDrop(model, name)
-        estimate = run.estimate()
+        try:
+            estimate = run.estimate()
+        except sb.SimulationError:
+            estimate = 0.0  # it blows up within its first frames: drop() records that
         if estimate > args.budget:
             row["softbody"][name] = {**run.settings(), "ok": None, "estimated_wall_s": estimate,
                                      "skipped": "slower than the budget"}  # fmt: skip
@@ -369,7 +400,10 @@ def race_size(s: int, peer: Path, folder: Path, args: argparse.Namespace) -> dic
         row["softbody"][name] = run.drop()
         report(n, name, row["softbody"][name])
 
-    # alternating timing rounds, each engine's entries at their chosen settings
+    # alternating timing rounds, each engine's entries at their chosen settings; each
+    # round's rates are kept, so that the ratio can be taken within a round (the machine's
+    # load changes from one minute to the next)
+    rates: dict[str, list[float]] = {}
     for k in range(args.rounds):
         for side in ("softbody", "jolt") if k % 2 else ("jolt", "softbody"):
             if side == "jolt":
@@ -379,16 +413,27 @@ def race_size(s: int, peer: Path, folder: Path, args: argparse.Namespace) -> dic
                         again = engine.drop(j["iterations"], args.budget)
                         if again is not None:
                             row[key] = best(j, again)
+                            rates.setdefault(key, []).append(again["simulated_per_wall_second"])
                 continue
             for name, e in row["softbody"].items():
                 if "wall_s" in e and e["wall_s"] <= ROUND_BUDGET:
                     again = SoftbodyDrop(model, name, e.get("xpbd_substeps")).drop()
                     row["softbody"][name] = best(e, again)
-    row["softbody_over_jolt"] = speed_ratio(row["softbody"], row["jolt"])
-    if row.get("jolt_one_worker"):
-        row["softbody_over_jolt_one_worker"] = speed_ratio(row["softbody"], row["jolt_one_worker"])
-    xpbd = row["softbody"]["xpbd fewest valid"]
-    row["xpbd_fewest_valid_over_jolt"] = speed_ratio({"x": xpbd}, row["jolt"])
+                    if "simulated_per_wall_second" in again:
+                        rates.setdefault(name, []).append(again["simulated_per_wall_second"])
+    row["round_rates"] = rates
+    passing = [name for name, e in row["softbody"].items() if e.get("ok")]
+    row["softbody_over_jolt"] = None
+    for suffix, key in (("", "jolt"), ("_one_worker", "jolt_one_worker")):
+        if not (row.get(key) or {}).get("ok"):
+            continue
+        # the ratio of the best times, and the median of the ratios within a round
+        row[f"softbody_over_jolt{suffix}_best"] = speed_ratio(row["softbody"], row[key])
+        paired = paired_ratios(rates, passing, key)
+        row[f"softbody_over_jolt{suffix}_rounds"] = paired
+        row[f"softbody_over_jolt{suffix}"] = (
+            float(np.median(paired)) if paired else row[f"softbody_over_jolt{suffix}_best"]
+        )
     return row
 
 
@@ -425,7 +470,7 @@ def main() -> None:
         default=os.cpu_count() or 1,
         help="Jolt's worker threads (default: the cores)",
     )
-    parser.add_argument("--rounds", type=int, default=2, help="extra alternating timing rounds")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating timing rounds")
     parser.add_argument(
         "--budget",
         type=float,
@@ -480,9 +525,10 @@ def main() -> None:
             except PeerError as error:
                 sys.exit(f"error: {error}")
             r = rows[-1]
-            print(f"{r['vertex_count']:>7} softbody / Jolt = {r['softbody_over_jolt']}  "
-                  f"(xpbd fewest valid / Jolt = {r['xpbd_fewest_valid_over_jolt']})",
-                  flush=True)  # fmt: skip
+            print(f"{r['vertex_count']:>7} softbody / Jolt = {r['softbody_over_jolt']} (rounds: "
+                  f"{r.get('softbody_over_jolt_rounds')}; best times: "
+                  f"{r.get('softbody_over_jolt_best')}; 1 worker: "
+                  f"{r.get('softbody_over_jolt_one_worker')})", flush=True)  # fmt: skip
             write_json(PARTIAL, run_record("jolt_peer", **head, sizes=rows))
     result = run_record("jolt_peer", **head, sizes=rows)
     write_json(RESULTS / "jolt_peer.json", result)

@@ -176,3 +176,19 @@ def test_a_peer_without_culverin_is_a_one_line_error(tmp_path):
         jolt_peer.peer_version(Path(sys.executable))
     with pytest.raises(jolt_peer.PeerError, match="cannot run the peer's Python"):
         jolt_peer.peer_version(tmp_path / "venv" / "bin" / "python")
+
+
+def test_paired_ratios_are_taken_within_each_round():
+    """The ratio of round k is the fastest passing softbody run's rate in round k over
+    Jolt's in round k (not the best of one over the best of the other); a run not timed in
+    a round is left out of it, a round without any passing run dropped."""
+    rates = {
+        "jolt": [10.0, 4.0, 8.0],
+        "a": [5.0, 2.0, 4.0],
+        "b": [6.0, 1.0],
+        "failing": [100.0, 100.0, 100.0],
+    }
+    ratios = jolt_peer.paired_ratios(rates, ["a", "b"], "jolt")
+    assert ratios == pytest.approx([0.6, 0.5, 0.5])
+    assert jolt_peer.paired_ratios(rates, [], "jolt") == []
+    assert jolt_peer.paired_ratios(rates, ["a"], "jolt_one_worker") == []
