@@ -547,7 +547,7 @@ def plot(result: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     rows = result["sizes"]
-    fig, (speed, bounce) = plt.subplots(1, 2, figsize=(12, 5), dpi=110)
+    fig, (speed, bounce) = plt.subplots(1, 2, figsize=(12, 5.3), dpi=110)
     lines = [(name, "softbody " + name, f"C{k}", "o-") for k, name in enumerate(SOFTBODY_RUNS)]
     lines.append(("jolt", f"Jolt ({result['threads']['jolt_workers']} workers), fewest valid "
                   "iterations", "k", "s--"))  # fmt: skip
@@ -593,8 +593,10 @@ def plot(result: dict, path: Path) -> None:
     fig.suptitle(
         "Ball drop at 1/60 s frames, softbody (one thread) against Jolt Physics (culverin); "
         "filled: valid, rebound >= 0.9 m\n"
-        f"softbody (fastest passing run) / Jolt ({result['threads']['jolt_workers']} workers): "
-        f"{ratios('softbody_over_jolt')}; / Jolt (1 worker): "
+        "softbody (fastest passing run) / Jolt, median of the ratios within a timing round "
+        "(the points: best times)\n"
+        f"against Jolt on {result['threads']['jolt_workers']} workers: "
+        f"{ratios('softbody_over_jolt')}; on 1 worker: "
         f"{ratios('softbody_over_jolt_one_worker')}",
         fontsize=10,
     )
