@@ -5,7 +5,8 @@ Five 162-vertex balls in a box spinning about a horizontal axis (paper, Figures 
 Euler and velocity Verlet at 0.9 of their stability estimate, implicit Euler at 1/60 s
 with either preconditioner and BDF2 at 1/60 s (CG tolerance 1e-3; the multigrid runs
 again at 1e-2), projective dynamics with 1, 2 and 4 iterations at 0.9 of its estimate
-(the gas's, 1 / omega_gas). Each run is timed inside one compiled call
+(the gas's, 1 / omega_gas), and XPBD with small steps at 1/60 s frames (its default
+substeps, and 16). Each run is timed inside one compiled call
 (kernels compiled before, best of 3) and checked; a run that blows up is recorded as
 failed. The checks: every ball keeps its volume within [0.6, 1.6] of its rest volume,
 at the end and in samples every 0.1 s of a separate untimed run, and stays inside the
@@ -13,12 +14,16 @@ box; the kinetic energy, sampled in that run, averages within 1.5x of RK4's at 0
 (an unstable step passed the first two checks while its balls shook with 17x the
 reference's kinetic energy).
 
-Writes results/five_balls.{json,png}.
-Usage: python benchmarks/five_balls.py
+Writes results/five_balls.{json,png}. ``--runs xpbd`` measures only the runs of the
+integrators named and merges them into results/five_balls.json (a run of the same name
+replaced, every other run and the file's date kept; the date of the merge recorded).
+Usage: python benchmarks/five_balls.py [--runs INTEGRATOR ...]
 """
 
 from __future__ import annotations
 
+import argparse
+import json
 import time
 import warnings
 
@@ -49,6 +54,8 @@ RUNS = [
     ("projective", "0.9 x stable", {"projective_iterations": 1}),
     ("projective", "0.9 x stable", {"projective_iterations": 2}),
     ("projective", "0.9 x stable", {"projective_iterations": 4}),
+    ("xpbd", "1/60 s frames", {}),
+    ("xpbd", "1/60 s frames", {"xpbd_substeps": 16}),
 ]
 
 
@@ -65,12 +72,15 @@ def sampled_run(model, sim: sb.Simulator) -> tuple[float, float, float]:
 
 
 def setup(integrator: str, step: str, options: dict) -> tuple[sb.Model, float, dict]:
-    """The scene's model, the step [s] a run of RUNS takes (the scene's, 1/60 s, or 0.9 of
-    the integrator's stability estimate) and its Simulator options."""
+    """The scene's model, the step [s] a run of RUNS takes (the scene's, 1/60 s, a 1/60 s
+    frame of substeps, or 0.9 of the integrator's stability estimate) and its Simulator
+    options."""
     scene = load_scene("bouncing-balls")
     model = scene.model
     if step == "scene dt":
         dt = scene.dt
+    elif step == "1/60 s frames":
+        dt = 1.0 / 60.0
     elif step == "1/60 s":
         dt = 1.0 / 60.0
         options = {"implicit_tolerance": 1e-3, **options}
@@ -93,6 +103,8 @@ def run(integrator: str, step: str, options: dict, reference_energy: float) -> d
         name += f" ({options['projective_iterations']} it.)"
     if "force_precision" in options:
         name += f" ({options['force_precision']} forces)"
+    if sim.integrator == sb.Integrator.XPBD:
+        name += f" ({sim.solver.substeps} substeps)"
     sim.run(model.state(), 2)  # compile
     best = np.inf
     try:
@@ -127,10 +139,18 @@ def run(integrator: str, step: str, options: dict, reference_energy: float) -> d
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--runs", nargs="+", choices=sorted({r[0] for r in RUNS}), default=None,
+        help="measure only the runs of these integrators and merge them into five_balls.json",
+    )  # fmt: skip
+    args = parser.parse_args()
     model = load_scene("bouncing-balls").model
     reference_energy, low, high = sampled_run(model, sb.Simulator(model, integrator="rk4", dt=5e-4))
     rows = []
     for integrator, step, options in RUNS:
+        if args.runs is not None and integrator not in args.runs:
+            continue
         row = run(integrator, step, options, reference_energy)
         rows.append(row)
         if "error" in row:
@@ -142,6 +162,19 @@ def main() -> None:
             f"kinetic energy {row['kinetic_energy_ratio']:.2f}x RK4's  ok={row['ok']}",
             flush=True,
         )
+    if args.runs is not None:
+        result = json.loads((RESULTS / "five_balls.json").read_text())
+        by_name = {r["name"]: k for k, r in enumerate(result["runs"])}
+        for row in rows:
+            if row["name"] in by_name:
+                result["runs"][by_name[row["name"]]] = row
+            else:
+                result["runs"].append(row)
+        result[f"{'+'.join(args.runs)} measured"] = time.strftime("%Y-%m-%d")
+        write_json(RESULTS / "five_balls.json", result)
+        plot(result["runs"])
+        print(f"merged {args.runs} into {RESULTS / 'five_balls.json'} and .png")
+        return
     result = run_record(
         "five_balls",
         threads=1,
