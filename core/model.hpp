@@ -57,6 +57,22 @@ struct Slots {
     const index* face_start = nullptr;  // (G + 1,)
     const index* face_next = nullptr;   // (slots, 8) face (i, j, k) seen from i: j
     const index* face_last = nullptr;   // (slots, 8) and k
+    // membrane triangles seen from each corner (terms/membrane.hpp, lane_triangle): per
+    // ring slot s, the one on the ring's face (j_{s-1}, j_s) (slot 0: the closing face);
+    // the others (a second layer, triangles off the rings) in their own slots, (i, next,
+    // last). Each slot's geometry (4, 8) (u, w, v, A0: the rest frame's gradient vectors
+    // of its two neighbours, (u, w) and (0, v), and the rest area [m^2], 0 for none) and
+    // its coefficient row, an index into membrane_rows (R, 8) (row 0 zero).
+    const double* ring_membrane = nullptr;       // (ring slots, 4, 8)
+    const index* ring_membrane_row = nullptr;    // (ring slots, 8)
+    const index* membrane_start = nullptr;       // (G + 1,)
+    const index* membrane_next = nullptr;        // (slots, 8)
+    const index* membrane_last = nullptr;        // (slots, 8)
+    const double* membrane_geometry = nullptr;   // (slots, 4, 8)
+    const index* membrane_row = nullptr;         // (slots, 8)
+    const double* membrane_rows = nullptr;       // (R, 8) [Pa m]
+    bool membrane_damped = false;  // some row has strain-rate damping
+    bool membrane_one_row = false;  // every triangle has row 1 (one material)
 };
 
 /// Everything fixed after ModelBuilder.finalize (softbody.sim.model.Model), SI units,
@@ -172,7 +188,7 @@ struct LaneBuffers {
     const float* ring_stiffness_f = nullptr;    // [N/m]
     const float* ring_damping_f = nullptr;      // [N s/m]
     const float* ring_face_f = nullptr;         // 1 where (j_{s-1}, j_s) is a face
-    bool extra_slots = false;  // the model has springs off the rings or broken fans
+    bool extra_slots = false;  // the model has springs off the rings, broken fans or membranes
 };
 
 /// Scratch for the explicit schemes, owned by softbody::ExplicitSolver.

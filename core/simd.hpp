@@ -159,7 +159,7 @@ struct Rows {
 };
 
 /// The rows (kRow doubles each) of particles idx[0 .. kLanes-1], one lane each.
-inline Rows load_rows(const double* rows, const index* idx) {
+SOFTBODY_ALWAYS_INLINE Rows load_rows(const double* rows, const index* idx) {
 #if defined(__AVX512F__)
     __m512d r[8];
     for (int l = 0; l < 8; ++l) r[l] = _mm512_loadu_pd(rows + kRow * idx[l]);

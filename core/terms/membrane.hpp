@@ -34,9 +34,10 @@
 // semi-definite; the damping C = -G^T D_F G, D_F = A0 H beta L^T C0 L (L: Fdot -> Gdot),
 // is so already.
 //
-// Forms: force and energy (edge-major, per triangle; no lane form, so the vertex-major
-// pass does not cover it and a model with membranes takes the general step, not the
-// fused symplectic pass), prepare + jacobian_product (the 6 x 6 blocks per triangle
+// Forms: force and energy (edge-major, per triangle), the lane form (lane_triangle: the
+// vertex-major pass computes each triangle at its three corners, fused with the ring of
+// neighbour rows it walks, so that no force is scattered; with it a model with membranes
+// keeps the fused symplectic pass), prepare + jacobian_product (the 6 x 6 blocks per triangle
 // stored in Linearization::membrane_hessian, or computed on the fly where that is null),
 // add_smoother_blocks (the triangle's 3 x 3 blocks of M - h C - h^2 K: its corners'
 // diagonal blocks, and the blocks between corners as the smoother's membrane entries;
@@ -51,6 +52,7 @@
 #include <cmath>
 
 #include "model.hpp"
+#include "simd.hpp"
 #include "terms/term.hpp"
 #include "vec.hpp"
 
@@ -607,10 +609,91 @@ inline void damping_ratios(const Model& m, double& lo, double& hi) {
     }
 }
 
+/// The lane form (the vertex-major pass, solvers/lanes.hpp): triangle (i, a, b) seen from
+/// its corner i, kLanes particles i at once, its force on i added to fx, fy, fz [N]. Rows
+/// of i, a, b (positions and velocities), with a - i and b - i given (the pass has them);
+/// `geometry` at the slot's lane 0 in a (slots, 4, 8) table (Slots::ring_membrane: u, w, v,
+/// A0, 8 apart), `row` its (kLanes,) coefficient rows in Slots::membrane_rows. In the rest
+/// frame whose x axis runs from i to a, a's gradient vector is (u, w) and b's (0, v), so
+/// F = [u (a - i), w (a - i) + v (b - i)] and i's is -(u, w + v); the stress S (the
+/// materials' dW/dC and the viscous stress in one form, with -2 H folded in: plan/lanes.cpp,
+/// membrane_row) gives f_i = A0 F S g_i, the edge-major force's corner term. Each triangle
+/// is computed at its three corners (3 x the arithmetic of `force`, without its scatter).
+SOFTBODY_ALWAYS_INLINE void lane_triangle(const Model& m, const double* geometry, const index* row,
+                          const Rows& self, const Rows& a, vd ax, vd ay, vd az, const Rows& b,
+                          vd bx, vd by, vd bz, vd& fx, vd& fy, vd& fz) {
+    const vd u = load_lanes(geometry), w = load_lanes(geometry + kGroup);
+    const vd v = load_lanes(geometry + 2 * kGroup), area = load_lanes(geometry + 3 * kGroup);
+    // the coefficients: one row for every lane (a body of one material), else a transpose
+    // (a lane without a triangle has no area: any row gives it no force)
+    vd m1, m2, s1, s2, d1, d2;
+    bool same = true;
+    if (!m.slots.membrane_one_row)
+        for (int l = 1; l < kLanes; ++l) same = same && row[l] == row[0];
+    if (same) {
+        const double* r = m.slots.membrane_rows + 8 * (m.slots.membrane_one_row ? 1 : row[0]);
+        m1 = splat(r[0]), m2 = splat(r[1]), s1 = splat(r[2]), s2 = splat(r[3]);
+        d1 = splat(r[4]), d2 = splat(r[5]);
+    } else {
+        const Rows r = load_rows(m.slots.membrane_rows, row);
+        m1 = r.x, m2 = r.y, s1 = r.z, s2 = r.vx, d1 = r.vy, d2 = r.vz;
+    }
+    // F = [f0 f1] and C = F^T F = [[ca, cb], [cb, cc]]
+    const vd f0x = u * ax, f0y = u * ay, f0z = u * az;
+    const vd f1x = w * ax + v * bx, f1y = w * ay + v * by, f1z = w * az + v * bz;
+    const vd ca = f0x * f0x + f0y * f0y + f0z * f0z;
+    const vd cb = f0x * f1x + f0y * f1y + f0z * f1z;
+    const vd cc = f1x * f1x + f1y * f1y + f1z * f1z;
+    const vd tr = ca + cc, j = ca * cc - cb * cb;
+    // 1 / J where the material is incompressible and there is a triangle (J <= 0 then gives
+    // what `force` gives), else of 1, so that no lane multiplies an infinity by a zero
+    const vi incompressible = ((m1 != 0.0) | (m2 != 0.0)) & (area != 0.0);
+    const vd inv_j = 1.0 / (incompressible ? j : splat(1.0)), inv_j2 = inv_j * inv_j;
+    // S = alpha I + beta adj C + s1 C (+ the viscous stress)
+    const vd alpha = m1 + m2 * inv_j - s1 + s2 * (tr - 2.0);
+    const vd beta = m2 - (m1 + m2 * tr) * inv_j2;
+    vd sa = alpha + beta * cc + s1 * ca, sb = (s1 - beta) * cb, sc = alpha + beta * ca + s1 * cc;
+    if (m.slots.membrane_damped) {  // dC/dt = Fdot^T F + F^T Fdot
+        const vd vax = a.vx - self.vx, vay = a.vy - self.vy, vaz = a.vz - self.vz;
+        const vd vbx = b.vx - self.vx, vby = b.vy - self.vy, vbz = b.vz - self.vz;
+        const vd r0x = u * vax, r0y = u * vay, r0z = u * vaz;
+        const vd r1x = w * vax + v * vbx, r1y = w * vay + v * vby, r1z = w * vaz + v * vbz;
+        const vd da = 2.0 * (r0x * f0x + r0y * f0y + r0z * f0z);
+        const vd db = r0x * f1x + r0y * f1y + r0z * f1z + f0x * r1x + f0y * r1y + f0z * r1z;
+        const vd dc = 2.0 * (r1x * f1x + r1y * f1y + r1z * f1z);
+        const vd dtr = d2 * (da + dc);
+        sa += d1 * da + dtr, sb += d1 * db, sc += d1 * dc + dtr;
+    }
+    // f_i = A0 F S g_i with g_i = -(u, w + v)
+    const vd gi0 = -area * u, gi1 = -area * (w + v);
+    const vd k0 = gi0 * sa + gi1 * sb, k1 = gi0 * sb + gi1 * sc;  // S g_i
+    fx += k0 * f0x + k1 * f1x;
+    fy += k0 * f0y + k1 * f1y;
+    fz += k0 * f0z + k1 * f1z;
+}
+
+/// The lane form's triangles off the rings (Slots::membrane_*: a second layer, triangles
+/// whose faces make no fan of the particle's), for particles [kGroup g + lane0, + kLanes),
+/// their force added to fx, fy, fz [N]; rows (8 G, 8) the packed state.
+inline void lane_force(const Model& m, const double* rows, index g, int lane0, const Rows& self,
+                       vd& fx, vd& fy, vd& fz) {
+    for (index s = m.slots.membrane_start[g]; s < m.slots.membrane_start[g + 1]; ++s) {
+        const index e = kGroup * s + lane0;
+        const Rows a = load_rows(rows, m.slots.membrane_next + e);
+        const Rows b = load_rows(rows, m.slots.membrane_last + e);
+        lane_triangle(m, m.slots.membrane_geometry + 4 * kGroup * s + lane0,
+                      m.slots.membrane_row + e, self, a, a.x - self.x, a.y - self.y,
+                      a.z - self.z, b, b.x - self.x, b.y - self.y, b.z - self.z, fx, fy, fz);
+    }
+}
+
 /// The registered term (terms/registry.hpp).
 struct Term : TermBase {
     static constexpr const char* kName = "membrane";
     static constexpr bool kProjected = true, kEnergy = true, kBound = true;
+    // the vertex-major pass gives its force (lane_triangle), and then the fused symplectic
+    // pass covers it; without the pass its edge-major force keeps its place in the sums
+    static constexpr bool kLane = true, kFusedInPass = true;
     /// The stability estimate: bound_rows by part, and beta into the c / k range.
     static void bound(const Model& m, const Control&, const double* q, double* rows,
                       TermBound& out) {
