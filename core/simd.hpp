@@ -64,6 +64,18 @@ inline vd vsqrt(vd x) {
 #endif
 }
 
+/// a b + c per lane: rounded once (FMA) with AVX2 and AVX-512, a b then + c on the scalar
+/// path (whose kernels are built without FMA).
+inline vd fmadd(vd a, vd b, vd c) {
+#if defined(__AVX512F__)
+    return _mm512_fmadd_pd(a, b, c);
+#elif defined(__AVX2__)
+    return _mm256_fmadd_pd(a, b, c);
+#else
+    return a * b + c;
+#endif
+}
+
 /// 1 / sqrt(x) per lane. AVX-512: the 14-bit estimate refined by two Newton steps (each
 /// doubles the correct bits: 28, then past double precision), so within a few ulp of the
 /// correctly rounded value, without the divide and square root that cost ~20 cycles each

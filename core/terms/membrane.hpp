@@ -638,38 +638,43 @@ SOFTBODY_ALWAYS_INLINE void lane_triangle(const Model& m, const double* geometry
         const Rows r = load_rows(m.slots.membrane_rows, row);
         m1 = r.x, m2 = r.y, s1 = r.z, s2 = r.vx, d1 = r.vy, d2 = r.vz;
     }
-    // F = [f0 f1] and C = F^T F = [[ca, cb], [cb, cc]]
+    // F = [f0 f1] and C = F^T F = [[ca, cb], [cb, cc]] (dot products by fused multiply-adds)
+    auto dot3 = [](vd x0, vd y0, vd z0, vd x1, vd y1, vd z1) {
+        return fmadd(x0, x1, fmadd(y0, y1, z0 * z1));
+    };
     const vd f0x = u * ax, f0y = u * ay, f0z = u * az;
-    const vd f1x = w * ax + v * bx, f1y = w * ay + v * by, f1z = w * az + v * bz;
-    const vd ca = f0x * f0x + f0y * f0y + f0z * f0z;
-    const vd cb = f0x * f1x + f0y * f1y + f0z * f1z;
-    const vd cc = f1x * f1x + f1y * f1y + f1z * f1z;
-    const vd tr = ca + cc, j = ca * cc - cb * cb;
+    const vd f1x = fmadd(w, ax, v * bx), f1y = fmadd(w, ay, v * by), f1z = fmadd(w, az, v * bz);
+    const vd ca = dot3(f0x, f0y, f0z, f0x, f0y, f0z);
+    const vd cb = dot3(f0x, f0y, f0z, f1x, f1y, f1z);
+    const vd cc = dot3(f1x, f1y, f1z, f1x, f1y, f1z);
+    const vd tr = ca + cc, j = fmadd(ca, cc, -(cb * cb));
     // 1 / J where the material is incompressible and there is a triangle (J <= 0 then gives
     // what `force` gives), else of 1, so that no lane multiplies an infinity by a zero
     const vi incompressible = ((m1 != 0.0) | (m2 != 0.0)) & (area != 0.0);
     const vd inv_j = 1.0 / (incompressible ? j : splat(1.0)), inv_j2 = inv_j * inv_j;
     // S = alpha I + beta adj C + s1 C (+ the viscous stress)
-    const vd alpha = m1 + m2 * inv_j - s1 + s2 * (tr - 2.0);
-    const vd beta = m2 - (m1 + m2 * tr) * inv_j2;
-    vd sa = alpha + beta * cc + s1 * ca, sb = (s1 - beta) * cb, sc = alpha + beta * ca + s1 * cc;
+    const vd alpha = fmadd(m2, inv_j, m1) - s1 + s2 * (tr - 2.0);
+    const vd beta = m2 - fmadd(m2, tr, m1) * inv_j2;
+    vd sa = fmadd(beta, cc, fmadd(s1, ca, alpha)), sb = (s1 - beta) * cb;
+    vd sc = fmadd(beta, ca, fmadd(s1, cc, alpha));
     if (m.slots.membrane_damped) {  // dC/dt = Fdot^T F + F^T Fdot
         const vd vax = a.vx - self.vx, vay = a.vy - self.vy, vaz = a.vz - self.vz;
         const vd vbx = b.vx - self.vx, vby = b.vy - self.vy, vbz = b.vz - self.vz;
         const vd r0x = u * vax, r0y = u * vay, r0z = u * vaz;
-        const vd r1x = w * vax + v * vbx, r1y = w * vay + v * vby, r1z = w * vaz + v * vbz;
-        const vd da = 2.0 * (r0x * f0x + r0y * f0y + r0z * f0z);
-        const vd db = r0x * f1x + r0y * f1y + r0z * f1z + f0x * r1x + f0y * r1y + f0z * r1z;
-        const vd dc = 2.0 * (r1x * f1x + r1y * f1y + r1z * f1z);
+        const vd r1x = fmadd(w, vax, v * vbx), r1y = fmadd(w, vay, v * vby);
+        const vd r1z = fmadd(w, vaz, v * vbz);
+        const vd da = 2.0 * dot3(r0x, r0y, r0z, f0x, f0y, f0z);
+        const vd db = dot3(r0x, r0y, r0z, f1x, f1y, f1z) + dot3(f0x, f0y, f0z, r1x, r1y, r1z);
+        const vd dc = 2.0 * dot3(r1x, r1y, r1z, f1x, f1y, f1z);
         const vd dtr = d2 * (da + dc);
-        sa += d1 * da + dtr, sb += d1 * db, sc += d1 * dc + dtr;
+        sa = fmadd(d1, da, sa + dtr), sb = fmadd(d1, db, sb), sc = fmadd(d1, dc, sc + dtr);
     }
     // f_i = A0 F S g_i with g_i = -(u, w + v)
     const vd gi0 = -area * u, gi1 = -area * (w + v);
-    const vd k0 = gi0 * sa + gi1 * sb, k1 = gi0 * sb + gi1 * sc;  // S g_i
-    fx += k0 * f0x + k1 * f1x;
-    fy += k0 * f0y + k1 * f1y;
-    fz += k0 * f0z + k1 * f1z;
+    const vd k0 = fmadd(gi0, sa, gi1 * sb), k1 = fmadd(gi0, sb, gi1 * sc);  // S g_i
+    fx += fmadd(k0, f0x, k1 * f1x);
+    fy += fmadd(k0, f0y, k1 * f1y);
+    fz += fmadd(k0, f0z, k1 * f1z);
 }
 
 /// The lane form's triangles off the rings (Slots::membrane_*: a second layer, triangles
