@@ -261,7 +261,8 @@ std::array<double, 6> membrane_row(const Model& m, index t) {
 
 /// Triangle t seen from its corner c, with neighbours `prev` and `cur` (corners cp, cq):
 /// u, w, v (the gradient vectors (u, w) of prev and (0, v) of cur in the rest frame whose
-/// x axis runs from c to prev) and the rest area A0, into out[0], out[stride], ...
+/// x axis runs from c to prev; the rest area is A0 = 1 / (2 u |v|)), into out[0],
+/// out[stride], out[2 stride]
 void membrane_view(const Model& m, index t, int c, int cp, int cq, double* out,
                    size_t stride) {
     const double* bm = m.membranes.rest_inverse + 4 * t;  // Dm^-1, row-major
@@ -276,7 +277,6 @@ void membrane_view(const Model& m, index t, int c, int cp, int cq, double* out,
     out[0] = 1.0 / len;
     out[stride] = -along / (len * across);
     out[2 * stride] = 1.0 / across;
-    out[3 * stride] = m.membranes.rest_area[t];
 }
 
 }  // namespace
@@ -336,7 +336,7 @@ void VertexLayout::build_membranes(Model& m, const std::vector<std::vector<index
         }
     }
     const size_t ring_entries = static_cast<size_t>(kGroup * ring_start_.back());
-    ring_membrane_.assign(4 * ring_entries, 0.0);
+    ring_membrane_.assign(kMembraneGeometry * ring_entries, 0.0);
     ring_membrane_row_.assign(ring_entries, 0);
     membrane_start_.assign(static_cast<size_t>(groups + 1), 0);
     for (index g = 0; g < groups; ++g) {
@@ -349,7 +349,7 @@ void VertexLayout::build_membranes(Model& m, const std::vector<std::vector<index
     const size_t entries = static_cast<size_t>(kGroup * membrane_start_.back());
     membrane_next_.assign(entries, 0);
     membrane_last_.assign(entries, 0);
-    membrane_geometry_.assign(4 * entries, 0.0);
+    membrane_geometry_.assign(kMembraneGeometry * entries, 0.0);
     membrane_row_.assign(entries, 0);
     for (index g = 0; g < groups; ++g)
         for (index l = 0; l < kGroup; ++l) {
@@ -364,7 +364,7 @@ void VertexLayout::build_membranes(Model& m, const std::vector<std::vector<index
                     const size_t local = k == 0 && rings[own].size() < slots ? rings[own].size() : k;
                     const size_t s = static_cast<size_t>(r0) + local;
                     membrane_view(m, view.t, view.c, view.cp, view.cq,
-                                  ring_membrane_.data() + 4 * kGroup * s + l, kGroup);
+                                  ring_membrane_.data() + kMembraneGeometry * kGroup * s + l, kGroup);
                     ring_membrane_row_[kGroup * s + l] = tri_row[static_cast<size_t>(view.t)];
                 }
             }
@@ -378,7 +378,7 @@ void VertexLayout::build_membranes(Model& m, const std::vector<std::vector<index
                     membrane_next_[e] = tri[view.cp];
                     membrane_last_[e] = tri[view.cq];
                     membrane_view(m, view.t, view.c, view.cp, view.cq,
-                                  membrane_geometry_.data() + 4 * kGroup * static_cast<size_t>(s) + l,
+                                  membrane_geometry_.data() + kMembraneGeometry * kGroup * static_cast<size_t>(s) + l,
                                   kGroup);
                     membrane_row_[e] = tri_row[static_cast<size_t>(view.t)];
                 }
