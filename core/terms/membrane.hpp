@@ -96,6 +96,18 @@ inline Element element(const Model& m, const double* q, index t) {
     return e;
 }
 
+/// Triangle t's corners and gradient vectors without F (what the matrix-free product needs).
+inline Element corners(const Model& m, index t) {
+    Element e;
+    for (int a = 0; a < 3; ++a) e.v[a] = m.membranes.indices[3 * t + a];
+    const double* bm = m.membranes.rest_inverse + 4 * t;  // row-major Dm^-1
+    e.g[1][0] = bm[0], e.g[1][1] = bm[1];
+    e.g[2][0] = bm[2], e.g[2][1] = bm[3];
+    e.g[0][0] = -(bm[0] + bm[2]), e.g[0][1] = -(bm[1] + bm[3]);
+    e.f0 = e.f1 = {0.0, 0.0, 0.0};
+    return e;
+}
+
 /// Fdot's columns for velocities qd (N, 3) (the same map as F).
 inline void rate(const Element& e, const double* qd, V3& r0, V3& r1) {
     r0 = {0.0, 0.0, 0.0};
@@ -423,7 +435,7 @@ inline void jacobian_product(const Model& m, const double* q, const double* h, d
                              double alpha_k, const double* p, double* out) {
     double local[kBlock];
     for (index t = 0; t < m.membranes.count; ++t) {
-        const Element e = element(m, q, t);
+        const Element e = corners(m, t);  // F is in the blocks
         const double* b = h != nullptr ? h + kBlock * t : local;
         if (h == nullptr) blocks(m, q, t, local);
         double mix[kSym6];
