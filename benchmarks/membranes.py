@@ -11,9 +11,10 @@ N s/m) or as a neo-Hookean membrane of the same small-strain stiffness (mu H = 2
    and the membrane's rate over the springs' in the same round (min-max): the issue's
    target is >= 0.5 at 40,962.
 2. Implicit Euler at 1/60 s, 2 s of the drop of the 10,242-vertex membrane ball (multigrid;
-   CG tolerance 1e-4, and 1e-3 beside it; at the spring ball's 1e-2 the membrane ball
-   inverts on landing): simulated seconds per second, CG iterations per step (mean, most),
-   the rebound, the volume range. The target: real time or better at 1e-4.
+   CG tolerance 1e-4, and 1e-3 beside it once; at the spring ball's 1e-2 the membrane ball
+   inverts on landing): simulated seconds per second (best of ROUNDS with a baseline),
+   CG iterations per step (mean, most), the rebound, the volume range. The target: real
+   time or better at 1e-4.
 
 Times are the worker process's CPU time (each run is one thread): on this shared machine
 the wall clock counts other people's work too, and on a quiet one the two agree. With
@@ -174,22 +175,31 @@ def main() -> None:
     )  # fmt: skip
     args = parser.parse_args()
     rows = explicit(args.max_subdivisions, args.baseline)
-    drops = {}
-    workers = versions(args.baseline)
-    for tol in TOLERANCES:
+    drops, speedups = {}, []
+    for r in range(ROUNDS if args.baseline else 1):  # the target's tolerance, paired
+        workers = versions(args.baseline)
+        got = {w.name: w.call("membranes:implicit", tolerance=TOLERANCES[0])
+               for w in (workers if r % 2 == 0 else workers[::-1])}  # fmt: skip
+        for name, drop in got.items():
+            best = drops.get((name, TOLERANCES[0]))
+            if best is None or drop["realtime_factor"] > best["realtime_factor"]:
+                drops[(name, TOLERANCES[0])] = drop
+        if args.baseline:
+            speedups.append(got["this"]["realtime_factor"] / got["baseline"]["realtime_factor"])
+        if r == 0:
+            drops[("this", TOLERANCES[1])] = workers[0].call("membranes:implicit",
+                                                             tolerance=TOLERANCES[1])  # fmt: skip
         for w in workers:
-            if w.name == "baseline" and tol != TOLERANCES[0]:
-                continue
-            drop = w.call("membranes:implicit", tolerance=tol)
-            drops[(w.name, tol)] = drop
-            print(f"implicit {drop['vertices']} ({w.name}, CG {tol:g}): "
-                  f"{drop['realtime_factor']:.2f}x real time ({drop['realtime_factor_wall']:.2f}x "
-                  f"by the wall clock), CG {drop['cg_iterations_mean']:.1f} mean / "
-                  f"{drop['cg_iterations_most']:.0f} most per step, rebound "
-                  f"{drop['rebound_m']:.2f} m, volume {drop['volume_range'][0]:.2f}-"
-                  f"{drop['volume_range'][1]:.2f}", flush=True)  # fmt: skip
-    for w in workers:
-        w.close()
+            w.close()
+    for (name, tol), drop in sorted(drops.items()):
+        print(f"implicit {drop['vertices']} ({name}, CG {tol:g}): "
+              f"{drop['realtime_factor']:.2f}x real time ({drop['realtime_factor_wall']:.2f}x "
+              f"by the wall clock), CG {drop['cg_iterations_mean']:.1f} mean / "
+              f"{drop['cg_iterations_most']:.0f} most per step, rebound "
+              f"{drop['rebound_m']:.2f} m, volume {drop['volume_range'][0]:.2f}-"
+              f"{drop['volume_range'][1]:.2f}", flush=True)  # fmt: skip
+    if speedups:
+        print(f"implicit: this version over the baseline, per round {np.round(speedups, 3)}")
     write_json(
         RESULTS / "membranes.json",
         run_record(
@@ -204,8 +214,8 @@ def main() -> None:
             explicit=rows,
             implicit=drops[("this", TOLERANCES[0])],
             implicit_looser=drops[("this", TOLERANCES[1])],
-            **({"implicit_baseline": drops[("baseline", TOLERANCES[0])]}
-               if args.baseline else {}),
+            **({"implicit_baseline": drops[("baseline", TOLERANCES[0])],
+                "implicit_speedup_rounds": speedups} if args.baseline else {}),
         ),
     )  # fmt: skip
     plot(rows, drops)
