@@ -38,8 +38,8 @@
 //               general step)
 //
 // Forms the vertex-major pass fuses (lanes) stay in each term's file beside these
-// (gravity::lane_force, springs::lane_pair, gas::lane_face); the stability estimate's
-// Gershgorin pieces too (kernels.cpp composes them).
+// (gravity::lane_force, springs::lane_pair, gas::lane_face, membrane::lane_triangle); the
+// stability estimate's Gershgorin pieces too (kernels.cpp composes them).
 #pragma once
 
 #include "model.hpp"
