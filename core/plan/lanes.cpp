@@ -357,29 +357,33 @@ void VertexLayout::build_membranes(Model& m, const std::vector<std::vector<index
             const size_t own = static_cast<size_t>(i);
             if (i < n) {
                 const index r0 = ring_start_[static_cast<size_t>(g)];
-                const size_t slots = static_cast<size_t>(ring_start_[static_cast<size_t>(g + 1)] - r0);
+                const size_t slots =
+                    static_cast<size_t>(ring_start_[static_cast<size_t>(g + 1)] - r0);
                 for (const auto& [k, view] : on_ring[own]) {
                     // the closing face (k = 0) sits where the pass meets it: the first
                     // padding slot of a padded ring, else slot 0 (the end of the ring)
-                    const size_t local = k == 0 && rings[own].size() < slots ? rings[own].size() : k;
+                    const size_t local =
+                        k == 0 && rings[own].size() < slots ? rings[own].size() : k;
                     const size_t s = static_cast<size_t>(r0) + local;
                     membrane_view(m, view.t, view.c, view.cp, view.cq,
-                                  ring_membrane_.data() + kMembraneGeometry * kGroup * s + l, kGroup);
+                                  ring_membrane_.data() + kMembraneGeometry * kGroup * s + l,
+                                  kGroup);
                     ring_membrane_row_[kGroup * s + l] = tri_row[static_cast<size_t>(view.t)];
                 }
             }
             const index s0 = membrane_start_[static_cast<size_t>(g)];
             for (index s = s0; s < membrane_start_[static_cast<size_t>(g + 1)]; ++s) {
-                const size_t e = static_cast<size_t>(kGroup * s + l), k = static_cast<size_t>(s - s0);
+                const size_t e = static_cast<size_t>(kGroup * s + l);
+                const size_t k = static_cast<size_t>(s - s0);
                 membrane_next_[e] = membrane_last_[e] = i;  // padding: no triangle
                 if (i < n && k < extra[own].size()) {
                     const View& view = extra[own][k];
                     const index* tri = m.membranes.indices + 3 * view.t;
                     membrane_next_[e] = tri[view.cp];
                     membrane_last_[e] = tri[view.cq];
+                    const size_t at = kMembraneGeometry * kGroup * static_cast<size_t>(s) + l;
                     membrane_view(m, view.t, view.c, view.cp, view.cq,
-                                  membrane_geometry_.data() + kMembraneGeometry * kGroup * static_cast<size_t>(s) + l,
-                                  kGroup);
+                                  membrane_geometry_.data() + at, kGroup);
                     membrane_row_[e] = tri_row[static_cast<size_t>(view.t)];
                 }
             }
@@ -393,8 +397,7 @@ void VertexLayout::build_membranes(Model& m, const std::vector<std::vector<index
     m.slots.membrane_row = membrane_row_.data();
     m.slots.membrane_rows = membrane_rows_.data();
     m.slots.membrane_damped = damped;
-    m.slots.membrane_one_row = membrane_rows_.size() == 16 && tm > 0 &&
-                               std::all_of(tri_row.begin(), tri_row.end(), [](index r) { return r == 1; });
+    m.slots.membrane_one_row = membrane_rows_.size() == 16 && tm > 0;  // one row past row 0
 }
 
 }  // namespace softbody

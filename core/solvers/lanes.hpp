@@ -79,7 +79,7 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
                     gas::lane_face(ux, uy, uz, dx, dy, dz, load_lanes(m.slots.ring_face + e), rx,
                                    ry, rz, gx, gy, gz, six_v);
                     if constexpr (kMembranes)
-                        membrane::lane_triangle(m, m.slots.ring_membrane + kMembraneGeometry * kGroup * s + lane0,
+                        membrane::lane_triangle(m, membrane::ring_geometry(m, s, lane0),
                                                 m.slots.ring_membrane_row + e, self, last_row, ux,
                                                 uy, uz, o, dx, dy, dz, fx, fy, fz);
                 }
@@ -92,7 +92,7 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
                                ry, rz, gx, gy, gz, six_v);
                 if constexpr (kMembranes)
                     membrane::lane_triangle(
-                        m, m.slots.ring_membrane + kMembraneGeometry * kGroup * m.slots.ring_start[g] + lane0,
+                        m, membrane::ring_geometry(m, m.slots.ring_start[g], lane0),
                         m.slots.ring_membrane_row + e0, self, last_row, ux, uy, uz, first_row,
                         ux0, uy0, uz0, fx, fy, fz);
             }
@@ -125,13 +125,13 @@ inline void membrane_ring(const Model& m, const double* rows, index g, int lane0
         if (s == s0)
             first_row = o;
         else
-            membrane::lane_triangle(m, m.slots.ring_membrane + kMembraneGeometry * kGroup * s + lane0,
+            membrane::lane_triangle(m, membrane::ring_geometry(m, s, lane0),
                                     m.slots.ring_membrane_row + e, self, last_row,
                                     last_row.x - self.x, last_row.y - self.y, last_row.z - self.z,
                                     o, o.x - self.x, o.y - self.y, o.z - self.z, fx, fy, fz);
         last_row = o;
     }
-    membrane::lane_triangle(m, m.slots.ring_membrane + kMembraneGeometry * kGroup * s0 + lane0,
+    membrane::lane_triangle(m, membrane::ring_geometry(m, s0, lane0),
                             m.slots.ring_membrane_row + kGroup * s0 + lane0, self, last_row,
                             last_row.x - self.x, last_row.y - self.y, last_row.z - self.z,
                             first_row, first_row.x - self.x, first_row.y - self.y,

@@ -621,6 +621,11 @@ inline void damping_ratios(const Model& m, double& lo, double& hi) {
     }
 }
 
+/// Ring slot s's geometry at lane lane0 (Slots::ring_membrane), for lane_triangle.
+inline const double* ring_geometry(const Model& m, index s, int lane0) {
+    return m.slots.ring_membrane + kMembraneGeometry * kGroup * s + lane0;
+}
+
 /// The lane form (the vertex-major pass, solvers/lanes.hpp): triangle (i, a, b) seen from
 /// its corner i, kLanes particles i at once, its force on i added to fx, fy, fz [N]. Rows
 /// of i, a, b (positions and velocities), with a - i and b - i given (the pass has them);
