@@ -139,6 +139,32 @@ def startup(data: dict) -> list[dict]:
     }]  # fmt: skip
 
 
+def membranes(data: dict) -> list[dict]:
+    """Issue 30's targets: the explicit step with a neo-Hookean skin at 40,962 vertices
+    against the spring skin's in the same rounds, and implicit Euler at 1/60 s on the
+    10,242-vertex membrane ball drop (CPU time of its one thread)."""
+    row = next(r for r in data["explicit"] if r["vertices"] == 40962)
+    source = {"source": "membranes.json", "date": data["date"],
+              "command": data.get("command", "python benchmarks/membranes.py")}  # fmt: skip
+    lo, hi = row["membrane_over_springs"]
+    drop = data["implicit"]
+    return [
+        {"key": "membrane-explicit-step", "case": "explicit step, membrane ball",
+         "vertices": 40962, "integrator": "symplectic Euler, neo-Hookean skin",
+         "dt_s": data["dt_explicit"], "step": f"{_ms(data['dt_explicit'])} (fixed)",
+         "value": row["mvps"]["membrane"], "unit": "M vertex-steps/s", **source,
+         "check": f"{lo:.2f}-{hi:.2f} of the spring skin's rate in the same rounds "
+                  "(target >= 0.5)"},
+        {"key": "membrane-implicit-drop", "case": "membrane ball drop",
+         "vertices": drop["vertices"],
+         "integrator": f"implicit Euler, multigrid CG {drop['tolerance']:g}",
+         "dt_s": 1 / 60, "step": "1/60 s", "value": drop["realtime_factor"],
+         "unit": REAL_TIME, **source,
+         "check": f"CPU seconds of its thread; {drop['cg_iterations_mean']:.1f} CG iterations "
+                  f"per step, rebound {drop['rebound_m']:.2f} m"},
+    ]  # fmt: skip
+
+
 def summarise(results: Path = RESULTS) -> dict:
     """The summary record from the result files in ``results``."""
     rows = [
@@ -146,6 +172,7 @@ def summarise(results: Path = RESULTS) -> dict:
         *ball_drop(_load(results, "ball_drop")),
         *engine(_load(results, "engine")),
         *startup(_load(results, "startup")),
+        *membranes(_load(results, "membranes")),
     ]
     return {
         "benchmark": "summary",

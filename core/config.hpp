@@ -16,6 +16,13 @@ using index = std::int64_t;  // NumPy's int64, the index type of every model arr
 // kernels.cpp is compiled once per instruction set with SOFTBODY_ISA set to scalar, avx2 or
 // avx512. Every function of the kernel headers lives in softbody::SOFTBODY_KERNELS, a
 // namespace of its own per build, so the three copies never meet at link time.
+// A kernel helper the compiler must inline (one called at several places in a hot loop,
+// whose vector arguments would otherwise go through memory).
+#if defined(__GNUC__) || defined(__clang__)
+#define SOFTBODY_ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define SOFTBODY_ALWAYS_INLINE __forceinline
+#endif
 #define SOFTBODY_CAT2(a, b) a##b
 #define SOFTBODY_CAT(a, b) SOFTBODY_CAT2(a, b)
 #ifdef SOFTBODY_ISA

@@ -11,6 +11,10 @@
 
 namespace softbody {
 
+/// Doubles per membrane triangle seen from a corner in the vertex-major tables (Slots:
+/// ring_membrane, membrane_geometry): u, w, v (terms/membrane.hpp, lane_triangle).
+constexpr int kMembraneGeometry = 3;
+
 // The model's parts (SOFTBODY_MODEL_PARTS in fields.hpp), one struct each with its count and
 // one member per field: an array as a pointer into NumPy memory, a number or a vec3 by
 // value. A term's code names the part it reads (m.springs.stiffness, m.gases.law).
@@ -57,6 +61,22 @@ struct Slots {
     const index* face_start = nullptr;  // (G + 1,)
     const index* face_next = nullptr;   // (slots, 8) face (i, j, k) seen from i: j
     const index* face_last = nullptr;   // (slots, 8) and k
+    // membrane triangles seen from each corner (terms/membrane.hpp, lane_triangle): per
+    // ring slot s, the one on the ring's face (j_{s-1}, j_s) (slot 0: the closing face);
+    // the others (a second layer, triangles off the rings) in their own slots, (i, next,
+    // last). Each slot's geometry (kMembraneGeometry, 8): u, w, v, the rest frame's
+    // gradient vectors of its two neighbours, (u, w) and (0, v) (all 0 for none), and its
+    // coefficient row, an index into membrane_rows (R, 8) (row 0 zero).
+    const double* ring_membrane = nullptr;       // (ring slots, 3, 8)
+    const index* ring_membrane_row = nullptr;    // (ring slots, 8)
+    const index* membrane_start = nullptr;       // (G + 1,)
+    const index* membrane_next = nullptr;        // (slots, 8)
+    const index* membrane_last = nullptr;        // (slots, 8)
+    const double* membrane_geometry = nullptr;   // (slots, 3, 8)
+    const index* membrane_row = nullptr;         // (slots, 8)
+    const double* membrane_rows = nullptr;       // (R, 8) [Pa m]
+    bool membrane_damped = false;  // some row has strain-rate damping
+    bool membrane_one_row = false;  // every triangle has row 1 (one material)
 };
 
 /// Everything fixed after ModelBuilder.finalize (softbody.sim.model.Model), SI units,
@@ -172,7 +192,7 @@ struct LaneBuffers {
     const float* ring_stiffness_f = nullptr;    // [N/m]
     const float* ring_damping_f = nullptr;      // [N s/m]
     const float* ring_face_f = nullptr;         // 1 where (j_{s-1}, j_s) is a face
-    bool extra_slots = false;  // the model has springs off the rings or broken fans
+    bool extra_slots = false;  // the model has springs off the rings, broken fans or membranes
 };
 
 /// Scratch for the explicit schemes, owned by softbody::ExplicitSolver.

@@ -64,6 +64,18 @@ inline vd vsqrt(vd x) {
 #endif
 }
 
+/// a b + c per lane: rounded once (FMA) with AVX2 and AVX-512, a b then + c on the scalar
+/// path (whose kernels are built without FMA).
+inline vd fmadd(vd a, vd b, vd c) {
+#if defined(__AVX512F__)
+    return _mm512_fmadd_pd(a, b, c);
+#elif defined(__AVX2__)
+    return _mm256_fmadd_pd(a, b, c);
+#else
+    return a * b + c;
+#endif
+}
+
 /// 1 / sqrt(x) per lane. AVX-512: the 14-bit estimate refined by two Newton steps (each
 /// doubles the correct bits: 28, then past double precision), so within a few ulp of the
 /// correctly rounded value, without the divide and square root that cost ~20 cycles each
@@ -159,7 +171,7 @@ struct Rows {
 };
 
 /// The rows (kRow doubles each) of particles idx[0 .. kLanes-1], one lane each.
-inline Rows load_rows(const double* rows, const index* idx) {
+SOFTBODY_ALWAYS_INLINE Rows load_rows(const double* rows, const index* idx) {
 #if defined(__AVX512F__)
     __m512d r[8];
     for (int l = 0; l < 8; ++l) r[l] = _mm512_loadu_pd(rows + kRow * idx[l]);

@@ -73,7 +73,10 @@ private:
         l.ring_stiffness_f = copy(m.slots.ring_stiffness, stiffness_f_);
         l.ring_damping_f = copy(m.slots.ring_damping, damping_f_);
         l.ring_face_f = copy(m.slots.ring_face, face_f_);
-        l.extra_slots = m.slots.spring_start[m.slots.group_count] > 0 || m.slots.face_start[m.slots.group_count] > 0;
+        const index g = m.slots.group_count;
+        // the membranes' lane form, too, reads the float64 rows
+        l.extra_slots = m.slots.spring_start[g] > 0 || m.slots.face_start[g] > 0 ||
+                        m.membranes.count > 0;
     }
 
     nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive

@@ -2,7 +2,10 @@
 #include "plan/lanes.hpp"
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <limits>
+#include <map>
 
 namespace softbody {
 
@@ -217,6 +220,184 @@ void VertexLayout::build(Model& m) {
     m.slots.face_start = face_start_.data();
     m.slots.face_next = face_next_.data();
     m.slots.face_last = face_last_.data();
+
+    std::vector<std::vector<index>> ring_lists(static_cast<size_t>(n));
+    std::vector<char> ring_closed(static_cast<size_t>(n), 0);
+    for (size_t i = 0; i < rings.size(); ++i) {
+        ring_lists[i] = rings[i].other;
+        ring_closed[i] = !rings[i].face.empty() && rings[i].face[0] == 1.0;
+    }
+    build_membranes(m, ring_lists, ring_closed);
+}
+
+namespace {
+
+/// Triangle t's coefficient row (Slots::membrane_rows): its stress dW/dC as
+/// m1 (I - adj C / J^2) + m2 (adj C + I / J - tr C adj C / J^2) + s1 (C - I) +
+/// s2 (tr C - 2) I + d1 dC/dt + d2 tr(dC/dt) I, the six times -2 H (so that the force on a
+/// corner is A0 F S g_a): neo-Hookean m1 = mu / 2; Mooney-Rivlin m1 = c10, m2 = c01; StVK
+/// s1 = k (1 - nu) / 2, s2 = k nu / 2 with k = E / (2 (1 - nu^2)); the damping d1 = beta
+/// G_s / 2, d2 = beta lam_s / 4 (terms/membrane.hpp: stress, small_strain, viscous_half).
+std::array<double, 6> membrane_row(const Model& m, index t) {
+    const double p0 = m.membranes.params[2 * t], p1 = m.membranes.params[2 * t + 1];
+    double m1 = 0.0, m2 = 0.0, s1 = 0.0, s2 = 0.0, shear = 0.0, lame = 0.0;
+    switch (m.membranes.material[t]) {
+        case MembraneMaterial::NEO_HOOKEAN:
+            m1 = 0.5 * p0, shear = p0, lame = 2.0 * p0;
+            break;
+        case MembraneMaterial::MOONEY_RIVLIN:
+            m1 = p0, m2 = p1, shear = 2.0 * (p0 + p1), lame = 4.0 * (p0 + p1);
+            break;
+        default: {
+            const double k = p0 / (2.0 * (1.0 - p1 * p1));
+            s1 = 0.5 * k * (1.0 - p1), s2 = 0.5 * k * p1;
+            shear = p0 / (2.0 * (1.0 + p1)), lame = p0 * p1 / (1.0 - p1 * p1);
+            break;
+        }
+    }
+    const double beta = m.membranes.damping[t], w = -2.0 * m.membranes.thickness[t];
+    return {w * m1, w * m2, w * s1, w * s2, w * 0.5 * beta * shear, w * 0.25 * beta * lame};
+}
+
+/// Triangle t seen from its corner c, with neighbours `prev` and `cur` (corners cp, cq):
+/// u, w, v (the gradient vectors (u, w) of prev and (0, v) of cur in the rest frame whose
+/// x axis runs from c to prev; the rest area is A0 = 1 / (2 u |v|)), into out[0],
+/// out[stride], out[2 stride]
+void membrane_view(const Model& m, index t, int c, int cp, int cq, double* out,
+                   size_t stride) {
+    const double* bm = m.membranes.rest_inverse + 4 * t;  // Dm^-1, row-major
+    const double det = bm[0] * bm[3] - bm[1] * bm[2];
+    // the rest corners in the triangle's 2D frame: 0, Dm's columns
+    const double x[3][2] = {{0.0, 0.0}, {bm[3] / det, -bm[2] / det}, {-bm[1] / det, bm[0] / det}};
+    const double e1[2] = {x[cp][0] - x[c][0], x[cp][1] - x[c][1]};
+    const double e2[2] = {x[cq][0] - x[c][0], x[cq][1] - x[c][1]};
+    const double len = std::hypot(e1[0], e1[1]);
+    const double along = (e1[0] * e2[0] + e1[1] * e2[1]) / len;
+    const double across = (e1[0] * e2[1] - e1[1] * e2[0]) / len;
+    out[0] = 1.0 / len;
+    out[stride] = -along / (len * across);
+    out[2 * stride] = 1.0 / across;
+}
+
+}  // namespace
+
+void VertexLayout::build_membranes(Model& m, const std::vector<std::vector<index>>& rings,
+                                   const std::vector<char>& closed) {
+    const index n = m.particles.count, groups = m.slots.group_count;
+    const index tm = m.membranes.count;
+    // the coefficient rows: row 0 zero (no membrane), equal rows shared
+    membrane_rows_.assign(8, 0.0);
+    std::map<std::array<double, 6>, index> row_of;
+    std::vector<index> tri_row(static_cast<size_t>(tm), 0);
+    bool damped = false;
+    for (index t = 0; t < tm; ++t) {
+        const std::array<double, 6> row = membrane_row(m, t);
+        auto [it, fresh] = row_of.insert({row, static_cast<index>(membrane_rows_.size() / 8)});
+        if (fresh) {
+            membrane_rows_.insert(membrane_rows_.end(), row.begin(), row.end());
+            membrane_rows_.insert(membrane_rows_.end(), {0.0, 0.0});
+        }
+        tri_row[static_cast<size_t>(t)] = it->second;
+        damped = damped || row[4] != 0.0 || row[5] != 0.0;
+    }
+    // each particle's triangles (t, corner), in model order
+    std::vector<std::vector<std::pair<index, int>>> corners(static_cast<size_t>(n));
+    for (index t = 0; t < tm; ++t)
+        for (int c = 0; c < 3; ++c)
+            corners[static_cast<size_t>(m.membranes.indices[3 * t + c])].push_back({t, c});
+    // a triangle on one of the ring's faces goes to that ring slot (once); the rest to
+    // the particle's own membrane slots: (t, corner, corner of next, corner of last)
+    struct View {
+        index t;
+        int c, cp, cq;
+    };
+    std::vector<std::vector<View>> extra(static_cast<size_t>(n));
+    std::vector<std::vector<std::pair<size_t, View>>> on_ring(static_cast<size_t>(n));
+    for (index i = 0; i < n; ++i) {
+        const size_t own = static_cast<size_t>(i);
+        const std::vector<index>& r = rings[own];
+        std::vector<char> used(r.size(), 0);
+        for (const auto& [t, c] : corners[own]) {
+            const index* tri = m.membranes.indices + 3 * t;
+            const int c1 = (c + 1) % 3, c2 = (c + 2) % 3;
+            bool placed = false;
+            for (size_t k = 0; k < r.size() && !placed; ++k) {
+                if (used[k] || (k == 0 && !closed[own])) continue;
+                const index prev = k > 0 ? r[k - 1] : r.back(), cur = r[k];
+                int cp = -1, cq = -1;
+                if (tri[c1] == prev && tri[c2] == cur) cp = c1, cq = c2;
+                if (tri[c2] == prev && tri[c1] == cur) cp = c2, cq = c1;
+                if (cp < 0) continue;
+                used[k] = 1;
+                on_ring[own].push_back({k, View{t, c, cp, cq}});
+                placed = true;
+            }
+            if (!placed) extra[own].push_back(View{t, c, c1, c2});
+        }
+    }
+    const size_t ring_entries = static_cast<size_t>(kGroup * ring_start_.back());
+    ring_membrane_.assign(kMembraneGeometry * ring_entries, 0.0);
+    ring_membrane_row_.assign(ring_entries, 0);
+    membrane_start_.assign(static_cast<size_t>(groups + 1), 0);
+    for (index g = 0; g < groups; ++g) {
+        size_t most = 0;
+        for (index i = kGroup * g; i < std::min(n, kGroup * (g + 1)); ++i)
+            most = std::max(most, extra[static_cast<size_t>(i)].size());
+        membrane_start_[static_cast<size_t>(g + 1)] =
+            membrane_start_[static_cast<size_t>(g)] + static_cast<index>(most);
+    }
+    const size_t entries = static_cast<size_t>(kGroup * membrane_start_.back());
+    membrane_next_.assign(entries, 0);
+    membrane_last_.assign(entries, 0);
+    membrane_geometry_.assign(kMembraneGeometry * entries, 0.0);
+    membrane_row_.assign(entries, 0);
+    for (index g = 0; g < groups; ++g)
+        for (index l = 0; l < kGroup; ++l) {
+            const index i = kGroup * g + l;
+            const size_t own = static_cast<size_t>(i);
+            if (i < n) {
+                const index r0 = ring_start_[static_cast<size_t>(g)];
+                const size_t slots =
+                    static_cast<size_t>(ring_start_[static_cast<size_t>(g + 1)] - r0);
+                for (const auto& [k, view] : on_ring[own]) {
+                    // the closing face (k = 0) sits where the pass meets it: the first
+                    // padding slot of a padded ring, else slot 0 (the end of the ring)
+                    const size_t local =
+                        k == 0 && rings[own].size() < slots ? rings[own].size() : k;
+                    const size_t s = static_cast<size_t>(r0) + local;
+                    membrane_view(m, view.t, view.c, view.cp, view.cq,
+                                  ring_membrane_.data() + kMembraneGeometry * kGroup * s + l,
+                                  kGroup);
+                    ring_membrane_row_[kGroup * s + l] = tri_row[static_cast<size_t>(view.t)];
+                }
+            }
+            const index s0 = membrane_start_[static_cast<size_t>(g)];
+            for (index s = s0; s < membrane_start_[static_cast<size_t>(g + 1)]; ++s) {
+                const size_t e = static_cast<size_t>(kGroup * s + l);
+                const size_t k = static_cast<size_t>(s - s0);
+                membrane_next_[e] = membrane_last_[e] = i;  // padding: no triangle
+                if (i < n && k < extra[own].size()) {
+                    const View& view = extra[own][k];
+                    const index* tri = m.membranes.indices + 3 * view.t;
+                    membrane_next_[e] = tri[view.cp];
+                    membrane_last_[e] = tri[view.cq];
+                    const size_t at = kMembraneGeometry * kGroup * static_cast<size_t>(s) + l;
+                    membrane_view(m, view.t, view.c, view.cp, view.cq,
+                                  membrane_geometry_.data() + at, kGroup);
+                    membrane_row_[e] = tri_row[static_cast<size_t>(view.t)];
+                }
+            }
+        }
+    m.slots.ring_membrane = ring_membrane_.data();
+    m.slots.ring_membrane_row = ring_membrane_row_.data();
+    m.slots.membrane_start = membrane_start_.data();
+    m.slots.membrane_next = membrane_next_.data();
+    m.slots.membrane_last = membrane_last_.data();
+    m.slots.membrane_geometry = membrane_geometry_.data();
+    m.slots.membrane_row = membrane_row_.data();
+    m.slots.membrane_rows = membrane_rows_.data();
+    m.slots.membrane_damped = damped;
+    m.slots.membrane_one_row = membrane_rows_.size() == 16 && tm > 0;  // one row past row 0
 }
 
 }  // namespace softbody

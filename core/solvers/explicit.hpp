@@ -154,10 +154,14 @@ inline void step(const Model& m, const Control& c, int scheme, double t, double 
 
 /// Whether symplectic Euler can end its steps in one fused pass (symplectic_pass): every
 /// term acting in the call is one that pass covers (kFused: the lane terms, the pressure and
-/// Control's forces; another would change the order of the sums), and bodies whose
+/// Control's forces; kFusedInPass: the membranes when the vertex-major pass runs; another
+/// would change the order of the sums), and bodies whose
 /// particle ranges follow one another.
-inline bool fused_symplectic(const Model& m, const Control& c, int scheme) {
-    if (scheme != Integrator::SYMPLECTIC_EULER || !forms::all_fused(m, c)) return false;
+inline bool fused_symplectic(const Model& m, const Control& c, int scheme,
+                             const LaneBuffers& lanes) {
+    if (scheme != Integrator::SYMPLECTIC_EULER ||
+        !forms::all_fused(m, c, lanes::use_vertex_pass(lanes)))
+        return false;
     index end = 0;
     for (index b = 0; b < m.bodies.count; ++b) {
         if (m.bodies.particle_range[2 * b] < end) return false;
@@ -277,7 +281,7 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
 inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                            const StateView& s, const ExplicitBuffers& w) {
     const index n3 = 3 * m.particles.count;
-    if (fused_symplectic(m, c, p.scheme)) return simulate_symplectic_fused(m, c, p, s, w);
+    if (fused_symplectic(m, c, p.scheme, w.lanes)) return simulate_symplectic_fused(m, c, p, s, w);
     const bool flowing = gas_state::flowing(m, c);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};

@@ -23,7 +23,8 @@ enum class Which {
 
 /// Forces at time t [s] for q, qd (N, 3) into f (N, 3) [N], the gas state into gas. With
 /// SIMD lanes (or threads) the lane terms' forces, dV/dx and the exact volumes come from
-/// the vertex-major pass (its springs left out for kUnprojected); on the scalar path every
+/// the vertex-major pass (its springs and membranes left out for kUnprojected, its springs
+/// for kUnconstrained); on the scalar path every
 /// term's edge-major force, each spring and face once (half the arithmetic, which pays
 /// without lanes). Then every term's update (the gas: the other volumes, the pressures),
 /// then the remaining forces in registry order. The same terms either way; the sums run in
@@ -34,8 +35,8 @@ inline void eval_forces(const Model& m, const Control& c, double t, const double
                         double* f) {
     const bool pass = lanes::use_vertex_pass(lanes);
     if (pass)
-        lanes::vertex_pass<kWhich != Which::kUnprojected && kWhich != Which::kUnconstrained>(
-            m, q, qd, gas, lanes, f);
+        lanes::vertex_pass<kWhich != Which::kUnprojected && kWhich != Which::kUnconstrained,
+                           kWhich != Which::kUnprojected>(m, q, qd, gas, lanes, f);
     else
         std::fill(f, f + 3 * m.particles.count, 0.0);
     const Eval e{m, c, t, q, qd, gas};
@@ -57,12 +58,14 @@ inline void update(const Eval& e) {
 }
 
 /// Whether every term that acts in this call with a force is one the fused symplectic
-/// pass covers (the flows move gas, which that pass's loop steps itself).
-inline bool all_fused(const Model& m, const Control& c) {
+/// pass covers (the flows move gas, which that pass's loop steps itself); `pass`: the
+/// vertex-major pass runs (kFusedInPass terms count then).
+inline bool all_fused(const Model& m, const Control& c, bool pass) {
     bool fused = true;
     Terms::each([&](auto term, int) {
         using T = decltype(term);
-        if (!T::kFused && !T::kFlow && T::active(m, c)) fused = false;
+        if (!T::kFused && !(pass && T::kFusedInPass) && !T::kFlow && T::active(m, c))
+            fused = false;
     });
     return fused;
 }

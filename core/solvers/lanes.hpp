@@ -1,8 +1,9 @@
 // The vertex-major force pass: every particle, kLanes at a time, computes its own share of
 // the terms that have a lane form (gravity::lane_force, springs::lane_pair and lane_force,
-// gas::lane_face and lane_faces: the weight, the springs, dV/dx and the exact volumes),
-// reading its neighbours' rows and writing only its own. A fused kernel: one ring of
-// neighbour rows serves a spring and two faces each. The terms it covers say so (kLane),
+// gas::lane_face and lane_faces, membrane::lane_triangle and lane_force: the weight, the
+// springs, dV/dx and the exact volumes, the membranes), reading its neighbours' rows and
+// writing only its own. A fused kernel: one ring of neighbour rows serves a spring and two
+// faces each, and the membrane triangles on those faces. The terms it covers say so (kLane),
 // and solvers/forms.hpp skips their edge-major forces when it ran.
 #pragma once
 
@@ -10,6 +11,7 @@
 #include "simd.hpp"
 #include "terms/gas.hpp"
 #include "terms/gravity.hpp"
+#include "terms/membrane.hpp"
 #include "terms/springs.hpp"
 #include "vec.hpp"
 
@@ -39,9 +41,10 @@ struct VolumeSums {
 /// weight, its springs (kSprings; projective dynamics solves them implicitly) and dV/dx
 /// from its faces, with its share of its body's exact volume (each face seen from its three
 /// corners: 3 x 6 V in all, added to body_six_v (B,)). The ring's neighbour rows serve a
-/// spring and two faces each. Writes the particles' rows of f and gas.volume_gradient (N, 3)
-/// and nothing else's.
-template <bool kSprings>
+/// spring and two faces each, and with kMembranes the membrane triangles on those faces
+/// (each seen from its three corners) and those off the rings. Writes the particles' rows
+/// of f and gas.volume_gradient (N, 3) and nothing else's.
+template <bool kSprings, bool kMembranes = false>
 inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas& gas, double* f,
                                index g0, index g1, double* body_six_v) {
     const index n = m.particles.count;
@@ -59,6 +62,7 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
             gravity::lane_force(m, first, fx, fy, fz);  // weight m g
             // the ring: damped edge springs, and the faces between consecutive neighbours
             vd ux0{}, uy0{}, uz0{}, ux{}, uy{}, uz{};
+            Rows first_row{}, last_row{};  // the ring's first and previous rows (membranes)
             for (index s = m.slots.ring_start[g]; s < m.slots.ring_start[g + 1]; ++s) {
                 const index e = kGroup * s + lane0;
                 const Rows o = load_rows(rows, m.slots.ring_other + e);
@@ -70,18 +74,32 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
                                        load_lanes(m.slots.ring_damping + e), fx, fy, fz);
                 if (s == m.slots.ring_start[g]) {
                     ux0 = dx, uy0 = dy, uz0 = dz;  // the face closing the ring comes last
+                    if constexpr (kMembranes) first_row = o;
                 } else {
                     gas::lane_face(ux, uy, uz, dx, dy, dz, load_lanes(m.slots.ring_face + e), rx,
                                    ry, rz, gx, gy, gz, six_v);
+                    if constexpr (kMembranes)
+                        membrane::lane_triangle(m, membrane::ring_geometry(m, s, lane0),
+                                                m.slots.ring_membrane_row + e, self, last_row, ux,
+                                                uy, uz, o, dx, dy, dz, fx, fy, fz);
                 }
                 ux = dx, uy = dy, uz = dz;
+                if constexpr (kMembranes) last_row = o;
             }
-            if (m.slots.ring_start[g + 1] > m.slots.ring_start[g])
-                gas::lane_face(ux, uy, uz, ux0, uy0, uz0,
-                               load_lanes(m.slots.ring_face + kGroup * m.slots.ring_start[g] + lane0),
-                               rx, ry, rz, gx, gy, gz, six_v);
+            if (m.slots.ring_start[g + 1] > m.slots.ring_start[g]) {
+                const index e0 = kGroup * m.slots.ring_start[g] + lane0;
+                gas::lane_face(ux, uy, uz, ux0, uy0, uz0, load_lanes(m.slots.ring_face + e0), rx,
+                               ry, rz, gx, gy, gz, six_v);
+                if constexpr (kMembranes)
+                    membrane::lane_triangle(
+                        m, membrane::ring_geometry(m, m.slots.ring_start[g], lane0),
+                        m.slots.ring_membrane_row + e0, self, last_row, ux, uy, uz, first_row,
+                        ux0, uy0, uz0, fx, fy, fz);
+            }
             if constexpr (kSprings)
                 springs::lane_force(m, rows, g, lane0, self, fx, fy, fz);  // springs off the rings
+            if constexpr (kMembranes)
+                membrane::lane_force(m, rows, g, lane0, self, fx, fy, fz);  // triangles off them
             gas::lane_faces(m, rows, g, lane0, self, rx, ry, rz, gx, gy, gz, six_v);  // odd fans
             for (int l = 0; l < kLanes && first + l < n; ++l) {
                 const index i = first + l;
@@ -93,10 +111,38 @@ inline void vertex_pass_groups(const Model& m, const double* rows, const BodyGas
     sums.flush();
 }
 
+/// The membrane triangles on the ring's faces of particles [kGroup g + lane0, + kLanes)
+/// (vertex_pass_groups' kMembranes part, for the float32 pass: its float64 rows), their
+/// force added to fx, fy, fz [N].
+inline void membrane_ring(const Model& m, const double* rows, index g, int lane0,
+                          const Rows& self, vd& fx, vd& fy, vd& fz) {
+    const index s0 = m.slots.ring_start[g], s1 = m.slots.ring_start[g + 1];
+    if (s1 == s0) return;
+    Rows first_row{}, last_row{};
+    for (index s = s0; s < s1; ++s) {
+        const index e = kGroup * s + lane0;
+        const Rows o = load_rows(rows, m.slots.ring_other + e);
+        if (s == s0)
+            first_row = o;
+        else
+            membrane::lane_triangle(m, membrane::ring_geometry(m, s, lane0),
+                                    m.slots.ring_membrane_row + e, self, last_row,
+                                    last_row.x - self.x, last_row.y - self.y, last_row.z - self.z,
+                                    o, o.x - self.x, o.y - self.y, o.z - self.z, fx, fy, fz);
+        last_row = o;
+    }
+    membrane::lane_triangle(m, membrane::ring_geometry(m, s0, lane0),
+                            m.slots.ring_membrane_row + kGroup * s0 + lane0, self, last_row,
+                            last_row.x - self.x, last_row.y - self.y, last_row.z - self.z,
+                            first_row, first_row.x - self.x, first_row.y - self.y,
+                            first_row.z - self.z, fx, fy, fz);
+}
+
 /// The float32 vertex-major pass over groups [g0, g1) (lanes.rows_f set): the ring's springs
 /// and faces as in vertex_pass_groups, in float lanes from body-local float rows, with
 /// float copies of the ring tables; the weight, the sums into f, dV/dx and the volumes, the
-/// springs off the rings and the faces of broken fans (from the float64 rows) in float64.
+/// springs off the rings, the faces of broken fans and the membranes (from the float64
+/// rows) in float64.
 /// Positions, velocities and the integration stay float64: the float32 part only perturbs
 /// the forces by the rounding of x - x_ref and v to float32 (2^-24 of their size).
 inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, const BodyGas& gas,
@@ -145,10 +191,12 @@ inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, con
         }
     sums.flush();
     if (!lanes.extra_slots) return;
-    // springs off the rings and faces of broken fans: in float64, added to what is there
+    // springs off the rings, faces of broken fans and the membranes: in float64, added to
+    // what is there
+    const bool membranes = m.membranes.count > 0;
     for (index g = g0; g < g1; ++g) {
         if (m.slots.spring_start[g + 1] == m.slots.spring_start[g] &&
-            m.slots.face_start[g + 1] == m.slots.face_start[g])
+            m.slots.face_start[g + 1] == m.slots.face_start[g] && !membranes)
             continue;
         for (int lane0 = 0; lane0 < kGroup; lane0 += kLanes) {
             const index first = kGroup * g + lane0;
@@ -161,6 +209,10 @@ inline void vertex_pass_groups_f32(const Model& m, const LaneBuffers& lanes, con
             vd fx{}, fy{}, fz{}, gx{}, gy{}, gz{}, six_v{};
             springs::lane_force(m, lanes.rows, g, lane0, self, fx, fy, fz);
             gas::lane_faces(m, lanes.rows, g, lane0, self, rx, ry, rz, gx, gy, gz, six_v);
+            if (membranes) {
+                membrane_ring(m, lanes.rows, g, lane0, self, fx, fy, fz);
+                membrane::lane_force(m, lanes.rows, g, lane0, self, fx, fy, fz);
+            }
             for (int l = 0; l < kLanes && first + l < n; ++l) {
                 const index i = first + l;
                 add_to(f, i, {fx[l], fy[l], fz[l]});
@@ -206,10 +258,24 @@ inline void pack(const Model& m, const double* q, const double* qd, const LaneBu
     pack_rows(q, qd, lanes.rows, i0, i1);
 }
 
+/// The float64 pass over groups [g0, g1) (vertex_pass_groups), with the membranes' lane
+/// form when kMembranes and the model has any (and without the springs when it has none).
+template <bool kSprings, bool kMembranes>
+inline void groups_f64(const Model& m, const double* rows, const BodyGas& gas, double* f,
+                       index g0, index g1, double* body_six_v) {
+    if (kMembranes && m.membranes.count > 0) {
+        if (kSprings && m.springs.count > 0)
+            vertex_pass_groups<kSprings, true>(m, rows, gas, f, g0, g1, body_six_v);
+        else  // a skin of membranes alone: no springs to walk
+            vertex_pass_groups<false, true>(m, rows, gas, f, g0, g1, body_six_v);
+    } else
+        vertex_pass_groups<kSprings, false>(m, rows, gas, f, g0, g1, body_six_v);
+}
+
 /// The vertex-major pass over every particle (see vertex_pass_groups), on the opt-in threads
 /// when there are: chunk c takes a fixed run of groups and keeps its own volume sums, added
 /// in chunk order, so a run repeats to the bit whatever the threads' timing.
-template <bool kSprings = true>
+template <bool kSprings = true, bool kMembranes = true>
 inline void vertex_pass(const Model& m, const double* q, const double* qd, const BodyGas& gas,
                         const LaneBuffers& lanes, double* f) {
     const int chunks = lanes.parallel != nullptr ? lanes.parallel->chunks : 1;
@@ -221,7 +287,7 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
         if (f32)
             vertex_pass_groups_f32(m, lanes, gas, f, 0, groups, gas.volume);
         else
-            vertex_pass_groups<kSprings>(m, lanes.rows, gas, f, 0, groups, gas.volume);
+            groups_f64<kSprings, kMembranes>(m, lanes.rows, gas, f, 0, groups, gas.volume);
     } else {
         struct Work {
             const Model* m;
@@ -248,7 +314,7 @@ inline void vertex_pass(const Model& m, const double* q, const double* qd, const
             if (kSprings && w.lanes->rows_f != nullptr)
                 vertex_pass_groups_f32(*w.m, *w.lanes, *w.gas, w.f, g0, g1, six_v);
             else
-                vertex_pass_groups<kSprings>(*w.m, w.lanes->rows, *w.gas, w.f, g0, g1, six_v);
+                groups_f64<kSprings, kMembranes>(*w.m, w.lanes->rows, *w.gas, w.f, g0, g1, six_v);
         }, &work);
         for (index b = 0; b < bodies; ++b) {
             double six_v = 0.0;

@@ -34,9 +34,10 @@
 // semi-definite; the damping C = -G^T D_F G, D_F = A0 H beta L^T C0 L (L: Fdot -> Gdot),
 // is so already.
 //
-// Forms: force and energy (edge-major, per triangle; no lane form, so the vertex-major
-// pass does not cover it and a model with membranes takes the general step, not the
-// fused symplectic pass), prepare + jacobian_product (the 6 x 6 blocks per triangle
+// Forms: force and energy (edge-major, per triangle), the lane form (lane_triangle: the
+// vertex-major pass computes each triangle at its three corners, fused with the ring of
+// neighbour rows it walks, so that no force is scattered; with it a model with membranes
+// keeps the fused symplectic pass), prepare + jacobian_product (the 6 x 6 blocks per triangle
 // stored in its linearisation (Linearization::own), or computed on the fly where that is null),
 // add_smoother_blocks (the triangle's 3 x 3 blocks of M - h C - h^2 K: its corners'
 // diagonal blocks, and the blocks between corners as the smoother's membrane entries;
@@ -51,6 +52,7 @@
 #include <cmath>
 
 #include "model.hpp"
+#include "simd.hpp"
 #include "terms/term.hpp"
 #include "vec.hpp"
 
@@ -91,6 +93,18 @@ inline Element element(const Model& m, const double* q, index t) {
     const V3 d1 = load(q, e.v[1]) - x0, d2 = load(q, e.v[2]) - x0;
     e.f0 = bm[0] * d1 + bm[2] * d2;
     e.f1 = bm[1] * d1 + bm[3] * d2;
+    return e;
+}
+
+/// Triangle t's corners and gradient vectors without F (what the matrix-free product needs).
+inline Element corners(const Model& m, index t) {
+    Element e;
+    for (int a = 0; a < 3; ++a) e.v[a] = m.membranes.indices[3 * t + a];
+    const double* bm = m.membranes.rest_inverse + 4 * t;  // row-major Dm^-1
+    e.g[1][0] = bm[0], e.g[1][1] = bm[1];
+    e.g[2][0] = bm[2], e.g[2][1] = bm[3];
+    e.g[0][0] = -(bm[0] + bm[2]), e.g[0][1] = -(bm[1] + bm[3]);
+    e.f0 = e.f1 = {0.0, 0.0, 0.0};
     return e;
 }
 
@@ -421,7 +435,7 @@ inline void jacobian_product(const Model& m, const double* q, const double* h, d
                              double alpha_k, const double* p, double* out) {
     double local[kBlock];
     for (index t = 0; t < m.membranes.count; ++t) {
-        const Element e = element(m, q, t);
+        const Element e = corners(m, t);  // F is in the blocks
         const double* b = h != nullptr ? h + kBlock * t : local;
         if (h == nullptr) blocks(m, q, t, local);
         double mix[kSym6];
@@ -607,10 +621,107 @@ inline void damping_ratios(const Model& m, double& lo, double& hi) {
     }
 }
 
+/// Ring slot s's geometry at lane lane0 (Slots::ring_membrane), for lane_triangle.
+inline const double* ring_geometry(const Model& m, index s, int lane0) {
+    return m.slots.ring_membrane + kMembraneGeometry * kGroup * s + lane0;
+}
+
+/// The lane form (the vertex-major pass, solvers/lanes.hpp): triangle (i, a, b) seen from
+/// its corner i, kLanes particles i at once, its force on i added to fx, fy, fz [N]. Rows
+/// of i, a, b (positions and velocities), with a - i and b - i given (the pass has them);
+/// `geometry` at the slot's lane 0 in a (slots, 3, 8) table (Slots::ring_membrane: u, w, v,
+/// 8 apart), `row` its (kLanes,) coefficient rows in Slots::membrane_rows. In the rest
+/// frame whose x axis runs from i to a, a's gradient vector is (u, w) and b's (0, v), so
+/// F = [u (a - i), w (a - i) + v (b - i)], i's is -(u, w + v) and the rest area
+/// A0 = 1 / (2 u |v|); the stress S (the
+/// materials' dW/dC and the viscous stress in one form, with -2 H folded in: plan/lanes.cpp,
+/// membrane_row) gives f_i = A0 F S g_i, the edge-major force's corner term. Each triangle
+/// is computed at its three corners (3 x the arithmetic of `force`, without its scatter).
+SOFTBODY_ALWAYS_INLINE void lane_triangle(const Model& m, const double* geometry, const index* row,
+                          const Rows& self, const Rows& a, vd ax, vd ay, vd az, const Rows& b,
+                          vd bx, vd by, vd bz, vd& fx, vd& fy, vd& fz) {
+    const vd u = load_lanes(geometry), w = load_lanes(geometry + kGroup);
+    const vd v = load_lanes(geometry + 2 * kGroup);
+    // the rest area A0 = 1 / (2 u |v|) (the table's third of a cache line less to read);
+    // 0 in a lane without a triangle (u = 0)
+    const vi has = u != 0.0;
+    const vd uv = u * v;
+    const vd area = select(has, 0.5 / (has ? (uv < 0.0 ? -uv : uv) : splat(1.0)));
+    // the coefficients: one row for every lane (a body of one material), else a transpose
+    // (a lane without a triangle has no area: any row gives it no force)
+    vd m1, m2, s1, s2, d1, d2;
+    bool same = true;
+    if (!m.slots.membrane_one_row)
+        for (int l = 1; l < kLanes; ++l) same = same && row[l] == row[0];
+    if (same) {
+        const double* r = m.slots.membrane_rows + 8 * (m.slots.membrane_one_row ? 1 : row[0]);
+        m1 = splat(r[0]), m2 = splat(r[1]), s1 = splat(r[2]), s2 = splat(r[3]);
+        d1 = splat(r[4]), d2 = splat(r[5]);
+    } else {
+        const Rows r = load_rows(m.slots.membrane_rows, row);
+        m1 = r.x, m2 = r.y, s1 = r.z, s2 = r.vx, d1 = r.vy, d2 = r.vz;
+    }
+    // F = [f0 f1] and C = F^T F = [[ca, cb], [cb, cc]] (dot products by fused multiply-adds)
+    auto dot3 = [](vd x0, vd y0, vd z0, vd x1, vd y1, vd z1) {
+        return fmadd(x0, x1, fmadd(y0, y1, z0 * z1));
+    };
+    const vd f0x = u * ax, f0y = u * ay, f0z = u * az;
+    const vd f1x = fmadd(w, ax, v * bx), f1y = fmadd(w, ay, v * by), f1z = fmadd(w, az, v * bz);
+    const vd ca = dot3(f0x, f0y, f0z, f0x, f0y, f0z);
+    const vd cb = dot3(f0x, f0y, f0z, f1x, f1y, f1z);
+    const vd cc = dot3(f1x, f1y, f1z, f1x, f1y, f1z);
+    const vd tr = ca + cc, j = fmadd(ca, cc, -(cb * cb));
+    // 1 / J where the material is incompressible and there is a triangle (J <= 0 then gives
+    // what `force` gives), else of 1, so that no lane multiplies an infinity by a zero
+    const vi incompressible = ((m1 != 0.0) | (m2 != 0.0)) & has;
+    const vd inv_j = 1.0 / (incompressible ? j : splat(1.0)), inv_j2 = inv_j * inv_j;
+    // S = alpha I + beta adj C + s1 C (+ the viscous stress)
+    const vd alpha = fmadd(m2, inv_j, m1) - s1 + s2 * (tr - 2.0);
+    const vd beta = m2 - fmadd(m2, tr, m1) * inv_j2;
+    vd sa = fmadd(beta, cc, fmadd(s1, ca, alpha)), sb = (s1 - beta) * cb;
+    vd sc = fmadd(beta, ca, fmadd(s1, cc, alpha));
+    if (m.slots.membrane_damped) {  // dC/dt = Fdot^T F + F^T Fdot
+        const vd vax = a.vx - self.vx, vay = a.vy - self.vy, vaz = a.vz - self.vz;
+        const vd vbx = b.vx - self.vx, vby = b.vy - self.vy, vbz = b.vz - self.vz;
+        const vd r0x = u * vax, r0y = u * vay, r0z = u * vaz;
+        const vd r1x = fmadd(w, vax, v * vbx), r1y = fmadd(w, vay, v * vby);
+        const vd r1z = fmadd(w, vaz, v * vbz);
+        const vd da = 2.0 * dot3(r0x, r0y, r0z, f0x, f0y, f0z);
+        const vd db = dot3(r0x, r0y, r0z, f1x, f1y, f1z) + dot3(f0x, f0y, f0z, r1x, r1y, r1z);
+        const vd dc = 2.0 * dot3(r1x, r1y, r1z, f1x, f1y, f1z);
+        const vd dtr = d2 * (da + dc);
+        sa = fmadd(d1, da, sa + dtr), sb = fmadd(d1, db, sb), sc = fmadd(d1, dc, sc + dtr);
+    }
+    // f_i = A0 F S g_i with g_i = -(u, w + v)
+    const vd gi0 = -area * u, gi1 = -area * (w + v);
+    const vd k0 = fmadd(gi0, sa, gi1 * sb), k1 = fmadd(gi0, sb, gi1 * sc);  // S g_i
+    fx += fmadd(k0, f0x, k1 * f1x);
+    fy += fmadd(k0, f0y, k1 * f1y);
+    fz += fmadd(k0, f0z, k1 * f1z);
+}
+
+/// The lane form's triangles off the rings (Slots::membrane_*: a second layer, triangles
+/// whose faces make no fan of the particle's), for particles [kGroup g + lane0, + kLanes),
+/// their force added to fx, fy, fz [N]; rows (8 G, 8) the packed state.
+inline void lane_force(const Model& m, const double* rows, index g, int lane0, const Rows& self,
+                       vd& fx, vd& fy, vd& fz) {
+    for (index s = m.slots.membrane_start[g]; s < m.slots.membrane_start[g + 1]; ++s) {
+        const index e = kGroup * s + lane0;
+        const Rows a = load_rows(rows, m.slots.membrane_next + e);
+        const Rows b = load_rows(rows, m.slots.membrane_last + e);
+        lane_triangle(m, m.slots.membrane_geometry + kMembraneGeometry * kGroup * s + lane0,
+                      m.slots.membrane_row + e, self, a, a.x - self.x, a.y - self.y,
+                      a.z - self.z, b, b.x - self.x, b.y - self.y, b.z - self.z, fx, fy, fz);
+    }
+}
+
 /// The registered term (terms/registry.hpp).
 struct Term : TermBase {
     static constexpr const char* kName = "membrane";
     static constexpr bool kProjected = true, kEnergy = true, kBound = true;
+    // the vertex-major pass gives its force (lane_triangle), and then the fused symplectic
+    // pass covers it; without the pass its edge-major force keeps its place in the sums
+    static constexpr bool kLane = true, kFusedInPass = true;
     // smoother entries: -A_ij (3 x 3, row-major) between corners (smoother_blocks)
     static constexpr bool kStencil = true;
     static constexpr int kStencilWidth = 9;

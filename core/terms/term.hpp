@@ -52,7 +52,7 @@
 //               general step)
 //
 // Forms the vertex-major pass fuses (lanes) stay in each term's file beside these
-// (gravity::lane_force, springs::lane_pair, gas::lane_face).
+// (gravity::lane_force, springs::lane_pair, gas::lane_face, membrane::lane_triangle).
 #pragma once
 
 #include "model.hpp"
@@ -102,6 +102,9 @@ struct TermBase {
     // the fused symplectic pass (solvers/explicit.hpp, symplectic_pass) sums its force: only
     // the lane terms and the terms that pass adds (the pressure, Control's forces) may say so
     static constexpr bool kFused = false;
+    // the same, but only when the vertex-major pass ran (a kLane term whose edge-major force
+    // sums after the pressure's: the general step keeps that order without the pass)
+    static constexpr bool kFusedInPass = false;
     static constexpr bool kEnergy = false;     // it has an energy
     // its energy is work done from outside the model (the grab spring: the user's hand),
     // which softbody.diagnostics leaves out of the model's total
