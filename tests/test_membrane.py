@@ -646,7 +646,7 @@ def test_a_given_linearisation_replaces_the_terms_own():
     linearisation given by name is what its product reads, in place of its own prepare at
     q. The membrane's blocks given as zeros give the product with the membrane left out
     (leave_out), bit for bit, and the product without them differs (there the membrane's
-    own blocks at q act); a linearisation of the wrong size, or a name that is no
+    own blocks at q act); a linearisation of the wrong size or type, or a name that is no
     registered term, is refused naming it."""
     model = _balloon(MATERIALS["stvk"], subdivisions=1)
     q, _ = _perturbed(model, scale=0.9, noise=0.02)
@@ -663,6 +663,9 @@ def test_a_given_linearisation_replaces_the_terms_own():
     with pytest.raises(ValueError, match=r"linearization\[membrane\]"):
         _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, zeroed,
                               linearization={"membrane": np.zeros((3, 42))})  # fmt: skip
+    with pytest.raises(ValueError, match=r"linearization\[membrane\] must be a C-contig"):
+        listed = {"membrane": blocks["membrane"].tolist()}
+        _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, zeroed, linearization=listed)
     with pytest.raises(ValueError, match="no registered term is called membranes"):
         _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, zeroed, leave_out=["membranes"])
 

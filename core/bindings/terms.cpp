@@ -1,6 +1,6 @@
 // The physics terms outside a time loop: forces, volumes, pressures, energies, Jacobian
-// products and the stability estimate's bounds at a state, and one contact pass
-// (diagnostics, the stability estimate, tests).
+// products, the stability estimate's bounds and its split products (SpectralOperator) at a
+// state, and one contact pass (diagnostics, the stability estimate, tests).
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
 
@@ -109,10 +109,13 @@ void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, Cons
     for (const std::string& name : leave_out) skip |= 1u << term_position(name);
     std::vector<std::pair<int, ConstF64>> given;
     for (auto [key, value] : linearization) {
-        const int term = term_position(nb::cast<std::string>(key));
-        ConstF64 a = nb::cast<ConstF64>(value);
-        check_shape(a, std::string("linearization[") + k.terms[term].name + "]",
-                    {k.linearization_size(term, m)});
+        std::string name;
+        if (!nb::try_cast(key, name)) fail("linearization's keys must be term names");
+        const int term = term_position(name);
+        const std::string what = "linearization[" + name + "]";
+        ConstF64 a;
+        if (!nb::try_cast(value, a, false)) fail(what + " must be a C-contiguous float64 array");
+        check_shape(a, what, {k.linearization_size(term, m)});
         given.emplace_back(term, a);
     }
     Buffers b(m, 0);

@@ -3,9 +3,9 @@
     out = alpha_m M p + alpha_c C p + alpha_k K p,    C = df/dv, K = df/dx,
 
 with M the (diagonal) particle masses and C, K summed over the springs, the attachments
-(optional: the stability estimate adds its own), the grab spring, the gas, the bending
-hinges (their Gauss-Newton K, :mod:`softbody.reference.bending`) and the membranes (their K
-clamped to negative semi-definite: :mod:`softbody.reference.membrane`). K drops the
+(optional), the grab spring, the gas, the bending hinges (their Gauss-Newton K,
+:mod:`softbody.reference.bending`) and the membranes (their K clamped to negative
+semi-definite: :mod:`softbody.reference.membrane`). K drops the
 compressive geometric stiffness of springs and attachments (see
 :mod:`softbody.reference.springs`), so it is df/dx exactly where every spring is at or
 beyond its rest length. Gravity, external forces and terms without a Jacobian add
