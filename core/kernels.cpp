@@ -100,8 +100,23 @@ unsigned active_terms(const Model& m, const Control& c) {
     return mask;
 }
 
-void membrane_blocks(const Model& m, const double* q, double* out) {
-    membrane::prepare(m, q, out);
+void prepare(const Model& m, const Control& c, double t, const BodyGas& gas,
+             const Linearization& l) {
+    const Eval e{m, c, t, l.q, l.q, gas};
+    forms::update(e);
+    forms::prepare(e, l);
+}
+
+void prepare_spectral(const Model& m, const Control& c, const BodyGas& gas,
+                      const BoundScratch& w, const Linearization& l) {
+    const Eval e{m, c, 0.0, l.q, l.q, gas};
+    forms::update(e);
+    forms::prepare_spectral(e, w, l);
+}
+
+void spectral_product(const Model& m, const Control& c, const Linearization& l,
+                      StiffnessPart part, const double* p, double* out) {
+    forms::spectral_product(m, c, l, part, p, out);
 }
 
 // The estimate's Gershgorin bounds, every registered term's `bound` form in registry order,
@@ -153,7 +168,8 @@ const KernelTable& kernel_table() {
                                    simulate_substep, projective_solve, eval_forces,
                                    eval_gas, eval_volumes,
                                    apply_jacobians, soft_contacts,
-                                   eval_energies, eval_flows, active_terms, membrane_blocks,
+                                   eval_energies, eval_flows, active_terms, prepare,
+                                   prepare_spectral, spectral_product,
                                    linearization_size, check_stencil, stiffness_bounds};
     return table;
 }

@@ -93,9 +93,20 @@ struct KernelTable {
                        const BodyGas& gas);
     /// Bit k set: registered term k acts in a call with model m and control c.
     unsigned (*active_terms)(const Model& m, const Control& c);
-    /// Every membrane triangle's clamped stiffness and damping blocks at q into out
-    /// (Tm, kMembraneBlock): what the membranes' linearisation holds (Linearization::own).
-    void (*membrane_blocks)(const Model&, const double* q, double* out);
+    /// Every registered term's linearisation at l.q and time t (its prepare form, into
+    /// l.scratch), after the terms' state there (gas: volumes, pressures and, where
+    /// gas.volume_gradient is set, dV/dx).
+    void (*prepare)(const Model&, const Control&, double t, const BodyGas& gas,
+                    const Linearization& l);
+    /// The stability estimate's linearisation at l.q (forms::prepare_spectral): each term's
+    /// from the estimate's state w (stiffness_bounds' at l.q), the terms' state at l.q and
+    /// time 0 into gas first.
+    void (*prepare_spectral)(const Model&, const Control&, const BodyGas& gas,
+                             const BoundScratch& w, const Linearization& l);
+    /// out (N, 3) = the part `part` of K p (C p for the damping part) at the estimate's
+    /// linearisation l, for p (N, 3): every registered term's split (forms::spectral_product).
+    void (*spectral_product)(const Model&, const Control&, const Linearization& l,
+                             StiffnessPart part, const double* p, double* out);
     /// How many doubles of scratch registered term `term` keeps for its linearisation in a
     /// model (Linearization::scratch; 0: none).
     index (*linearization_size)(int term, const Model& m);

@@ -387,6 +387,13 @@ struct TermBound {
     bool pure_dampers = false;
 };
 
+/// The stability estimate's four operators (softbody.stability.spectral_bounds), in
+/// TermBound::parts' order: the damped stiffness (what the dampers act on), the undamped
+/// stiffness, the whole stiffness, and the damping matrix. Each term's spectral_product
+/// form (terms/term.hpp) says which of its stiffness goes into which.
+enum class StiffnessPart : int { kDamped = 0, kUndamped = 1, kWhole = 2, kDamping = 3 };
+constexpr int kStiffnessParts = 4;
+
 /// What the terms' `bound` forms share (kernels.cpp: stiffness_bounds): scratch, the
 /// Gershgorin row sums the kSharedRows terms fill first, and the state at which the
 /// estimate took its linearisation, which softbody.stability's spectral part reuses.

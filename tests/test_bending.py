@@ -212,8 +212,8 @@ def test_jacobian_product_is_the_gauss_newton_stiffness(name, simd):
     p = rng.normal(size=q.shape)
     inputs = jacobians.prepare(model, control_data(model), 0.0, q)
     out = np.zeros_like(q)
-    _core.apply_jacobians(core_model(model), control_data(model), q, p, 0.0, 0.0, 1.7,
-                          *inputs, out)  # fmt: skip
+    _core.apply_jacobians(core_model(model), control_data(model), q, p, 0.0, 0.0, 1.7, out,
+                          **inputs.core_arguments())  # fmt: skip
     k_matrix, kp = _gauss_newton_by_hand(model, q, p)
     _, g, _ = rb.angles_and_gradients(model, q)
     gnorm = np.linalg.norm(g, axis=2)

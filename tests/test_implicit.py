@@ -274,8 +274,11 @@ def test_pressure_jacobian_matches_finite_differences():
     dpdv = -model.body_gas_gamma * pressure / volume
     p = np.random.default_rng(1).normal(size=q.shape)
     kp = np.zeros_like(q)
-    _core.apply_jacobians(core_model(model), c, q, p, 0.0, 0.0, 1.0, u, a, b, gradient, dpdv,
-                          pnet, kp)  # fmt: skip
+    # in the springs' and the gas's layouts (core/terms/springs.hpp, gas.hpp)
+    linearization = {"springs": np.concatenate([u.ravel(), a, b]),
+                     "gas": np.concatenate([dpdv, pnet])}  # fmt: skip
+    _core.apply_jacobians(core_model(model), c, q, p, 0.0, 0.0, 1.0, kp,
+                          linearization=linearization, volume_gradient=gradient)  # fmt: skip
     h = 1e-6
     plus = forces(model, sb.State(q + h * p, state.particle_qd))
     minus = forces(model, sb.State(q - h * p, state.particle_qd))

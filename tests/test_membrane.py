@@ -106,7 +106,7 @@ def _jacobian_product(model, q, p, alpha_c=0.0, alpha_k=1.0):
     inputs = jacobians.prepare(model, data, 0.0, q)
     out = np.zeros_like(q)
     _core.apply_jacobians(core_model(model), data, q, np.ascontiguousarray(p), 0.0, alpha_c,
-                          alpha_k, *inputs, out)  # fmt: skip
+                          alpha_k, out, **inputs.core_arguments())  # fmt: skip
     return out
 
 
@@ -642,26 +642,33 @@ def test_jacobian_product_matches_the_reference_clamped_hessian(name, scale):
         assert np.abs(got - want).max() <= 1e-7 * np.abs(want).max()
 
 
-def test_precomputed_membrane_blocks_give_the_same_product():
-    """Contract of softbody._core.membrane_blocks (what the stability estimate's Lanczos
-    runs pass to every product, so the per-triangle eigensolves run once): the product
-    with those blocks equals the one computing them as it goes, bit for bit, and a block
-    array of the wrong shape is refused naming it."""
+def test_a_given_linearisation_replaces_the_terms_own():
+    """Contract of softbody._core.apply_jacobians' ``linearization``: a term's
+    linearisation given by name is what its product reads, in place of its own prepare at
+    q. The membrane's blocks given as zeros give the product with the membrane left out
+    (leave_out), bit for bit, and the product without them differs (there the membrane's
+    own blocks at q act); a linearisation of the wrong size or type, or a name that is no
+    registered term, is refused naming it."""
     model = _balloon(MATERIALS["stvk"], subdivisions=1)
     q, _ = _perturbed(model, scale=0.9, noise=0.02)
     data = control_data(model)
-    inputs = jacobians.prepare(model, data, 0.0, q)
+    core = core_model(model)
     p = np.random.default_rng(2).normal(size=q.shape)
-    blocks = _core.membrane_blocks(core_model(model), q)
-    assert blocks.shape == (model.membrane_count, 42)
-    plain, given = np.zeros_like(q), np.zeros_like(q)
-    _core.apply_jacobians(core_model(model), data, q, p, 0.0, 0.3, 1.0, *inputs, plain)
-    _core.apply_jacobians(core_model(model), data, q, p, 0.0, 0.3, 1.0, *inputs, given,
-                          membrane_hessian=blocks)  # fmt: skip
-    np.testing.assert_array_equal(given, plain)
-    with pytest.raises(ValueError, match="membrane_hessian"):
-        _core.apply_jacobians(core_model(model), data, q, p, 0.0, 0.3, 1.0, *inputs, given,
-                              membrane_hessian=np.zeros((3, 42)))  # fmt: skip
+    plain, zeroed, without = (np.zeros_like(q) for _ in range(3))
+    _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, plain)
+    blocks = {"membrane": np.zeros(42 * model.membrane_count)}  # (Tm, 42) flat, all zero
+    _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, zeroed, linearization=blocks)
+    _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, without, leave_out=["membrane"])
+    np.testing.assert_array_equal(zeroed, without)
+    assert np.abs(plain - without).max() > 1e-3 * np.abs(plain).max()
+    with pytest.raises(ValueError, match=r"linearization\[membrane\]"):
+        _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, zeroed,
+                              linearization={"membrane": np.zeros((3, 42))})  # fmt: skip
+    with pytest.raises(ValueError, match=r"linearization\[membrane\] must be a C-contig"):
+        listed = {"membrane": blocks["membrane"].tolist()}
+        _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, zeroed, linearization=listed)
+    with pytest.raises(ValueError, match="no registered term is called membranes"):
+        _core.apply_jacobians(core, data, q, p, 0.0, 0.3, 1.0, zeroed, leave_out=["membranes"])
 
 
 def test_breathing_mode_frequency_is_the_rayleigh_quotient_of_uniform_scaling():

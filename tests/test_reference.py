@@ -375,8 +375,9 @@ def test_core_jacobian_product_matches_the_reference(name, simd):
         scale += sum(_scatter(n, tri[:, k], face) for k in range(3))
     for with_attachments in (True, False):
         out = np.full_like(q, np.nan)
-        _core.apply_jacobians(core_model(model), data, q, p, *alphas, *inputs, out,
-                              attachments=with_attachments)  # fmt: skip
+        _core.apply_jacobians(core_model(model), data, q, p, *alphas, out,
+                              leave_out=[] if with_attachments else ["attachments"],
+                              **inputs.core_arguments())  # fmt: skip
         expected = jacobians.apply_jacobians(
             model, data, q, p, *alphas, inputs, with_attachments=with_attachments
         )

@@ -406,3 +406,66 @@ def test_step_radius_is_accurate_at_small_steps(integrator):
     h = np.geomspace(1e-10, 1e-1, 200)
     radius = step_radius(Integrator.parse(integrator), h, 1.0, 16.0)
     assert radius.max() <= 1.0
+
+
+def _split_cases():
+    """The every-term model with its control (a grab spring, an attachment, each gas law),
+    and a balloon of neo-Hookean membrane with material bending and springs under a
+    pressure schedule; each scaled by 1.1 (every spring and attachment stretched) and
+    moved at random by 1 mm."""
+    from trajectory_cases import every_term_model
+
+    model, control = every_term_model()
+    b = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+    b.add_soft_body(sb.icosphere(1, radius=0.2), mass=0.05, stiffness=50.0, damping=0.1,
+                    gas=sb.Gas.isothermal(60.0), bending=sb.Bending(0.02),
+                    membrane=sb.Membrane.neo_hookean(3e4, 1e-3, damping=2e-3))  # fmt: skip
+    balloon = b.finalize()
+    return {"every-term": (model, control), "membrane-bending": (balloon, balloon.control())}
+
+
+@pytest.mark.parametrize("name", ["every-term", "membrane-bending"])
+def test_spectral_parts_split_the_implicit_product(name):
+    """softbody._core.SpectralOperator's four parts against the implicit schemes' product
+    (softbody._core.apply_jacobians, its gas linearisation given as the estimate's), for
+    random p at a state where every spring and attachment is stretched (there the
+    transverse k |1 - L0/L| is the implicit product's k max(0, 1 - L0/L)): the whole part
+    is K p and the damping part C p, to 1e-12 of their largest entry (the springs'
+    direction is d / L there, d times 1 / L in the implicit product); the damped and
+    undamped parts add up to the whole, except for a term that does not split its
+    Jacobian (the grab spring), which counts whole in each: damped + undamped - whole is
+    the grab's -k p on its particle. An unknown part is refused naming the parts."""
+    from softbody import _core
+    from softbody.core import core_model
+    from softbody.sim.control import control_data
+
+    model, control = _split_cases()[name]
+    data = control.write(model, control_data(model))
+    rng = np.random.default_rng(4)
+    q = 1.1 * model.particle_q + rng.uniform(-1e-3, 1e-3, model.particle_q.shape)
+    pieces = _core.stiffness_bounds(core_model(model), data, q)
+    pnet, dpdv = pieces["body_pnet"], pieces["body_dpdv"]
+    gradient = pieces["volume_gradient"]
+    operator = _core.SpectralOperator(core_model(model), data, q, pnet, dpdv, gradient)
+    gas = {"gas": np.concatenate([dpdv, pnet])}
+    for _ in range(2):
+        p = rng.normal(size=q.shape)
+        parts = [np.zeros_like(q) for _ in range(4)]
+        for k, out in enumerate(parts):
+            operator.apply(k, p, out)
+        damped, undamped, whole, damping = parts
+        kp, cp = np.zeros_like(q), np.zeros_like(q)
+        _core.apply_jacobians(core_model(model), data, q, p, 0.0, 0.0, 1.0, kp,
+                              linearization=gas, volume_gradient=gradient)  # fmt: skip
+        _core.apply_jacobians(core_model(model), data, q, p, 0.0, 1.0, 0.0, cp,
+                              linearization=gas, volume_gradient=gradient)  # fmt: skip
+        np.testing.assert_allclose(whole, kp, rtol=0, atol=1e-12 * np.abs(kp).max())
+        np.testing.assert_allclose(damping, cp, rtol=0, atol=1e-12 * np.abs(cp).max())
+        grab = np.zeros_like(q)
+        if data.grab_particle >= 0:
+            grab[data.grab_particle] = -data.grab_stiffness * p[data.grab_particle]
+        np.testing.assert_allclose(damped + undamped - whole, grab, rtol=0,
+                                   atol=1e-12 * np.abs(kp).max())  # fmt: skip
+        assert np.abs(damped).max() > 0 and np.abs(undamped).max() > 0
+    with pytest.raises(ValueError, match="part must be 0"):
+        operator.apply(4, p, parts[0])

@@ -1,6 +1,6 @@
 // The physics terms outside a time loop: forces, volumes, pressures, energies, Jacobian
-// products and the stability estimate's bounds at a state, and one contact pass
-// (diagnostics, the stability estimate, tests).
+// products, the stability estimate's bounds and its split products (SpectralOperator) at a
+// state, and one contact pass (diagnostics, the stability estimate, tests).
 #include "bindings/bindings.hpp"
 #include "bindings/buffers.hpp"
 
@@ -76,71 +76,114 @@ int term_position(const std::string& name) {
     return -1;
 }
 
-/// The implicit schemes' matrix-free product, also behind the stability estimate.
+/// Every registered term's linearisation scratch for a model: one buffer each, sized by
+/// the term's linearization_size (terms/term.hpp), and the table of them (Linearization).
+struct TermScratch {
+    explicit TermScratch(const softbody::Model& m) {
+        const softbody::KernelTable& k = softbody::kernels();
+        for (int t = 0; t < k.term_count; ++t) {
+            own[t].assign(static_cast<size_t>(k.linearization_size(t, m)), 0.0);
+            table[t] = own[t].data();
+        }
+    }
+    std::vector<double> own[softbody::kMaxTerms];
+    double* table[softbody::kMaxTerms] = {};
+};
+
+/// The implicit schemes' matrix-free product at q and time t, every term's linearisation
+/// by its own prepare form there, or (a term named in `linearization`) the caller's, in the
+/// term's layout; terms named in leave_out left out.
 void apply_jacobians(const CoreModel& core, nb::handle control, ConstF64 q, ConstF64 p,
-                     double alpha_m, double alpha_c, double alpha_k, ConstF64 u, ConstF64 a,
-                     ConstF64 b, ConstF64 gradient, ConstF64 dpdv, ConstF64 pnet, F64 out,
-                     bool attachments, bool bending, bool membrane,
-                     std::optional<ConstF64> membrane_hessian) {
+                     double alpha_m, double alpha_c, double alpha_k, F64 out, double t,
+                     nb::dict linearization, std::optional<ConstF64> volume_gradient,
+                     std::vector<std::string> leave_out) {
     const softbody::Model& m = core.model();
-    const Index n = m.particles.count, s = m.springs.count, nb_ = m.bodies.count;
+    const Index n = m.particles.count;
     check_shape(q, "q", {n, 3});
     check_shape(p, "p", {n, 3});
-    check_shape(u, "spring_u", {s, 3});
-    check_shape(a, "spring_a", {s});
-    check_shape(b, "spring_b", {s});
-    check_shape(gradient, "volume_gradient", {n, 3});
-    check_shape(dpdv, "body_dpdv", {nb_});
-    check_shape(pnet, "body_pnet", {nb_});
     check_shape(out, "out", {n, 3});
+    if (volume_gradient) check_shape(*volume_gradient, "volume_gradient", {n, 3});
     CoreControl c(m, control);
-    // the terms' linearisations in their layouts (terms/*.hpp: linearization_size): the
-    // springs' u, a, b and the gas's P'(V), P - P_a copied from the caller's arrays; the
-    // membranes' blocks from membrane_blocks(q) (read in place), or, like the bending
-    // gradients, computed at q as the product goes
     const softbody::KernelTable& k = softbody::kernels();
-    const int springs = term_position("springs"), gas = term_position("gas");
-    std::vector<double> spring_lin(static_cast<size_t>(k.linearization_size(springs, m)));
-    std::vector<double> gas_lin(static_cast<size_t>(k.linearization_size(gas, m)));
-    std::copy(u.data(), u.data() + 3 * s, spring_lin.begin());
-    std::copy(a.data(), a.data() + s, spring_lin.begin() + 3 * s);
-    std::copy(b.data(), b.data() + s, spring_lin.begin() + 4 * s);
-    std::copy(dpdv.data(), dpdv.data() + nb_, gas_lin.begin());
-    std::copy(pnet.data(), pnet.data() + nb_, gas_lin.begin() + nb_);
-    double* scratch[softbody::kMaxTerms] = {};
-    scratch[springs] = spring_lin.data();
-    scratch[gas] = gas_lin.data();
-    if (membrane_hessian) {
-        check_shape(*membrane_hessian, "membrane_hessian",
-                    {m.membranes.count, softbody::kMembraneBlock});
-        scratch[term_position("membrane")] = const_cast<double*>(membrane_hessian->data());
+    unsigned skip = 0;
+    for (const std::string& name : leave_out) skip |= 1u << term_position(name);
+    std::vector<std::pair<int, ConstF64>> given;
+    for (auto [key, value] : linearization) {
+        std::string name;
+        if (!nb::try_cast(key, name)) fail("linearization's keys must be term names");
+        const int term = term_position(name);
+        const std::string what = "linearization[" + name + "]";
+        ConstF64 a;
+        if (!nb::try_cast(value, a, false)) fail(what + " must be a C-contiguous float64 array");
+        check_shape(a, what, {k.linearization_size(term, m)});
+        given.emplace_back(term, a);
     }
+    Buffers b(m, 0);
+    TermScratch scratch(m);
     softbody::Linearization l;
     l.q = q.data();
-    l.volume_gradient = gradient.data();
-    l.scratch = scratch;
-    const unsigned skip = (attachments ? 0u : 1u << term_position("attachments")) |
-                          (bending ? 0u : 1u << term_position("bending")) |
-                          (membrane ? 0u : 1u << term_position("membrane"));
+    l.volume_gradient = b.gas.volume_gradient;
+    l.scratch = scratch.table;
     nb::gil_scoped_release release;
-    softbody::kernels().apply_jacobians(m, c.view, l, p.data(), alpha_m, alpha_c, alpha_k, skip,
-                                        out.data());
+    k.prepare(m, c.view, t, b.gas, l);
+    for (const auto& [term, a] : given) std::copy(a.data(), a.data() + a.size(), scratch.table[term]);
+    if (volume_gradient) l.volume_gradient = volume_gradient->data();
+    k.apply_jacobians(m, c.view, l, p.data(), alpha_m, alpha_c, alpha_k, skip, out.data());
 }
 
-/// Every membrane triangle's blocks at q (the membranes' linearisation).
-nb::ndarray<nb::numpy, double> membrane_blocks(const CoreModel& core, ConstF64 q) {
-    const softbody::Model& m = core.model();
-    check_shape(q, "q", {m.particles.count, 3});
-    const size_t rows = static_cast<size_t>(m.membranes.count);
-    auto* owned = new std::vector<double>(rows * softbody::kMembraneBlock);
-    {
+/// softbody._core.SpectralOperator: the stability estimate's four operators at one state
+/// (StiffnessPart), each term's linearisation prepared once for every product.
+class SpectralOperator {
+public:
+    SpectralOperator(nb::object model, nb::object control, ConstF64 q, ConstF64 body_pnet,
+                     ConstF64 body_dpdv, ConstF64 volume_gradient)
+        : handle_(model),
+          model_(nb::cast<const CoreModel&>(model)),
+          control_(model_.model(), control),
+          buffers_(model_.model(), 0),
+          scratch_(model_.model()) {
+        const softbody::Model& m = model_.model();
+        const Index n = m.particles.count, bodies = m.bodies.count;
+        check_shape(q, "q", {n, 3});
+        check_shape(body_pnet, "body_pnet", {bodies});
+        check_shape(body_dpdv, "body_dpdv", {bodies});
+        check_shape(volume_gradient, "volume_gradient", {n, 3});
+        q_.assign(q.data(), q.data() + 3 * n);
+        pnet_.assign(body_pnet.data(), body_pnet.data() + bodies);
+        dpdv_.assign(body_dpdv.data(), body_dpdv.data() + bodies);
+        gradient_.assign(volume_gradient.data(), volume_gradient.data() + 3 * n);
+        softbody::BoundScratch w;
+        w.body_pnet = pnet_.data();
+        w.body_dpdv = dpdv_.data();
+        w.volume_gradient = gradient_.data();
+        l_.q = q_.data();
+        l_.volume_gradient = gradient_.data();
+        l_.scratch = scratch_.table;
         nb::gil_scoped_release release;
-        softbody::kernels().membrane_blocks(m, q.data(), owned->data());
+        softbody::kernels().prepare_spectral(m, control_.view, buffers_.gas, w, l_);
     }
-    size_t shape[2] = {rows, static_cast<size_t>(softbody::kMembraneBlock)};
-    nb::capsule owner(owned, [](void* p) noexcept { delete static_cast<std::vector<double>*>(p); });
-    return nb::ndarray<nb::numpy, double>(owned->data(), 2, shape, owner);
-}
+
+    void apply(int part, ConstF64 p, F64 out) const {
+        const softbody::Model& m = model_.model();
+        if (part < 0 || part >= softbody::kStiffnessParts)
+            fail("part must be 0 (damped), 1 (undamped), 2 (whole) or 3 (damping)");
+        check_shape(p, "p", {m.particles.count, 3});
+        check_shape(out, "out", {m.particles.count, 3});
+        nb::gil_scoped_release release;
+        softbody::kernels().spectral_product(m, control_.view, l_,
+                                             static_cast<softbody::StiffnessPart>(part),
+                                             p.data(), out.data());
+    }
+
+private:
+    nb::object handle_;  // keeps the CoreModel (and so the model's arrays) alive
+    const CoreModel& model_;
+    CoreControl control_;  // holds the control's arrays
+    Buffers buffers_;
+    TermScratch scratch_;
+    std::vector<double> q_, pnet_, dpdv_, gradient_;
+    softbody::Linearization l_;
+};
 
 /// Volumes of bodies given by plain arrays (before a Model exists, or by another method).
 nb::ndarray<nb::numpy, double> body_volumes(ConstF64 q, ConstI64 tri_indices,
@@ -382,20 +425,31 @@ void bind_terms(nb::module_& mod) {
             "(f (N, 3) [N], volume (B,) [m^3], pressure (B,) [Pa], dV/dx (N, 3) [m^2]).");
     mod.def("apply_jacobians", &apply_jacobians, nb::arg("model"), nb::arg("control"),
             nb::arg("q").noconvert(), nb::arg("p").noconvert(), nb::arg("alpha_m"),
-            nb::arg("alpha_c"), nb::arg("alpha_k"), nb::arg("spring_u").noconvert(),
-            nb::arg("spring_a").noconvert(), nb::arg("spring_b").noconvert(),
-            nb::arg("volume_gradient").noconvert(), nb::arg("body_dpdv").noconvert(),
-            nb::arg("body_pnet").noconvert(), nb::arg("out").noconvert(),
-            nb::arg("attachments") = true, nb::arg("bending") = true, nb::arg("membrane") = true,
-            nb::arg("membrane_hessian").noconvert() = nb::none(),
-            "out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p (C = df/dv, K = df/dx); "
-            "attachments, bending or membrane false leave those terms out; membrane_hessian "
-            "(Tm, 42): the membrane's blocks at q from membrane_blocks (default: computed "
-            "as the product goes).");
-    mod.def("membrane_blocks", &membrane_blocks, nb::arg("model"), nb::arg("q").noconvert(),
-            "Every membrane triangle's clamped stiffness and damping blocks in F at q (N, 3), "
-            "(Tm, 42): two symmetric 6 x 6 blocks by their upper triangles "
-            "(core/terms/membrane.hpp), for apply_jacobians' membrane_hessian.");
+            nb::arg("alpha_c"), nb::arg("alpha_k"), nb::arg("out").noconvert(),
+            nb::arg("t") = 0.0, nb::arg("linearization") = nb::dict(),
+            nb::arg("volume_gradient").noconvert() = nb::none(),
+            nb::arg("leave_out") = std::vector<std::string>(),
+            "out (N, 3) = alpha_m M p + alpha_c C p + alpha_k K p (C = df/dv, K = df/dx) for "
+            "p (N, 3), linearised at q (N, 3) and time t [s] as the implicit schemes do at a "
+            "step's start: each registered term's own prepare form, except the terms named "
+            "in linearization (name -> that term's linearisation, flat, in its layout: "
+            "core/terms/*.hpp linearization_size) and dV/dx where volume_gradient (N, 3) "
+            "[m^2] is given; the terms named in leave_out add nothing.");
+    nb::class_<SpectralOperator>(mod, "SpectralOperator",
+                                 "The stability estimate's split of the terms' Jacobians at "
+                                 "one state, linearised once for its products.")
+        .def(nb::init<nb::object, nb::object, ConstF64, ConstF64, ConstF64, ConstF64>(),
+             nb::arg("model"), nb::arg("control"), nb::arg("q").noconvert(),
+             nb::arg("body_pnet").noconvert(), nb::arg("body_dpdv").noconvert(),
+             nb::arg("volume_gradient").noconvert(),
+             "At positions q (N, 3) [m], with the estimate's state (stiffness_bounds'): "
+             "body_pnet (B,) [Pa], body_dpdv (B,) [Pa/m^3], volume_gradient (N, 3) [m^2].")
+        .def("apply", &SpectralOperator::apply, nb::arg("part"), nb::arg("p").noconvert(),
+             nb::arg("out").noconvert(),
+             "out (N, 3) = the part's K p [N] (part 0 damped, 1 undamped, 2 whole stiffness; "
+             "3: C p, the damping) for p (N, 3), summed over the registered terms: each "
+             "says which of its stiffness goes where (core/terms/term.hpp: "
+             "spectral_product).");
     mod.def("soft_contacts", &soft_contacts, nb::arg("model"), nb::arg("q").noconvert(),
             nb::arg("qd").noconvert(), nb::arg("hash_capacity") = nb::none(),
             "One pass of the model's soft-soft contacts on q, qd (N, 3) in place; returns "

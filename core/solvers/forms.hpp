@@ -98,6 +98,36 @@ inline void apply_jacobians(const Model& m, const Control& c, const Linearizatio
     });
 }
 
+/// The stability estimate's linearisation at l.q: every kSpectral term's prepare_spectral
+/// (from the estimate's state w, after the bound forms), every other term's prepare at e
+/// (its state at l.q), each into its own scratch.
+inline void prepare_spectral(const Eval& e, const BoundScratch& w, const Linearization& l) {
+    Terms::each([&](auto term, int k) {
+        using T = decltype(term);
+        if constexpr (T::kSpectral)
+            T::prepare_spectral(e, w, own(l, k));
+        else
+            T::prepare(e, own(l, k));
+    });
+}
+
+/// out (N, 3) = the part `part` of K p (or C p, StiffnessPart::kDamping) for p (N, 3) at the
+/// estimate's linearisation l, summed over the terms in registry order: each kSpectral
+/// term's split, each other term's whole K (its C for the damping part).
+inline void spectral_product(const Model& m, const Control& c, const Linearization& l,
+                             StiffnessPart part, const double* p, double* out) {
+    std::fill(out, out + 3 * m.particles.count, 0.0);
+    const bool damping = part == StiffnessPart::kDamping;
+    Terms::each([&](auto term, int k) {
+        using T = decltype(term);
+        if constexpr (T::kSpectral)
+            T::spectral_product(m, c, own(l, k), part, p, out);
+        else
+            T::jacobian_product(m, c, own(l, k), damping ? 1.0 : 0.0, damping ? 0.0 : 1.0, p,
+                                out);
+    });
+}
+
 /// The smoother's blocks of M - h C - h^2 K for step h [s]: its diagonal blocks into block
 /// (N, 3, 3), m I then each term's share, and each kStencil term's blocks between
 /// particles into its stencil (stencils: by registry position).

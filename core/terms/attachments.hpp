@@ -77,6 +77,34 @@ inline void jacobian_product(const Model& m, const Control& c, const double* q, 
     }
 }
 
+/// out -= the stability estimate's part `part` of every attachment's stiffness (or
+/// damping) block times p_i at q, anchors from c: with u = d / L the unit vector to the
+/// anchor and t = k |1 - L0/L| (u = 0 and t = k where L = 0), the axial k u u^T (damped,
+/// its damper c u u^T the damping part), the transverse t (I - u u^T) (undamped), their
+/// sum (whole).
+inline void spectral_product(const Model& m, const Control& c, const double* q,
+                             StiffnessPart part, const double* p, double* out) {
+    for (index a = 0; a < m.attachments.count; ++a) {
+        const index i = m.attachments.particle[a];
+        const V3 d = load(c.attachment_anchor, a) - load(q, i);
+        const double length = std::sqrt(dot(d, d));
+        const double k = m.attachments.stiffness[a];
+        V3 u{0.0, 0.0, 0.0};
+        double t = k * 1.0;
+        if (length > 0.0) {
+            u = {d.x / length, d.y / length, d.z / length};
+            t = k * std::abs(1.0 - m.attachments.rest_length[a] / length);
+        }
+        double axial = 0.0, side = 0.0;  // the block axial u u^T + side (I - u u^T)
+        if (part == StiffnessPart::kDamped || part == StiffnessPart::kWhole) axial = k;
+        if (part == StiffnessPart::kUndamped || part == StiffnessPart::kWhole) side = t;
+        if (part == StiffnessPart::kDamping) axial = m.attachments.damping[a];
+        const V3 pi = load(p, i);
+        const double up = dot(u, pi);
+        add_to(out, i, -(side * pi + ((axial - side) * up) * u));
+    }
+}
+
 /// The attachments' share of the implicit system's diagonal blocks (N, 3, 3) at q for step
 /// h [s]: per attachment h^2 (k_iso I + (k - k_iso) u u^T) + h c u u^T, added to its particle's.
 inline void add_smoother_blocks(const Model& m, const Control& c, double h, const double* q,
@@ -198,6 +226,7 @@ struct Term : TermBase {
     static constexpr const char* kName = "attachments";
     static constexpr bool kProjected = true, kEnergy = true, kConstraint = true;
     static constexpr bool kBound = true, kSharedRows = true, kFromOutside = true;
+    static constexpr bool kSpectral = true;
     static bool active(const Model& m, const Control&) { return m.attachments.count > 0; }
     /// The stability estimate: R_i at the tied particles (shared with the springs' rows),
     /// then the attachments' rows against them and their c / k; anchors from c.
@@ -222,6 +251,11 @@ struct Term : TermBase {
     static void jacobian_product(const Model& m, const Control& c, const Linearization& l,
                                  double alpha_c, double alpha_k, const double* p, double* out) {
         attachments::jacobian_product(m, c, l.q, alpha_c, alpha_k, p, out);
+    }
+    /// The estimate's split, computed at l.q as the product goes (no linearisation).
+    static void spectral_product(const Model& m, const Control& c, const Linearization& l,
+                                 StiffnessPart part, const double* p, double* out) {
+        attachments::spectral_product(m, c, l.q, part, p, out);
     }
     static void add_smoother_blocks(const Model& m, const Control& c, const Linearization& l,
                                     const SmootherBlocks& s) {

@@ -193,7 +193,7 @@ inline void add_bound_rows(const Model& m, const double* q, double* rows) {
 /// (its linearisation, l.own: (H, 4, 3)); the products compute them at l.q where it does not.
 struct Term : TermBase {
     static constexpr const char* kName = "bending";
-    static constexpr bool kEnergy = true, kBound = true;
+    static constexpr bool kEnergy = true, kBound = true, kSpectral = true;
     /// The stability estimate: its rows are undamped stiffness (parts undamped and whole).
     static void bound(const Model& m, const Control&, const double* q, const BoundScratch& s,
                       TermBound& out) {
@@ -216,6 +216,16 @@ struct Term : TermBase {
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double, double alpha_k, const double* p, double* out) {
         bending::jacobian_product(m, l.q, l.own, alpha_k, p, out);
+    }
+    /// The stability estimate: the gradients at l.q, as prepare; its Gauss-Newton stiffness
+    /// is undamped (the undamped and whole parts).
+    static void prepare_spectral(const Eval& e, const BoundScratch&, const Linearization& l) {
+        prepare(e, l);
+    }
+    static void spectral_product(const Model& m, const Control& c, const Linearization& l,
+                                 StiffnessPart part, const double* p, double* out) {
+        if (part == StiffnessPart::kUndamped || part == StiffnessPart::kWhole)
+            jacobian_product(m, c, l, 0.0, 1.0, p, out);
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {

@@ -283,6 +283,7 @@ inline double rank_one_bound(const Model& m, const double* dpdv, const double* g
 struct Term : TermBase {
     static constexpr const char* kName = "gas";
     static constexpr bool kFused = true, kEnergy = true, kBound = true, kVolumeMode = true;
+    static constexpr bool kSpectral = true;
     /// The stability estimate: the local pressure rows, and the volume mode (out.mode)
     /// added to them (undamped and whole parts), at the largest scheduled gas; the gas's
     /// state there into s.body_pnet, body_dpdv, volume_gradient.
@@ -319,6 +320,20 @@ struct Term : TermBase {
                                  double, double alpha_k, const double* p, double* out) {
         gas::jacobian_product(m, l.q, l.volume_gradient, l.own, l.own + m.bodies.count, alpha_k,
                               p, out);
+    }
+    /// The stability estimate's linearisation: P'(V) and P - P_a at the largest scheduled
+    /// gas, as its bound form left them in s (l.volume_gradient: the bound's dV/dx).
+    static void prepare_spectral(const Eval& e, const BoundScratch& s, const Linearization& l) {
+        const index bodies = e.m.bodies.count;
+        std::copy(s.body_dpdv, s.body_dpdv + bodies, l.own);
+        std::copy(s.body_pnet, s.body_pnet + bodies, l.own + bodies);
+    }
+    /// The split: the pressure rows and the volume mode are undamped stiffness (no damper
+    /// acts on them): in the undamped and whole parts.
+    static void spectral_product(const Model& m, const Control& c, const Linearization& l,
+                                 StiffnessPart part, const double* p, double* out) {
+        if (part == StiffnessPart::kUndamped || part == StiffnessPart::kWhole)
+            jacobian_product(m, c, l, 0.0, 1.0, p, out);
     }
 };
 

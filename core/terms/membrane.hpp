@@ -718,7 +718,7 @@ inline void lane_force(const Model& m, const double* rows, index g, int lane0, c
 /// The registered term (terms/registry.hpp).
 struct Term : TermBase {
     static constexpr const char* kName = "membrane";
-    static constexpr bool kProjected = true, kEnergy = true, kBound = true;
+    static constexpr bool kProjected = true, kEnergy = true, kBound = true, kSpectral = true;
     // the vertex-major pass gives its force (lane_triangle), and then the fused symplectic
     // pass covers it; without the pass its edge-major force keeps its place in the sums
     static constexpr bool kLane = true, kFusedInPass = true;
@@ -766,6 +766,18 @@ struct Term : TermBase {
     static void jacobian_product(const Model& m, const Control&, const Linearization& l,
                                  double alpha_c, double alpha_k, const double* p, double* out) {
         membrane::jacobian_product(m, l.q, l.own, alpha_c, alpha_k, p, out);
+    }
+    /// The stability estimate: the clamped blocks at l.q, as prepare. Its stiffness is
+    /// damped (its damping is beta times it near rest): the damped and whole parts, its
+    /// damping the damping part.
+    static void prepare_spectral(const Eval& e, const BoundScratch&, const Linearization& l) {
+        prepare(e, l);
+    }
+    static void spectral_product(const Model& m, const Control& c, const Linearization& l,
+                                 StiffnessPart part, const double* p, double* out) {
+        if (part == StiffnessPart::kUndamped) return;
+        const bool damping = part == StiffnessPart::kDamping;
+        jacobian_product(m, c, l, damping ? 1.0 : 0.0, damping ? 0.0 : 1.0, p, out);
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {

@@ -419,6 +419,7 @@ struct Term : TermBase {
     static constexpr const char* kName = "springs";
     static constexpr bool kLane = true, kProjected = true, kFused = true, kEnergy = true;
     static constexpr bool kConstraint = true, kBound = true, kSharedRows = true;
+    static constexpr bool kSpectral = true;
     // smoother entries: u (3,), alpha, beta of the entry's spring (smoother_blocks)
     static constexpr bool kStencil = true;
     static constexpr int kStencilWidth = 5;
@@ -483,6 +484,49 @@ struct Term : TermBase {
                                  double alpha_c, double alpha_k, const double* p, double* out) {
         springs::jacobian_product(m, lin_u(m, l), lin_a(m, l), lin_b(m, l), alpha_c, alpha_k, p,
                                   out);
+    }
+    /// The stability estimate's linearisation (the same 5 S doubles): u (S, 3) = d / L
+    /// (0 where L = 0), the transverse stiffness t = k |1 - L0/L| (S,) (k where L = 0:
+    /// the estimate takes the compressive part too, unlike prepare), and zeros (S,).
+    static void prepare_spectral(const Eval& e, const BoundScratch&, const Linearization& l) {
+        const Model& m = e.m;
+        double* u = lin_u(m, l);
+        double* t = lin_a(m, l);
+        double* zero = lin_b(m, l);
+        for (index s = 0; s < m.springs.count; ++s) {
+            const V3 d = load(l.q, m.springs.indices[2 * s + 1]) -
+                         load(l.q, m.springs.indices[2 * s]);
+            const double length = std::sqrt(dot(d, d));
+            const double k = m.springs.stiffness[s];
+            zero[s] = 0.0;
+            if (length > 0.0) {
+                store(u, s, {d.x / length, d.y / length, d.z / length});
+                t[s] = k * std::abs(1.0 - m.springs.rest_length[s] / length);
+            } else {
+                store(u, s, {0.0, 0.0, 0.0});
+                t[s] = k * 1.0;
+            }
+        }
+    }
+    /// The split: the axial k u u^T damped (its damper c u u^T acts on it), the transverse
+    /// t (I - u u^T) undamped, both in the whole; the blocks (a - b) u u^T + b I of
+    /// jacobian_product with a, b one of k, t and 0.
+    static void spectral_product(const Model& m, const Control&, const Linearization& l,
+                                 StiffnessPart part, const double* p, double* out) {
+        const double* u = lin_u(m, l);
+        const double* t = lin_a(m, l);
+        const double* zero = lin_b(m, l);
+        const double* k = m.springs.stiffness;
+        switch (part) {
+            case StiffnessPart::kDamped:
+                return springs::jacobian_product(m, u, k, zero, 0.0, 1.0, p, out);
+            case StiffnessPart::kUndamped:
+                return springs::jacobian_product(m, u, zero, t, 0.0, 1.0, p, out);
+            case StiffnessPart::kWhole:
+                return springs::jacobian_product(m, u, k, t, 0.0, 1.0, p, out);
+            case StiffnessPart::kDamping:
+                return springs::jacobian_product(m, u, k, zero, 1.0, 0.0, p, out);
+        }
     }
     static void add_smoother_blocks(const Model& m, const Control&, const Linearization& l,
                                     const SmootherBlocks& s) {

@@ -43,6 +43,16 @@
 //               q (TermBound), after every add_row_sums (kBound says it has one; s.rows
 //               (N, 2) its scratch); kernels.cpp: stiffness_bounds calls it for every term,
 //               softbody.stability adds them (Weyl), the kSharedRows ones by their largest
+//   prepare_spectral  (kSpectral) the stability estimate's linearisation at l.q into its own
+//               scratch (linearization_size doubles, l.own), after every `bound` form: the
+//               estimate's state in BoundScratch (the gas at its largest scheduled value);
+//               a term without kSpectral gets its `prepare` at e instead
+//   spectral_product  (kSpectral) the stability estimate's split of the Jacobian: out
+//               (N, 3) += the term's part `part` (StiffnessPart: damped, undamped or whole
+//               stiffness, K = df/dx; or the damping, C = df/dv) times p at
+//               prepare_spectral's linearisation. A term without kSpectral counts its whole
+//               K (jacobian_product, alpha_k = 1) in every stiffness part and its C in the
+//               damping part: never less than it has, so the estimate stays an upper bound
 //   prepare_constraints  what XPBD's constraint pass needs for a substep h, once per run
 //   constrain   XPBD's pass over the term's constraints (solvers/substep.hpp): positions
 //               p.rows moved in place by each constraint's Delta lambda (kConstraint terms;
@@ -128,6 +138,9 @@ struct TermBase {
     static constexpr int kStencilWidth = 0;
     // XPBD (solvers/substep.hpp) solves it by its `constrain` form, no force there
     static constexpr bool kConstraint = false;
+    // it splits its Jacobian for the stability estimate itself (prepare_spectral and
+    // spectral_product); else its whole K counts in every stiffness part
+    static constexpr bool kSpectral = false;
     static bool active(const Model&, const Control&) { return true; }
     static void update(const Eval&, bool /*lanes_ran*/) {}
     static void force(const Eval&, double* /*f*/) {}
@@ -153,6 +166,9 @@ struct TermBase {
                              const BoundScratch&) {}
     static void bound(const Model&, const Control&, const double* /*q*/, const BoundScratch&,
                       TermBound&) {}
+    static void prepare_spectral(const Eval&, const BoundScratch&, const Linearization&) {}
+    static void spectral_product(const Model&, const Control&, const Linearization&,
+                                 StiffnessPart, const double* /*p*/, double* /*out*/) {}
     static void prepare_constraints(const Model&, const Control&, const ConstraintPass&) {}
     static void constrain(const Model&, const Control&, const ConstraintPass&) {}
 };

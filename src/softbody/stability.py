@@ -93,12 +93,6 @@ ball it made the four runs 3.4x faster than 1e-3 (0.56 s against 1.92 s) and the
 estimate 0.24% longer, well inside ``SPECTRAL_MARGIN``."""
 
 
-def _stretch(length, rest_length):
-    """|1 - L0 / L|, 1 where L = 0 (the transverse stiffness factor)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(length > 0, np.abs(1.0 - rest_length / length), 1.0)
-
-
 def _largest_eigenvalue(matvec, size: int, seed: int = 0) -> float:
     """Largest eigenvalue of the symmetric operator ``matvec`` on vectors of ``size``:
     dense for small operators, else Lanczos (ARPACK, relative tolerance
@@ -125,77 +119,37 @@ def spectral_bounds(
     model, q: np.ndarray, body_pnet: np.ndarray, body_dpdv: np.ndarray, volume_gradient
 ) -> tuple[float, float, float, float]:
     """Largest eigenvalues of M^-1/2 A M^-1/2 at positions ``q`` (N, 3) [m] for A the
-    damped stiffness (axial springs and attachments), the undamped stiffness (transverse
-    springs k |1 - L0/L| (I - u u^T), attachments alike, and the pressure terms), the
-    whole stiffness, and the damping matrix: (omega_damped^2, omega_undamped^2,
-    omega^2 [1/s^2], damping rate [1/s]). Stiffness here is -df/dx. Material bending
-    (its Gauss-Newton stiffness, which is exact at the rest angles) is in the undamped and
-    whole parts. The pressure terms
-    use body_pnet (B,) = P - P_ambient [Pa], body_dpdv (B,) [Pa/m^3] and
-    volume_gradient (N, 3) = dV/dx [m^2]; products come from the implicit integrator's
-    matrix-free ``apply_jacobians``. Pinned particles (inverse mass 0) drop out."""
+    damped stiffness, the undamped stiffness, the whole stiffness, and the damping matrix:
+    (omega_damped^2, omega_undamped^2, omega^2 [1/s^2], damping rate [1/s]). Stiffness here
+    is -df/dx. Each registered term says which of its stiffness goes where (its
+    ``spectral_product`` form, ``core/terms/term.hpp``): the springs' and attachments'
+    axial k u u^T damped, their transverse k |1 - L0/L| (I - u u^T) undamped; the gas's
+    pressure rows and volume mode undamped; material bending's Gauss-Newton stiffness
+    undamped; the membranes' clamped stiffness damped and their damping in the damping
+    part; a term that does not split its Jacobian counts it whole in every part. The gas's
+    state is the estimate's: body_pnet (B,) = P - P_ambient [Pa], body_dpdv (B,) [Pa/m^3]
+    and volume_gradient (N, 3) = dV/dx [m^2]. The products come from the compiled core
+    (``softbody._core.SpectralOperator``), linearised once. Pinned particles (inverse mass
+    0) drop out."""
     n = model.particle_count
     # the compiled product takes C-contiguous float64 arrays
-    q = kernel_array(q)
-    body_pnet, body_dpdv = kernel_array(body_pnet), kernel_array(body_dpdv)
-    volume_gradient = kernel_array(volume_gradient)
+    operator = _core.SpectralOperator(
+        core_model(model), control_data(model), kernel_array(q), kernel_array(body_pnet),
+        kernel_array(body_dpdv), kernel_array(volume_gradient),
+    )  # fmt: skip
     scale = np.sqrt(model.particle_inv_mass)[:, None]
-    idx = model.spring_indices.reshape(-1, 2)
-    k = kernel_array(model.spring_stiffness)
-    d = q[idx[:, 1]] - q[idx[:, 0]]
-    length = np.linalg.norm(d, axis=1)
-    u = np.divide(d, length[:, None], out=np.zeros_like(d), where=length[:, None] > 0)
-    transverse = k * _stretch(length, model.spring_rest_length)
-    # attachments: a (3, 3) block on their particle each, added here
-    a = model.attachment_particle
-    da = model.attachment_anchor - q[a]
-    la = np.linalg.norm(da, axis=1)
-    ua = np.divide(da, la[:, None], out=np.zeros_like(da), where=la[:, None] > 0)
-    axial_block = ua[:, :, None] * ua[:, None, :]
-    ka = model.attachment_stiffness
-    ta = ka * _stretch(la, model.attachment_rest_length)
-    damped_a = ka[:, None, None] * axial_block
-    undamped_a = ta[:, None, None] * (np.eye(3) - axial_block)
-    damping_a = model.attachment_damping[:, None, None] * axial_block
-    core = core_model(model)
-    control = control_data(model)
-    # the membranes' blocks at q, once for every product (an eigensolve per triangle)
-    membrane = _core.membrane_blocks(core, q) if model.membrane_count else None
     out = np.zeros((n, 3))
-    no_gas = np.zeros(model.body_count)
 
-    def operator(axial, side, alpha_c, alpha_k, pnet, dpdv, anchored, bending, with_membrane=True):
-        # spring blocks (axial - side) u u^T + side I, as apply_jacobians builds them; the
-        # membranes' clamped stiffness and damping (damped: not in the undamped operator)
+    def part(index: int):
         def matvec(y):
-            p = scale * y.reshape(n, 3)
-            # attachments are added below, as the blocks at this call's anchors
-            _core.apply_jacobians(
-                core, control, q, p, 0.0, alpha_c, alpha_k, u, axial, side,
-                volume_gradient, dpdv, pnet, out, attachments=False, bending=bending,
-                membrane=with_membrane, membrane_hessian=membrane,
-            )  # fmt: skip
-            r = -out
-            if len(a):
-                np.add.at(r, a, np.einsum("aij,aj->ai", anchored, p[a]))
-            return (scale * r).ravel()
+            operator.apply(index, scale * y.reshape(n, 3), out)
+            return (scale * -out).ravel()
 
         return matvec
 
-    zero = np.zeros_like(k)
     size = 3 * n
-    return (
-        _largest_eigenvalue(operator(k, zero, 0.0, 1.0, no_gas, no_gas, damped_a, False), size),
-        _largest_eigenvalue(
-            operator(zero, transverse, 0.0, 1.0, body_pnet, body_dpdv, undamped_a, True, False),
-            size,
-        ),
-        _largest_eigenvalue(
-            operator(k, transverse, 0.0, 1.0, body_pnet, body_dpdv, damped_a + undamped_a, True),
-            size,
-        ),
-        _largest_eigenvalue(operator(k, zero, 1.0, 0.0, no_gas, no_gas, damping_a, False), size),
-    )
+    damped, undamped, whole, damping = (_largest_eigenvalue(part(k), size) for k in range(4))
+    return damped, undamped, whole, damping
 
 
 def stiffest_mode(model, q: np.ndarray | None = None, *, spectral: bool = True) -> StiffestMode:

@@ -3,9 +3,9 @@
     out = alpha_m M p + alpha_c C p + alpha_k K p,    C = df/dv, K = df/dx,
 
 with M the (diagonal) particle masses and C, K summed over the springs, the attachments
-(optional: the stability estimate adds its own), the grab spring, the gas, the bending
-hinges (their Gauss-Newton K, :mod:`softbody.reference.bending`) and the membranes (their K
-clamped to negative semi-definite: :mod:`softbody.reference.membrane`). K drops the
+(optional), the grab spring, the gas, the bending hinges (their Gauss-Newton K,
+:mod:`softbody.reference.bending`) and the membranes (their K clamped to negative
+semi-definite: :mod:`softbody.reference.membrane`). K drops the
 compressive geometric stiffness of springs and attachments (see
 :mod:`softbody.reference.springs`), so it is df/dx exactly where every spring is at or
 beyond its rest length. Gravity, external forces and terms without a Jacobian add
@@ -25,8 +25,8 @@ from softbody.sim.model import Model
 
 
 class JacobianInputs(NamedTuple):
-    """What the product reads besides q and p: the arguments ``softbody._core.
-    apply_jacobians`` takes between alpha_k and out, in its order."""
+    """What the product reads besides q and p: the springs' blocks, dV/dx and the pressure
+    slopes (:meth:`core_arguments`: as ``softbody._core.apply_jacobians`` takes them)."""
 
     spring_u: np.ndarray  # (S, 3)
     spring_a: np.ndarray  # (S,) [N/m]
@@ -34,6 +34,18 @@ class JacobianInputs(NamedTuple):
     volume_gradient: np.ndarray  # (N, 3) [m^2]
     body_dpdv: np.ndarray  # (B,) [Pa/m^3]
     body_pnet: np.ndarray  # (B,) [Pa]
+
+    def core_arguments(self) -> dict:
+        """``softbody._core.apply_jacobians``' keyword arguments that make the core's product
+        read these: the springs' and the gas's linearisations in their layouts
+        (``core/terms/springs.hpp``: u (S, 3), a, b; ``gas.hpp``: P'(V), P - P_a; flat)
+        and dV/dx (N, 3)."""
+        springs = np.concatenate([self.spring_u.ravel(), self.spring_a, self.spring_b])
+        gas = np.concatenate([self.body_dpdv, self.body_pnet])
+        return {
+            "linearization": {"springs": springs, "gas": gas},
+            "volume_gradient": self.volume_gradient,
+        }
 
 
 def prepare(model: Model, control: ControlData, t: float, q: np.ndarray) -> JacobianInputs:
