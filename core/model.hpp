@@ -166,6 +166,10 @@ struct ContactBuffers {
     double* scale = nullptr;      // (N,)
     double* tri_box = nullptr;    // (T, 6)
     index* crossing = nullptr;    // (2,)
+    // The pair list kept between steps: the positions it was built at (N, 3), and its pair
+    // count (-1: none yet, build it).
+    double* q_build = nullptr;    // (N, 3)
+    index* list = nullptr;        // (1,)
 };
 
 /// Scratch of the vertex-major force pass.

@@ -125,14 +125,17 @@ struct Stage {
     const ContactBuffers& w;
     V3 T;              // the common translation
     double inv;        // 1 / cell size
-    double g;          // the margin the triangles' boxes grow by
+    double g;          // the distance boxes grow by before they are compared
     bool self;         // pairs within a body too
+    bool swept = true; // boxes over q0 and q - T (the step's pairs), or q0 alone (the list's)
+    double keep = std::numeric_limits<double>::infinity();  // pairs nearer than this are kept
 };
 
-/// Box of particle i over q0 and q0 + u (u = q - q0 - T) into lo, hi.
+/// Box of particle i over q0 and q0 + u (u = q - q0 - T), or q0 alone, into lo, hi.
 inline void particle_box(const Stage& st, index i, double* lo, double* hi) {
     for (int k = 0; k < 3; ++k) {
-        const double a = st.q0[3 * i + k], b = st.q[3 * i + k] - (&st.T.x)[k];
+        const double a = st.q0[3 * i + k];
+        const double b = st.swept ? st.q[3 * i + k] - (&st.T.x)[k] : a;
         lo[k] = std::min(a, b);
         hi[k] = std::max(a, b);
     }
@@ -276,7 +279,8 @@ inline index collect(const Stage& st) {
                 const index v[4] = {i, tri[0], tri[1], tri[2]};
                 double c[4];
                 const V3 d = gap(st.q0, kVertexTriangle, v, c);
-                add_pair(w, count, kVertexTriangle, v, std::sqrt(dot(d, d)));
+                const double dist = std::sqrt(dot(d, d));
+                if (dist < st.keep) add_pair(w, count, kVertexTriangle, v, dist);
                 return true;
             });
         }
@@ -324,7 +328,8 @@ inline index collect(const Stage& st) {
                     const index v[4] = {a, b, c, d};
                     double cc[4];
                     const V3 g = gap(st.q0, kEdgeEdge, v, cc);
-                    add_pair(w, count, kEdgeEdge, v, std::sqrt(dot(g, g)));
+                    const double dist = std::sqrt(dot(g, g));
+                    if (dist < st.keep) add_pair(w, count, kEdgeEdge, v, dist);
                 }
                 return true;
             });
@@ -458,15 +463,68 @@ inline bool any_bodies_near(const Stage& st) {
     return false;
 }
 
+/// The candidate pairs of a step into w.pairs, collected (broad phase, narrow phase, the
+/// crossing check) with the stage's settings; grows the list when it must. Returns their
+/// count; -1 for a crossing; or, below -1, minus the entries the hash or the list needed
+/// (less 1) when its buffer could not grow to them.
+inline index gather(const Stage& st) {
+    const ContactBuffers& w = st.w;
+    const index needed = build_hash(st);
+    if (needed > w.hash_entries->capacity) {
+        HashEntries& entries = *w.hash_entries;
+        if (entries.grow == nullptr || !entries.grow(entries, needed)) return -1 - needed;
+        build_hash(st);
+    }
+    index pairs = collect(st);
+    if (pairs >= 0 && pairs * kSlots > w.pairs->capacity) {
+        HashEntries& list = *w.pairs;
+        if (list.grow == nullptr || !list.grow(list, pairs * kSlots)) return -1 - pairs * kSlots;
+        pairs = collect(st);
+    }
+    return pairs;
+}
+
+/// The list's particles' largest offset from where it was built, after the common
+/// translation C of the bodies' free particles between the two: max_i |q0_i - q_b,i - C|.
+inline double drift(const Model& m, const double* q0, const double* qb) {
+    double mass = 0.0;
+    V3 sum{0.0, 0.0, 0.0};
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            if (m.particles.inv_mass[i] == 0.0) continue;
+            mass += m.particles.mass[i];
+            sum = sum + m.particles.mass[i] * (load(q0, i) - load(qb, i));
+        }
+    const V3 c = mass > 0.0 ? (1.0 / mass) * sum : V3{0.0, 0.0, 0.0};
+    double most = 0.0;
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            const V3 d = load(q0, i) - load(qb, i) - c;
+            most = std::max(most, dot(d, d));
+        }
+    return std::sqrt(most);
+}
+
 /// The stage (steps 1-5) on q, qd (N, 3) in place, from the step's start q0 (N, 3). Returns
 /// 0; the entries the hash or the pair list needed when its buffer could not grow to them
 /// (nothing resolved); or -1 for a crossing at q0 (w.crossing: particle, triangle; nothing
 /// changed).
+///
+/// The pairs come from a list kept between steps (a Verlet list): the pairs nearer than
+/// R = 2 h + g at the positions q_b where it was built. While the bodies' particles have
+/// drifted by sigma (after a common translation) from q_b and move by mu in the step (after
+/// T), with sigma + mu <= g / 2, a pair off the list starts the step at least R - 2 sigma
+/// apart and ends it (bound, and response moves of h / 2 a side) at least
+/// R - 2 (sigma + mu) - h >= h apart: neither the bound nor the response needs it. The list
+/// is built again (at q0, with the crossing check) when that fails; a step whose own motion
+/// is over g / 2 takes its pairs from the swept boxes instead (and the list is dropped).
 inline index contacts(const Model& m, const double* q0, double* q, double* qd,
                       const ContactBuffers& w) {
     Stage st{m, q0, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
              m.soft_contacts.margin, m.soft_contacts.self_contact != 0};
-    // 1. the common translation
+    // 1. the common translation, and the step's largest motion after it
     double mass = 0.0;
     V3 sum{0.0, 0.0, 0.0};
     for (index b = 0; b < m.bodies.count; ++b)
@@ -479,26 +537,51 @@ inline index contacts(const Model& m, const double* q0, double* q, double* qd,
         }
     if (mass > 0.0) st.T = (1.0 / mass) * sum;
     if (!st.self && !any_bodies_near(st)) return 0;
-    // 2. broad phase
-    index needed = build_hash(st);
-    if (needed > w.hash_entries->capacity) {
-        HashEntries& entries = *w.hash_entries;
-        if (entries.grow == nullptr || !entries.grow(entries, needed)) return needed;
-        build_hash(st);
-    }
-    index pairs = collect(st);
-    if (pairs < 0) return -1;  // 3. crossed at the start
-    if (pairs * kSlots > w.pairs->capacity) {
-        HashEntries& list = *w.pairs;
-        if (list.grow == nullptr || !list.grow(list, pairs * kSlots)) return pairs * kSlots;
-        pairs = collect(st);
+    double mu = 0.0;
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            const V3 u = load(q, i) - load(q0, i) - st.T;
+            mu = std::max(mu, dot(u, u));
+        }
+    mu = std::sqrt(mu);
+    // 2-3. the pairs: the list (built again when it no longer covers the step), or the
+    // step's swept boxes
+    const double h = m.soft_contacts.thickness, slack = 0.5 * st.g;
+    index pairs = 0;
+    const index n3 = 3 * m.particles.count;
+    if (mu <= slack) {
+        if (*w.list < 0 || drift(m, q0, w.q_build) + mu > slack) {
+            Stage list = st;
+            list.swept = false;
+            list.g = 2.0 * h + st.g;
+            list.keep = list.g;
+            *w.list = -1;
+            pairs = gather(list);
+            if (pairs == -1) return -1;  // crossed at the start
+            if (pairs < -1) return -1 - pairs;
+            for (index k = 0; k < n3; ++k) w.q_build[k] = q0[k];
+            *w.list = pairs;
+        }
+        pairs = *w.list;
+        for (index p = 0; p < pairs; ++p) {  // each pair's distance at this step's start
+            index* row = w.pairs->data + kSlots * p;
+            double c[4];
+            const V3 g = gap(q0, row[0], row + 1, c);
+            const double d = std::sqrt(dot(g, g));
+            std::memcpy(row + 5, &d, sizeof(double));
+        }
+    } else {
+        *w.list = -1;
+        pairs = gather(st);
+        if (pairs == -1) return -1;
+        if (pairs < -1) return -1 - pairs;
     }
     // 4. the bound, 5. the response, its moves clipped to h / 2, and the bound again
     bound(st, pairs);
-    const index n3 = 3 * m.particles.count;
     for (index k = 0; k < n3; ++k) w.q_pre[k] = q[k];
     respond(st, pairs, qd);
-    const double clip = 0.5 * m.soft_contacts.thickness;
+    const double clip = 0.5 * h;
     for (index i = 0; i < m.particles.count; ++i) {
         const V3 d = load(q, i) - load(w.q_pre, i);
         const double len = std::sqrt(dot(d, d));
