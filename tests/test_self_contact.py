@@ -24,6 +24,32 @@ def test_crossing_check_finds_a_known_crossing():
     assert edge_crossings(q, tri, edges).tolist() == [[0, 0]]
 
 
+def test_crossing_check_grid_finds_every_pair():
+    """The check's grid broad phase against every edge-triangle pair: on a seeded random
+    soup of 400 triangles (thousands of crossings) it finds exactly the crossings a test
+    of all pairs finds (the same segment-plane and sub-area test, without boxes or grid)."""
+    rng = np.random.default_rng(7)
+    q = rng.normal(size=(300, 3))
+    tri = rng.integers(0, 300, size=(400, 3))
+    tri = tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])]
+    edges = unique_edges(tri)
+    e, t = (g.ravel() for g in np.meshgrid(np.arange(len(edges)), np.arange(len(tri)),
+                                           indexing="ij"))  # fmt: skip
+    i, j = q[edges[e, 0]], q[edges[e, 1]]
+    a, b, c = q[tri[t, 0]], q[tri[t, 1]], q[tri[t, 2]]
+    apart = ~np.any(tri[t][:, :, None] == edges[e][:, None, :], axis=(1, 2))
+    n = np.cross(b - a, c - a)
+    da, db = np.sum((i - a) * n, axis=1), np.sum((j - a) * n, axis=1)
+    straddle = da * db < 0
+    x = i + (da / np.where(straddle, da - db, 1.0))[:, None] * (j - i)
+    w = [np.sum(np.cross(u - x, v - x) * n, axis=1) for u, v in ((b, c), (c, a), (a, b))]
+    hit = apart & straddle & (w[0] > 0) & (w[1] > 0) & (w[2] > 0)
+    brute = set(zip(e[hit].tolist(), t[hit].tolist(), strict=True))
+    found = set(map(tuple, edge_crossings(q, tri, edges).tolist()))
+    assert len(brute) > 1000
+    assert found == brute
+
+
 # -- the vacuum-packed ball ------------------------------------------------------------------
 AMBIENT = 500.0  # [Pa]
 
