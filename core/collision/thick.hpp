@@ -10,7 +10,8 @@
 //      q0 + u, grown by the margin g >= h (soft_contacts.margin); each vertex's and each
 //      edge's box over the same points is looked up in it. Every pair whose boxes meet is a
 //      candidate, with its distance D at the step's start. Any pair of primitives that could
-//      meet below (every path stays in its box grown by h / 2) is a candidate.
+//      meet below (every path stays in its box grown by h / 2) is a candidate. Most steps
+//      take their candidates from a list kept between steps instead (see contacts()).
 //   3. A pre-existing crossing (an edge through a non-adjacent triangle at q0: an initial
 //      self-intersection, or a collider that pushed one sheet through another) stops the
 //      run with Status CROSSED and says where; nothing is changed.

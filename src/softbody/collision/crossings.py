@@ -25,7 +25,7 @@ def _cells(lo: np.ndarray, hi: np.ndarray, size: float) -> tuple[np.ndarray, np.
 
 def candidate_pairs(elo, ehi, tlo, thi) -> tuple[np.ndarray, np.ndarray]:
     """Every (edge, triangle) pair whose boxes meet, once (shapes (K,), (K,))."""
-    size = max(float(np.max(ehi - elo)), 1e-300) if len(elo) else 1.0
+    size = max(float(np.median(np.max(ehi - elo, axis=1))), 1e-300)
     lo = np.minimum(elo.min(axis=0), tlo.min(axis=0))
     e_owner, e_key = _cells(elo - lo, ehi - lo, size)
     t_owner, t_key = _cells(tlo - lo, thi - lo, size)
@@ -37,7 +37,8 @@ def candidate_pairs(elo, ehi, tlo, thi) -> tuple[np.ndarray, np.ndarray]:
     n = last - first
     e = np.repeat(e_owner, n)
     t = t_owner[np.repeat(first, n) + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)]
-    pairs = np.unique(e * len(tlo) + t)
+    pairs = np.sort(e * len(tlo) + t)  # each pair once (a sort: no hash table)
+    pairs = pairs[np.concatenate([[True], pairs[1:] != pairs[:-1]])]
     e, t = pairs // len(tlo), pairs % len(tlo)
     meet = np.all((elo[e] <= thi[t]) & (tlo[t] <= ehi[e]), axis=1)
     return e[meet], t[meet]
