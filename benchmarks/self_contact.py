@@ -63,9 +63,9 @@ def rate(
     for _ in range(rounds):
         state = start.copy()
         steps = max(1, round((t1 - t0) / sim.dt))
-        start = time.perf_counter()
+        clock = time.perf_counter()
         sim.run(state, steps)
-        best = max(best, steps / (time.perf_counter() - start))
+        best = max(best, steps / (time.perf_counter() - clock))
     return best
 
 
