@@ -70,7 +70,10 @@
     F(triangles, indices, tri_indices, i64, (T, 3), index(0, N), "",                              \
       "particle indices of each surface triangle, outward-wound")                                 \
     F(triangles, body, tri_body, i64, (T), index(0, B), "",                                       \
-      "body of each triangle")
+      "body of each triangle")                                                                    \
+    F(triangles, edge_owner, tri_edge_owner, i64, (T, 3), index(0, 2), "",                        \
+      "1 where the triangle owns its edge k (corner k to corner k + 1): every mesh edge has "     \
+      "one owner (surface contacts' edge-edge pairs)")
 
 #define SOFTBODY_FIELDS_BODIES(F)                                                                 \
     F(bodies, particle_range, body_particle_range, i64, (B, 2), range(N), "",                     \
@@ -146,7 +149,12 @@
     F(soft_contacts, margin, contact_margin, f64_value, (), none, "m",                            \
       "distance within which surface contacts look for the nearest triangle")                     \
     F(soft_contacts, cell_size, contact_cell_size, f64_value, (), none, "m",                      \
-      "grid cell of the surface contacts' spatial hash")
+      "grid cell of the surface contacts' spatial hash")                                          \
+    F(soft_contacts, thickness, contact_thickness, f64_value, (), finite_nonneg, "m",             \
+      "distance surface contacts keep between two sheets; 0: vertices against the other "       \
+      "body's triangles without one (collision/soft.hpp), > 0: collision/thick.hpp")              \
+    F(soft_contacts, self_contact, soft_self_contact, i64_value, (), index(0, 2), "",             \
+      "1: surface contacts with a thickness act within a body too")
 
 #define SOFTBODY_FIELDS_COLLIDERS(F)                                                              \
     F(colliders, kind, collider_kind, i64, (C), index(0, ColliderKind::kCount), "",               \

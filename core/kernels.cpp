@@ -3,6 +3,7 @@
 #include "kernels.hpp"
 
 #include <algorithm>
+#include <vector>
 
 #include "solvers/explicit.hpp"
 #include "solvers/forms.hpp"
@@ -78,6 +79,10 @@ void apply_jacobians(const Model& m, const Control& c, const Linearization& l, c
 
 index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers& w) {
     if (m.soft_contacts.mode == SoftContactMode::BOUNDING) soft::contacts_bounding(m, q, qd, w);
+    if (m.soft_contacts.mode == SoftContactMode::SURFACE && m.soft_contacts.thickness > 0.0) {
+        const std::vector<double> q0(q, q + 3 * m.particles.count);  // a pass from rest
+        return thick::contacts(m, q0.data(), q, qd, w);
+    }
     if (m.soft_contacts.mode == SoftContactMode::SURFACE) return soft::contacts_surface(m, q, qd, w);
     return 0;
 }

@@ -176,6 +176,20 @@ struct ContactBuffers {
     HashEntries* hash_entries = nullptr;  // the entries (triangle indices), grown as needed
     index* hash_start = nullptr;  // (H + 1,)
     index* hash_count = nullptr;  // (H,)
+    // Surface contacts with a thickness (collision/thick.hpp): the candidate pairs, kPairSlots
+    // entries each (kind, four particles, the start distance's bits), grown as needed; the
+    // positions before the response (N, 3), each particle's displacement scale (N,), the
+    // triangles' boxes (T, 6), and where a crossing was found (particle, triangle).
+    static constexpr index kPairSlots = 6;
+    HashEntries* pairs = nullptr;
+    double* q_pre = nullptr;      // (N, 3)
+    double* scale = nullptr;      // (N,)
+    double* tri_box = nullptr;    // (T, 6)
+    index* crossing = nullptr;    // (2,)
+    // The pair list kept between steps: the positions it was built at (N, 3), and its pair
+    // count (-1: none yet, build it).
+    double* q_build = nullptr;    // (N, 3)
+    index* list = nullptr;        // (1,)
 };
 
 /// Scratch of the vertex-major force pass.
@@ -410,7 +424,9 @@ struct BoundScratch {
 /// faster than the speed limit; BAD_VOLUME: a body volume became NaN, zero or negative;
 /// SHRUNK / EXPLODED: a body volume fell below / grew past its limit; NEED_HASH: the
 /// spatial hash needs more room; BAD_GAS: a body's gas amount or temperature became
-/// negative or not finite (value: the amount [mol]); STOPPED: RunParams::poll asked to stop (an interrupt), the
+/// negative or not finite (value: the amount [mol]); CROSSED: surface contacts with a thickness
+/// found an edge through a triangle at a step's start (where: the edge's first particle,
+/// value: the triangle); STOPPED: RunParams::poll asked to stop (an interrupt), the
 /// steps done are kept (enums.hpp lists them).
 enum Status : int { SOFTBODY_ENUM_STATUS(SOFTBODY_ENUM_MEMBER) };
 

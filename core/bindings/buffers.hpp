@@ -17,6 +17,10 @@ inline Index hash_table_size(Index tris) {
 /// triangle 8 cells across; cells are as large as the longest edge at rest).
 constexpr Index kMostEntriesPerTriangle = 512;
 
+/// The most candidate pairs per triangle surface contacts with a thickness grow their list
+/// to (collision/thick.hpp; a few tens where nothing has stretched).
+constexpr Index kMostPairsPerTriangle = 4096;
+
 /// A solver's scratch, allocated once: (N, 3) rows, per-body and per-collider arrays, and
 /// for surface soft contacts (soft_contact_mode 2) the spatial hash with room for
 /// `hash_capacity` entries.
@@ -67,7 +71,26 @@ public:
             contact.hash_table = table;
             contact.hash_start = hash_start_.data();
             contact.hash_count = hash_count_.data();
+            if (m.soft_contacts.thickness > 0.0) {  // collision/thick.hpp
+                const size_t tris = static_cast<size_t>(m.triangles.count);
+                thick_.assign(2 * n3 + n3 / 3 + 6 * tris, 0.0);
+                contact.q_pre = thick_.data();
+                contact.scale = contact.q_pre + n3;
+                contact.tri_box = contact.scale + n3 / 3;
+                contact.q_build = contact.tri_box + 6 * tris;
+                pair_entries_.assign(static_cast<size_t>(softbody::ContactBuffers::kPairSlots) *
+                                         (16 * tris + 16),
+                                     0);
+            }
         }
+        contact.crossing = crossing_;
+        contact.list = &list_;
+        pairs_.capacity = static_cast<Index>(pair_entries_.size());
+        pairs_.data = pair_entries_.data();
+        pairs_.owner = this;
+        most_pairs_ = softbody::ContactBuffers::kPairSlots * kMostPairsPerTriangle *
+                      std::max<Index>(m.triangles.count, 1);
+        contact.pairs = &pairs_;
         entries_.capacity = static_cast<Index>(hash_entries_.size());
         entries_.data = hash_entries_.data();
         entries_.owner = this;
@@ -79,7 +102,10 @@ public:
 
     /// Let the surface contacts grow their hash inside a run (the solvers'; a one-off
     /// contact pass keeps the capacity it was given).
-    void allow_growth() { entries_.grow = &Buffers::grow_entries; }
+    void allow_growth() {
+        entries_.grow = &Buffers::grow_entries;
+        pairs_.grow = &Buffers::grow_pairs;
+    }
     Index hash_capacity() const { return entries_.capacity; }
     double* row(int k) { return rows_[static_cast<size_t>(k)].data(); }
     softbody::LaneBuffers lanes_view;
@@ -89,9 +115,28 @@ public:
 private:
     std::vector<std::vector<double>> rows_, per_body_, per_collider_;
     std::vector<double> gradient_, rows_buffer_, lane_pnet_, gas_work_;
-    std::vector<Index> hash_start_, hash_count_, hash_entries_;
-    softbody::HashEntries entries_;
-    Index most_entries_ = 0;
+    std::vector<Index> hash_start_, hash_count_, hash_entries_, pair_entries_;
+    std::vector<double> thick_;
+    softbody::HashEntries entries_, pairs_;
+    Index crossing_[2] = {-1, -1};
+    Index list_ = -1;  // the thickness contacts' pair list: none yet
+    Index most_entries_ = 0, most_pairs_ = 0;
+
+    /// Room for `needed` pair entries (as grow_entries), up to kMostPairsPerTriangle pairs a
+    /// triangle.
+    static bool grow_pairs(softbody::HashEntries& h, Index needed) {
+        Buffers& self = *static_cast<Buffers*>(h.owner);
+        if (needed > self.most_pairs_) return false;
+        const Index size = std::min(self.most_pairs_, std::max(needed, 2 * h.capacity));
+        try {
+            self.pair_entries_.resize(static_cast<size_t>(size));
+        } catch (const std::bad_alloc&) {
+            return false;
+        }
+        h.data = self.pair_entries_.data();
+        h.capacity = size;
+        return true;
+    }
 
     /// Room for `needed` entries (twice the capacity when that is more, up to the most), or
     /// false beyond kMostEntriesPerTriangle per triangle: a triangle spanning that many grid

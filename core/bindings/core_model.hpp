@@ -75,6 +75,12 @@ private:
             if (!(std::isfinite(m.soft_contacts.margin) && m.soft_contacts.margin >= 0.0))
                 fail("contact_margin must be finite and >= 0, got " +
                      std::to_string(m.soft_contacts.margin));
+            // with a thickness h the broad phase grows boxes by the margin, which must
+            // cover the h the response may move two sheets by (collision/thick.hpp)
+            if (m.soft_contacts.thickness > 0.0 && !(m.soft_contacts.margin >= m.soft_contacts.thickness))
+                fail("contact_margin must be >= contact_thickness, got " +
+                     std::to_string(m.soft_contacts.margin) + " < " +
+                     std::to_string(m.soft_contacts.thickness));
         }
     }
 

@@ -6,6 +6,7 @@
 
 #include "collision/colliders.hpp"
 #include "collision/soft.hpp"
+#include "collision/thick.hpp"
 #include "model.hpp"
 #include "simd.hpp"
 #include "solvers/gas_state.hpp"
@@ -103,9 +104,11 @@ inline void begin_run(const Model& m, const Control& c, const RunParams& p, cons
 }
 
 /// Contacts at the end of step `step` (of p.steps, ending at time t [s]); q_start (N, 3) is
-/// the step's start positions (continuous collider detection). Returns 0, or the spatial-hash
-/// entries surface soft contacts need when their buffer could not grow to them: then the colliders
-/// have moved but no contact was resolved, and the caller undoes the step.
+/// the step's start positions (continuous collider detection, the thickness contacts' bound).
+/// Returns 0, or the spatial-hash entries surface soft contacts need when their buffer could
+/// not grow to them: then the colliders have moved but no contact was resolved, and the caller
+/// undoes the step; or -1 when the thickness contacts found a crossing at the step's start
+/// (w.crossing says where; contact_failure makes either a RunResult).
 inline index contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
                       const StateView& s, const double* q_start, const ContactBuffers& w,
                       colliders::Seen* seen = nullptr) {
@@ -117,6 +120,9 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
     }
     if (m.soft_contacts.mode == SoftContactMode::BOUNDING) {
         soft::contacts_bounding(m, s.q, s.qd, w);
+    } else if (m.soft_contacts.mode == SoftContactMode::SURFACE && m.soft_contacts.thickness > 0.0) {
+        const index needed = thick::contacts(m, q_start, s.q, s.qd, w);
+        if (needed != 0) return needed;
     } else if (m.soft_contacts.mode == SoftContactMode::SURFACE) {
         const index needed = soft::contacts_surface(m, s.q, s.qd, w);
         if (needed > 0) return needed;
@@ -125,6 +131,13 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
         colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
                             s.q, s.qd, s.collider_impulse, seen, p.dt);
     return 0;
+}
+
+/// The run's outcome when contacts() returned `needed` != 0 at step `step`: NEED_HASH (value:
+/// the entries needed), or CROSSED (where: the edge's particle, value: the triangle).
+inline RunResult contact_failure(index needed, index step, const ContactBuffers& w) {
+    if (needed < 0) return {CROSSED, step, w.crossing[0], static_cast<double>(w.crossing[1])};
+    return {NEED_HASH, step, -1, static_cast<double>(needed)};
 }
 
 /// The end of step `step` (from t to t + p.dt) every solver shares: contacts, then the
@@ -136,8 +149,8 @@ inline RunResult end_step(const Model& m, const Control& c, const RunParams& p, 
                           const ContactBuffers& w) {
     const index n3 = 3 * m.particles.count;
     const index needed = contacts(m, c, p, step, t + p.dt, s, q0, w);
-    RunResult r = needed > 0 ? RunResult{NEED_HASH, step, -1, static_cast<double>(needed)}
-                             : check_particles(m, s.q, s.qd, p.max_speed);
+    RunResult r = needed != 0 ? contact_failure(needed, step, w)
+                              : check_particles(m, s.q, s.qd, p.max_speed);
     if (r.status != OK) {
         copy(q0, s.q, n3);
         copy(v0, s.qd, n3);

@@ -259,8 +259,8 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
         colliders::Seen seen;
         symplectic_pass(m, c, p.dt, h3, w.gas, w.f, s.q, s.qd, w.q0, w.v0, seen);
         const index needed = loop::contacts(m, c, p, step_index, t + p.dt, s, w.q0, w.contact, &seen);
-        if (needed > 0)
-            r = {NEED_HASH, step_index, -1, static_cast<double>(needed)};
+        if (needed != 0)
+            r = loop::contact_failure(needed, step_index, w.contact);
         else if (m.soft_contacts.mode != SoftContactMode::NONE)  // soft contacts moved particles unseen
             r = loop::check_particles(m, s.q, s.qd, p.max_speed);
         else

@@ -142,9 +142,8 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
             if (flowing) gas_state::advance(m, h, s.gas_moles, theta, dn, dth, s.gas_moles, theta);
             const index needed =
                 loop::contacts(m, c, sub, step_index * substeps + k, ts + h, s, w.q_prev, w.contact);
-            if (needed > 0)
-                return undo(m, s, w, flowing,
-                            RunResult{NEED_HASH, step_index, -1, static_cast<double>(needed)},
+            if (needed != 0)
+                return undo(m, s, w, flowing, loop::contact_failure(needed, step_index, w.contact),
                             step_index);
         }
         RunResult r = loop::check_particles(m, s.q, s.qd, p.max_speed);

@@ -487,7 +487,12 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
     if spec.contact is not None:
         c = spec.contact
         builder.set_soft_contact(
-            c.mode, restitution=c.restitution, friction=c.friction, margin=c.margin
+            c.mode,
+            self_contact=c.self_contact,
+            thickness=c.thickness,
+            restitution=c.restitution,
+            friction=c.friction,
+            margin=c.margin,
         )
     builder.set_air(density=spec.air.density, wind=spec.air.wind)
 

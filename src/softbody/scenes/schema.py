@@ -303,8 +303,31 @@ class Contact(Table):
     margin: Real | None = Field(
         None,
         gt=0,
-        description="surface contact search distance [m] (default: half the median edge length)",
+        description="surface contact search distance [m] (default: half the median edge "
+        "length); with a thickness, how far the broad phase grows boxes, >= thickness "
+        "(default: the thickness)",
     )
+    self_contact: Flag = Field(
+        False,
+        description="surface mode: bodies collide with themselves too (vertex-triangle and "
+        "edge-edge pairs, with a thickness)",
+    )
+    thickness: Real | None = Field(
+        None,
+        gt=0,
+        description="surface mode: distance kept between two sheets [m] (default with "
+        "self_contact: 0.2 times the median edge length)",
+    )
+
+    @model_validator(mode="after")
+    def _surface_only(self) -> Contact:
+        if (self.self_contact or self.thickness is not None) and self.mode != "surface":
+            name = "self_contact" if self.self_contact else "thickness"
+            raise _error("field", "needs contact.mode 'surface', not '{mode}'", field=name,
+                         mode=self.mode)  # fmt: skip
+        if self.thickness is not None and self.margin is not None and self.margin < self.thickness:
+            raise _error("field", "must be >= contact.thickness", field="margin")
+        return self
 
 
 class Air(Table):

@@ -39,6 +39,17 @@ def _number(name: str, value, *, minimum: float | None = 0.0, strict: bool = Fal
     return x
 
 
+def _edge_owners(tri: np.ndarray) -> np.ndarray:
+    """(T, 3) int64: 1 where triangle t is the first (in triangle, then corner order) to
+    have the edge from its corner k to corner k + 1, so that every edge has one owner."""
+    edges = np.stack([tri, np.roll(tri, -1, axis=1)], axis=2).reshape(-1, 2)
+    owner = np.zeros(len(edges), dtype=np.int64)
+    if len(edges):
+        _, first = np.unique(np.sort(edges, axis=1), axis=0, return_index=True)
+        owner[first] = 1
+    return owner.reshape(-1, 3)
+
+
 def _vec3(name: str, value) -> np.ndarray:
     v = np.asarray(value, dtype=np.float64)
     if v.shape != (3,) or not np.all(np.isfinite(v)):
@@ -60,6 +71,8 @@ def _sample_count(value) -> int:
 
 #: Density of air at sea level and 20 C [kg/m^3], the builder's default.
 DEFAULT_AIR_DENSITY = 1.2
+#: Default surface-contact thickness with self-contact, a fraction of the median edge length
+DEFAULT_THICKNESS_FRACTION = 0.2
 
 
 @dataclass
@@ -185,6 +198,8 @@ class ModelBuilder:
         self._bodies: list[_Body] = []
         self._colliders: list[Collider] = []
         self._soft_contact = ("none", 0.5, 0.1, None)
+        self._self_contact = False
+        self._thickness: float | None = None
         self.air_density = DEFAULT_AIR_DENSITY
         self.wind = np.zeros(3)
         self._vents: list[tuple[int, float, float, float, float]] = []
@@ -667,29 +682,60 @@ class ModelBuilder:
         self,
         mode: Literal["none", "bounding", "surface"] = "surface",
         *,
+        self_contact: bool = False,
+        thickness: float | None = None,
         restitution: float = 0.5,
         friction: float = 0.1,
         margin: float | None = None,
     ) -> None:
-        """How soft bodies collide with each other.
+        """How soft bodies collide with each other (and with themselves).
 
         ``"bounding"``: the paper's method, vertices against the other body's bounding
         object (each body's ``contact_shape``); ``"surface"``: vertices against the other
         body's triangles; ``"none"``: bodies pass through each other. restitution and
-        friction lie in [0, 1]; margin [m] is how far surface contacts look for the
-        nearest triangle (default half the median edge length).
+        friction lie in [0, 1] (friction: the fraction of the tangential relative speed a
+        contact removes).
+
+        Surface contacts with a thickness (``thickness`` given, or ``self_contact=True``):
+        vertex-triangle and edge-edge pairs between bodies, and within each body when
+        ``self_contact``, keep two sheets at least ``thickness`` h [m] apart (adjacent
+        elements, sharing a vertex, excepted), and no edge passes through a triangle
+        whatever the step (a bound on each step's motion, ``core/collision/thick.hpp``); a
+        run whose surfaces cross at a step's start (an initial self-intersection) stops
+        with ``Status.CROSSED``, naming the edge and triangle. h defaults to
+        ``DEFAULT_THICKNESS_FRACTION`` (0.2) times the median edge length with
+        self-contact; it must stay below the distance between a vertex and the nearest
+        triangle not touching it at rest (about 0.8 edge lengths on regular meshes), or the
+        mesh pushes itself apart. margin [m]: without a thickness, how far surface contacts
+        look for the nearest triangle (default half the median edge length); with one, how
+        far the broad phase grows boxes, >= h (default h).
         """
         if mode not in ("none", "bounding", "surface"):
             raise ValueError(
                 f"soft contact mode must be 'none', 'bounding' or 'surface', got {mode!r}"
             )
+        if not isinstance(self_contact, (bool, np.bool_)):
+            raise ValueError(f"self_contact must be True or False, got {self_contact!r}")
+        if (self_contact or thickness is not None) and mode != "surface":
+            raise ValueError(
+                f"self_contact and thickness need soft contact mode 'surface', got {mode!r}"
+            )
         for name, value in (("restitution", restitution), ("friction", friction)):
             v = _number(f"soft contact {name}", value)
             if v > 1:
                 raise ValueError(f"soft contact {name} must lie in [0, 1], got {value!r}")
+        if thickness is not None:
+            thickness = _number("soft contact thickness", thickness, strict=True)
         if margin is not None:
-            _number("soft contact margin", margin, strict=True)
+            margin = _number("soft contact margin", margin, strict=True)
+            if thickness is not None and margin < thickness:
+                raise ValueError(
+                    f"soft contact margin must be >= the thickness {thickness:g} m, "
+                    f"got {margin!r}"
+                )
         self._soft_contact = (mode, float(restitution), float(friction), margin)
+        self._self_contact = bool(self_contact)
+        self._thickness = thickness
 
     def set_air(self, *, density: float = DEFAULT_AIR_DENSITY, wind: ArrayLike = (0.0, 0.0, 0.0)):
         """The air the bodies move through: density rho [kg/m^3] >= 0 and the wind, its
@@ -930,8 +976,15 @@ class ModelBuilder:
             if len(body_edges)
             else np.ones(1)
         )
+        thickness = self._thickness
+        if thickness is None and self._self_contact:
+            thickness = DEFAULT_THICKNESS_FRACTION * float(np.median(edge_length))
+        if thickness is not None and margin is not None and margin < thickness:
+            raise ValueError(
+                f"soft contact margin {margin:g} m is below the thickness {thickness:g} m"
+            )
         if margin is None:
-            margin = 0.5 * float(np.median(edge_length))
+            margin = thickness if thickness is not None else 0.5 * float(np.median(edge_length))
         colliders = collider_arrays(self._colliders)
         vents = np.array(self._vents, dtype=np.float64).reshape(-1, 5)
         orifices = np.array(self._orifices, dtype=np.float64).reshape(-1, 4)
@@ -1014,6 +1067,9 @@ class ModelBuilder:
             soft_contact_friction=contact_mu,
             contact_margin=float(margin),
             contact_cell_size=float(edge_length.max() + 2.0 * margin),
+            contact_thickness=float(thickness or 0.0),
+            soft_self_contact=int(self._self_contact),
+            tri_edge_owner=_edge_owners(tri),
             collider_kind=colliders.kind,
             collider_center=colliders.center,
             collider_rotation=colliders.rotation,

@@ -527,6 +527,15 @@ class Simulator:
             )
             msg = f"{who} blew up {where}: particle {index} {what}"
             particle = int(index)
+        elif status == Status.CROSSED:
+            particle, tri = int(index), int(value)
+            body = int(model.particle_body[particle])
+            msg = (
+                f"body {body} crossed a surface {where}: the edge at particle {particle} "
+                f"passes through triangle {tri} (body {int(model.tri_body[tri])}) at the "
+                "step's start (an initial self-intersection, or a collider pushed one sheet "
+                "through another)"
+            )
         elif status == Status.NEED_HASH:
             # the core grows the contacts' hash itself up to 512 entries per triangle
             body, particle = -1, -1

@@ -29,6 +29,7 @@ class Status(IntEnum):
     NEED_HASH = 6  # the contacts' hash would need > 512 entries a triangle (value: entries)
     STOPPED = 7  # a signal handler or the progress callback raised (the core raises it)
     BAD_GAS = 8  # a body's gas amount or temperature became negative or not finite
+    CROSSED = 9  # an edge passes through a triangle (index: its particle, value: the triangle)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,143 @@
+"""Self-contact's cost, and the vacuum-packed ball (issue 32).
+
+1. The ball drop of benchmarks/ball_drop.py (an icosphere of radius 1 m, 1 kg, nRT = 300 J,
+   springs 500 N/m, dropped from 1 m onto the ground) with and without
+   ``set_soft_contact("surface", self_contact=True)`` (thickness 0.2 x the median edge),
+   symplectic Euler at 0.9 x its stable step and implicit Euler at 1/60 s (CG tolerance
+   1e-3): steps per second over the free fall (the first 0.1 s) and over the impact
+   (0.40 s to 0.60 s: the ball meets the ground at 0.45 s), best of ``--rounds``, and the
+   ratio on / off of each.
+2. The vacuum-packed ball: radius 0.5 m, its gas drawn down to 2 % over 0.3 s under a
+   500 Pa ambient pressure (no gravity), self-contact on, implicit Euler at 1/240 s for
+   0.6 s: wall time against simulated time, the volume at the end against the start,
+   and softbody.collision.crossings.edge_crossings (every edge against every triangle) at
+   every 0.05 s frame.
+
+Writes results/self_contact.json. Usage:
+python benchmarks/self_contact.py [--subdivisions 5] [--vacuum-subdivisions 5] [--rounds 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import softbody as sb
+from results_io import RESULTS, run_record, write_json
+from softbody.collision.crossings import edge_crossings
+from softbody.diagnostics import body_volume
+from softbody.mesh.topology import unique_edges
+
+
+def ball_drop(subdivisions: int, self_contact: bool) -> sb.Model:
+    builder = sb.ModelBuilder()
+    if self_contact:
+        builder.set_soft_contact("surface", self_contact=True)
+    builder.add_soft_body(
+        sb.icosphere(subdivisions, radius=1.0, center=(0.0, 2.0, 0.0)),
+        mass=1.0,
+        stiffness=500.0,
+        damping=0.5,
+        gas=sb.Gas.isothermal(300.0),
+    )
+    builder.add_collider(sb.ColliderPlane(restitution=0.5, friction=0.1))
+    return builder.finalize()
+
+
+def simulator(model: sb.Model, integrator: str) -> sb.Simulator:
+    if integrator == "implicit_euler":
+        return sb.Simulator(model, integrator=integrator, dt=1 / 60, implicit_tolerance=1e-3)
+    probe = sb.Simulator(model, integrator=integrator, dt=1e-6)
+    return sb.Simulator(model, integrator=integrator, dt=0.9 * probe.stable_dt)
+
+
+def rate(
+    model: sb.Model, integrator: str, t0: float, t1: float, rounds: int, start: sb.State
+) -> float:
+    """Steps per second over simulated time [t0, t1] from `start` (the state at t0), best of
+    rounds."""
+    sim = simulator(model, integrator)
+    best = 0.0
+    for _ in range(rounds):
+        state = start.copy()
+        steps = max(1, round((t1 - t0) / sim.dt))
+        clock = time.perf_counter()
+        sim.run(state, steps)
+        best = max(best, steps / (time.perf_counter() - clock))
+    return best
+
+
+def vacuum_ball(subdivisions: int) -> sb.Model:
+    ambient = 500.0
+    nrt = ambient * 4.0 / 3.0 * np.pi * 0.5**3
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("surface", self_contact=True, restitution=0.0, friction=0.1)
+    builder.add_soft_body(
+        sb.icosphere(subdivisions, radius=0.5),
+        mass=1.0,
+        stiffness=200.0,
+        damping=0.5,
+        gas=sb.Gas.isothermal(
+            nrt, ambient_pressure=ambient, schedule=[(0.0, nrt), (0.3, 0.02 * nrt)]
+        ),
+    )
+    return builder.finalize()
+
+
+def vacuum(subdivisions: int) -> dict:
+    model = vacuum_ball(subdivisions)
+    sim = sb.Simulator(model, integrator="implicit_euler", dt=1 / 240)
+    state = model.state()
+    edges = unique_edges(model.tri_indices)
+    v0 = body_volume(model, state)[0]
+    wall, crossings, frames = 0.0, 0, 0
+    for _ in range(12):
+        start = time.perf_counter()
+        sim.run(state, 12)
+        wall += time.perf_counter() - start
+        crossings += len(edge_crossings(state.particle_q, model.tri_indices, edges))
+        frames += 1
+    return {
+        "vertices": model.particle_count,
+        "simulated_s": state.time,
+        "wall_s": wall,
+        "x_real_time": state.time / wall,
+        "volume_ratio_end": float(body_volume(model, state)[0] / v0),
+        "frames_checked": frames,
+        "crossings": crossings,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--subdivisions", type=int, default=5)
+    parser.add_argument("--vacuum-subdivisions", type=int, default=5)
+    parser.add_argument("--rounds", type=int, default=2)
+    args = parser.parse_args()
+    rows = []
+    for integrator in ("symplectic_euler", "implicit_euler"):
+        for phase, (t0, t1) in (("fall", (0.0, 0.1)), ("impact", (0.4, 0.6))):
+            # the same start for both: the drop without self-contact up to t0
+            plain = ball_drop(args.subdivisions, False)
+            start = plain.state()
+            first = simulator(plain, integrator)
+            first.run(start, round(t0 / first.dt))
+            off = rate(plain, integrator, t0, t1, args.rounds, start)
+            on = rate(ball_drop(args.subdivisions, True), integrator, t0, t1, args.rounds, start)
+            row = {"integrator": integrator, "phase": phase, "steps_per_s_off": off,
+                   "steps_per_s_on": on, "ratio": on / off}  # fmt: skip
+            print(row, flush=True)
+            rows.append(row)
+    vac = vacuum(args.vacuum_subdivisions)
+    print(vac, flush=True)
+    model = ball_drop(args.subdivisions, False)
+    write_json(
+        RESULTS / "self_contact.json",
+        run_record("self_contact", vertices=model.particle_count, drop=rows, vacuum=vac),
+    )
+
+
+if __name__ == "__main__":
+    main()
