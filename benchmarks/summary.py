@@ -165,6 +165,56 @@ def membranes(data: dict) -> list[dict]:
     ]  # fmt: skip
 
 
+def _fastest_passing(softbody: dict) -> tuple[str, dict]:
+    """The race's fastest softbody run that passes with the bounce kept: (name, entry)."""
+    passing = [(name, e) for name, e in softbody.items() if e.get("ok")]
+    return max(passing, key=lambda item: item[1]["simulated_per_wall_second"])
+
+
+def _xpbd_setting(name: str, entry: dict) -> str:
+    """How a race run of XPBD was set: its substeps, and its passes where relaxed."""
+    if "relaxed" in name:
+        return f"xpbd, {entry['xpbd_substeps']} substeps of 4 passes, the last 3 x 1.9"
+    if "xpbd_substeps" in entry:
+        return f"xpbd, {entry['xpbd_substeps']} substeps of one pass"
+    return name.replace("_", " ")
+
+
+def jolt_peer(data: dict) -> list[dict]:
+    """Issue 33's targets from the race against Jolt Physics: the 40,962-vertex drop with
+    the bounce kept (softbody's fastest passing run there), and at each size softbody's
+    fastest passing run's rate over Jolt's (median of the paired timing rounds where the
+    drops were short enough to have them, else of the best times)."""
+    source = {"source": "jolt_peer.json", "date": data["date"],
+              "command": "python benchmarks/jolt_peer.py"}  # fmt: skip
+    workers = data["threads"]["jolt_workers"]
+    rows = []
+    for size in data["sizes"]:
+        n = size["vertex_count"]
+        name, run = _fastest_passing(size["softbody"])
+        dt = run["dt_s"] / run.get("xpbd_substeps", 1)
+        step = (f"{_ms(dt)} ({run['xpbd_substeps']} substeps of the 1/60 s frame)"
+                if "xpbd_substeps" in run else _ms(dt))  # fmt: skip
+        setting = {"integrator": _xpbd_setting(name, run), "dt_s": dt, "step": step}
+        if n == 40962:
+            rows.append({"key": "ball-drop-40962-xpbd", "case": "ball drop", "vertices": n,
+                         **setting, "value": run["simulated_per_wall_second"],
+                         "unit": REAL_TIME, **source,
+                         "check": f"rebound {run['rebound_m']:.2f} m, volume "
+                                  f"{run['volume_ratio_range'][0]:.2f}-"
+                                  f"{run['volume_ratio_range'][1]:.2f} of its start"})
+        rounds = size.get("softbody_over_jolt_rounds") or []
+        rows.append({"key": f"jolt-race-{n}", "case": "ball drop against Jolt Physics",
+                     "vertices": n, **setting, "value": size["softbody_over_jolt"],
+                     "unit": "x Jolt's rate", **source,
+                     "check": f"Jolt at {size['jolt']['iterations']} iterations on {workers} "
+                              "workers, both keeping the bounce; "
+                              + (f"median of {len(rounds)} paired timing rounds" if rounds
+                                 else "best times (drops too long for the rounds)")
+                              + " (target >= 4)"})  # fmt: skip
+    return rows
+
+
 def summarise(results: Path = RESULTS) -> dict:
     """The summary record from the result files in ``results``."""
     rows = [
@@ -173,6 +223,7 @@ def summarise(results: Path = RESULTS) -> dict:
         *engine(_load(results, "engine")),
         *startup(_load(results, "startup")),
         *membranes(_load(results, "membranes")),
+        *jolt_peer(_load(results, "jolt_peer")),
     ]
     return {
         "benchmark": "summary",

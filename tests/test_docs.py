@@ -103,7 +103,8 @@ def test_readme_speed_figures_name_their_integrator_and_step():
     the integrator and step it ran at: the five balls' 75x is symplectic Euler at its 2.0 ms
     step, and the scene as `softbody run` runs it (midpoint at 0.5 ms) is quoted beside it;
     the explicit step's throughput is symplectic Euler's; the 40,962-vertex drop's is
-    implicit Euler's at 1/60 s. Reference: issue 29, item 19 (a 75x headline beside a CLI
+    implicit Euler's at 1/60 s and, with the bounce kept, XPBD's; the race against Jolt's
+    ratios are the race's. Reference: issue 29, item 19 (a 75x headline beside a CLI
     that prints 7-10x)."""
     rows = {row["key"]: row for row in _summary()["rows"]}
     readme = (ROOT / "README.md").read_text().splitlines()
@@ -127,6 +128,14 @@ def test_readme_speed_figures_name_their_integrator_and_step():
     big, drop_10k = rows["ball-drop-40962-implicit"], rows["ball-drop-implicit"]
     assert f"{big['value']:.2f}x" in drop and "implicit Euler at 1/60 s" in drop
     assert f"{drop_10k['value']:.2f}x real time (implicit Euler at 1/60 s" in feature
+    # the bounce kept at 40,962 vertices (XPBD, its substeps and passes named), and the
+    # race against Jolt: softbody's rate over Jolt's at each size, in the README's order
+    xpbd = rows["ball-drop-40962-xpbd"]
+    assert f"{xpbd['value']:.2f}x" in drop and "`xpbd` at 32 substeps of 4 passes" in drop
+    race = next(line for line in readme if line.startswith("| softbody >= 4x Jolt"))
+    ratios = ", ".join(f"{rows[f'jolt-race-{n}']['value']:.2f}x"
+                       for n in (642, 2562, 10242, 40962))  # fmt: skip
+    assert ratios in race
 
 
 @pytest.mark.parametrize(
