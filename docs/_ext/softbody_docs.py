@@ -201,7 +201,7 @@ def benchmark_summary() -> str:
     summary = json.loads((RESULTS / "summary.json").read_text())
     shutil.copyfile(RESULTS / "summary.png", OUT / "benchmarks" / "summary.png")
     units = {"x real time": "{:.3g}x real time", "M vertex-steps/s": "{:.3g} M vertex-steps/s",
-             "s": "{:.2g} s"}  # fmt: skip
+             "s": "{:.2g} s", "x Jolt's rate": "{:.3g}x Jolt's rate"}  # fmt: skip
     lines = ["| case | vertices | integrator | step | measured | check | from |",
              "|---|---:|---|---|---:|---|---|"]  # fmt: skip
     for row in summary["rows"]:
