@@ -182,9 +182,14 @@ inline unsigned outside_terms() {
 /// whatever CG's tolerance: its residual only seeds the spin). With the turn, backward
 /// Euler keeps a free body's angular momentum to round-off (x1 - x0 = dt v1, so
 /// sum_i m_i x1_i x v1_i = sum_i m_i x0_i x v1_i); BDF2 to its own step's error.
-inline void keep_own_torque(const Model& m, const Control& c, double h,
+///
+/// K dx costs no product of the whole system: CG leaves r = b - A dv (A = M - h C - h^2 K,
+/// every term; b the right-hand side), so h K dv = (M dv - b + r) / h - C dv, and
+/// K_own dx = K y + (M dv - b + r) / h - C dv - K_out dx with K y the right-hand side's
+/// product (w.ky) and _out the terms from outside a body (kFromOutside), whose products
+/// are cheap. The body's own damping C_own dv is left in: its torque is 0 (above).
+inline void keep_own_torque(const Model& m, const Control& c, double h, bool bdf2,
                             const ImplicitBuffers& w) {
-    const index n3 = 3 * m.particles.count;
     const double* inv_mass = m.particles.inv_mass;
     const double* mass = m.particles.mass;
     std::vector<unsigned char> joined(static_cast<size_t>(m.bodies.count), 0);
@@ -196,8 +201,18 @@ inline void keep_own_torque(const Model& m, const Control& c, double h,
             if (b >= 0) joined[static_cast<size_t>(b)] = 1;
         }
     }
-    for (index k = 0; k < n3; ++k) w.cg_p[k] = w.qs[k] + h * w.cg_x[k];  // dx
-    forms::apply_jacobians(m, c, at_start(w), 0.0, 0.0, 1.0, w.cg_p, w.cg_ap, outside_terms());
+    // C_out dv + h K_out dv into cg_p, K_out y into cg_z: the outside terms alone
+    const unsigned own_terms = ~outside_terms();
+    forms::apply_jacobians(m, c, at_start(w), 0.0, 1.0, h, w.cg_x, w.cg_p, own_terms);
+    forms::apply_jacobians(m, c, at_start(w), 0.0, 0.0, 1.0, w.qs, w.cg_z, own_terms);
+    for (index i = 0; i < m.particles.count; ++i)
+        for (int k = 0; k < 3; ++k) {
+            const index r = 3 * i + k;
+            double b = h * (w.f[r] + w.ky[r]);  // the right-hand side, as step() made it
+            if (bdf2) b += mass[i] * (w.v0[r] - w.v_prev[r]) / 3.0;
+            const double own_dv = (mass[i] * w.cg_x[r] - b + w.cg_r[r]) / h;
+            w.cg_ap[r] = w.ky[r] + own_dv - w.cg_p[r] - w.cg_z[r];  // K_own dx (+ C_own dv)
+        }
     for (index b = 0; b < m.bodies.count; ++b) {
         if (joined[static_cast<size_t>(b)]) continue;
         const index first = m.bodies.particle_range[2 * b], last = m.bodies.particle_range[2 * b + 1];
@@ -311,7 +326,7 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
             for (index k = 0; k < 3 * n; ++k) w.cg_p[k] = w.cg_z[k] + beta * w.cg_p[k];
         }
     }
-    keep_own_torque(m, c, h, w);
+    keep_own_torque(m, c, h, bdf2, w);
     for (index i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {
             const index r = 3 * i + k;
