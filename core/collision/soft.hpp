@@ -227,15 +227,15 @@ inline void cell_range(double a, double b, double c, double margin, double inv, 
     hi = cell_of((std::max(std::max(a, b), c) + margin) * inv);
 }
 
-/// Spatial hash of the triangles' boxes (grown by the contact margin) on the contact grid
-/// into w.hash_*. Counts the entries first; returns that count, and stores nothing when it
-/// exceeds the entries' capacity (the caller grows the buffer). Every bucket index is reduced
-/// modulo w.hash_table and every entry index is below the count, so nothing is written
-/// outside the buffers.
-inline index build_triangle_hash(const Model& m, const double* q, const ContactBuffers& w) {
+/// Spatial hash of the triangles into w.hash_* (a counting sort): cells(t, r) gives triangle
+/// t's cell range r = (x0, y0, z0, x1, y1, z1). Counts the entries first; returns that count,
+/// and stores nothing when it exceeds the entries' capacity (the caller grows the buffer).
+/// Every bucket index is reduced modulo w.hash_table and every entry index is below the
+/// count, so nothing is written outside the buffers.
+template <class Cells>
+inline index hash_triangles(const Model& m, const ContactBuffers& w, Cells cells) {
     const index table = w.hash_table;
     for (index h = 0; h < table; ++h) w.hash_count[h] = 0;
-    const double inv = 1.0 / m.soft_contacts.cell_size, margin = m.soft_contacts.margin;
     index total = 0;
     for (int pass = 0; pass < 2; ++pass) {
         if (pass == 1) {
@@ -247,15 +247,11 @@ inline index build_triangle_hash(const Model& m, const double* q, const ContactB
             }
         }
         for (index t = 0; t < m.triangles.count; ++t) {
-            const index* tri = m.triangles.indices + 3 * t;
-            const V3 a = load(q, tri[0]), b = load(q, tri[1]), c = load(q, tri[2]);
-            index x0, x1, y0, y1, z0, z1;
-            cell_range(a.x, b.x, c.x, margin, inv, x0, x1);
-            cell_range(a.y, b.y, c.y, margin, inv, y0, y1);
-            cell_range(a.z, b.z, c.z, margin, inv, z0, z1);
-            for (index ix = x0; ix <= x1; ++ix)
-                for (index iy = y0; iy <= y1; ++iy)
-                    for (index iz = z0; iz <= z1; ++iz) {
+            index r[6];
+            cells(t, r);
+            for (index ix = r[0]; ix <= r[3]; ++ix)
+                for (index iy = r[1]; iy <= r[4]; ++iy)
+                    for (index iz = r[2]; iz <= r[5]; ++iz) {
                         const index h = cell_hash(ix, iy, iz, table);
                         if (pass == 0) {
                             ++w.hash_count[h];
@@ -268,6 +264,19 @@ inline index build_triangle_hash(const Model& m, const double* q, const ContactB
         }
     }
     return total;
+}
+
+/// The triangles' boxes at q, grown by the contact margin, hashed on the contact grid
+/// (hash_triangles' contract).
+inline index build_triangle_hash(const Model& m, const double* q, const ContactBuffers& w) {
+    const double inv = 1.0 / m.soft_contacts.cell_size, margin = m.soft_contacts.margin;
+    return hash_triangles(m, w, [&](index t, index* r) {
+        const index* tri = m.triangles.indices + 3 * t;
+        const V3 a = load(q, tri[0]), b = load(q, tri[1]), c = load(q, tri[2]);
+        cell_range(a.x, b.x, c.x, margin, inv, r[0], r[3]);
+        cell_range(a.y, b.y, c.y, margin, inv, r[1], r[4]);
+        cell_range(a.z, b.z, c.z, margin, inv, r[2], r[5]);
+    });
 }
 
 /// Whether any two bodies' bounds, grown by the margin, overlap (w.body_lo, body_hi).

@@ -151,12 +151,10 @@ inline bool boxes_meet(const double* lo, const double* hi, const double* lo2, co
 
 /// Hash of the triangles' boxes (over their corners' boxes, grown by g) into w.hash_*, the
 /// boxes themselves into w.tri_box (T, 6). Counts first; returns the entries needed, and
-/// stores no entry when they exceed the capacity (soft::build_triangle_hash's contract).
+/// stores no entry when they exceed the capacity (soft::hash_triangles' contract).
 inline index build_hash(const Stage& st) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
-    const index table = w.hash_table;
-    for (index h = 0; h < table; ++h) w.hash_count[h] = 0;
     for (index t = 0; t < m.triangles.count; ++t) {
         double* box = w.tri_box + 6 * t;
         for (int k = 0; k < 3; ++k) {
@@ -172,38 +170,13 @@ inline index build_hash(const Stage& st) {
             }
         }
     }
-    index total = 0;
-    for (int pass = 0; pass < 2; ++pass) {
-        if (pass == 1) {
-            if (total > w.hash_entries->capacity) return total;
-            w.hash_start[0] = 0;
-            for (index h = 0; h < table; ++h) {
-                w.hash_start[h + 1] = w.hash_start[h] + w.hash_count[h];
-                w.hash_count[h] = 0;
-            }
+    return soft::hash_triangles(m, w, [&](index t, index* r) {
+        const double* box = w.tri_box + 6 * t;
+        for (int k = 0; k < 3; ++k) {
+            r[k] = soft::cell_of((box[k] - st.g) * st.inv);
+            r[3 + k] = soft::cell_of((box[3 + k] + st.g) * st.inv);
         }
-        for (index t = 0; t < m.triangles.count; ++t) {
-            const double* box = w.tri_box + 6 * t;
-            index r[6];
-            for (int k = 0; k < 3; ++k) {
-                r[k] = soft::cell_of((box[k] - st.g) * st.inv);
-                r[3 + k] = soft::cell_of((box[3 + k] + st.g) * st.inv);
-            }
-            for (index ix = r[0]; ix <= r[3]; ++ix)
-                for (index iy = r[1]; iy <= r[4]; ++iy)
-                    for (index iz = r[2]; iz <= r[5]; ++iz) {
-                        const index h = soft::cell_hash(ix, iy, iz, table);
-                        if (pass == 0) {
-                            ++w.hash_count[h];
-                            ++total;
-                        } else {
-                            w.hash_entries->data[w.hash_start[h] + w.hash_count[h]] = t;
-                            ++w.hash_count[h];
-                        }
-                    }
-        }
-    }
-    return total;
+    });
 }
 
 /// Each triangle whose grown box meets the box [lo, hi], once (in the first grid cell the
