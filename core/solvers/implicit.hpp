@@ -188,10 +188,8 @@ inline unsigned outside_terms() {
 /// K_own dx = K y + (M dv - b + r) / h - C dv - K_out dx with K y the right-hand side's
 /// product (w.ky) and _out the terms from outside a body (kFromOutside), whose products
 /// are cheap. The body's own damping C_own dv is left in: its torque is 0 (above).
-inline void keep_own_torque(const Model& m, const Control& c, double h, bool bdf2,
-                            const ImplicitBuffers& w) {
-    const double* inv_mass = m.particles.inv_mass;
-    const double* mass = m.particles.mass;
+/// Whether each body (B,) is joined to another by a spring: made once a run.
+inline std::vector<unsigned char> joined_bodies(const Model& m) {
     std::vector<unsigned char> joined(static_cast<size_t>(m.bodies.count), 0);
     for (index s = 0; s < m.springs.count; ++s) {
         const index a = m.particles.body[m.springs.indices[2 * s]];
@@ -201,6 +199,13 @@ inline void keep_own_torque(const Model& m, const Control& c, double h, bool bdf
             if (b >= 0) joined[static_cast<size_t>(b)] = 1;
         }
     }
+    return joined;
+}
+
+inline void keep_own_torque(const Model& m, const Control& c, double h, bool bdf2,
+                            const unsigned char* joined, const ImplicitBuffers& w) {
+    const double* inv_mass = m.particles.inv_mass;
+    const double* mass = m.particles.mass;
     // C_out dv + h K_out dv into cg_p, K_out y into cg_z: the outside terms alone
     const unsigned own_terms = ~outside_terms();
     forms::apply_jacobians(m, c, at_start(w), 0.0, 1.0, h, w.cg_x, w.cg_p, own_terms);
@@ -214,7 +219,7 @@ inline void keep_own_torque(const Model& m, const Control& c, double h, bool bdf
             w.cg_ap[r] = w.ky[r] + own_dv - w.cg_p[r] - w.cg_z[r];  // K_own dx (+ C_own dv)
         }
     for (index b = 0; b < m.bodies.count; ++b) {
-        if (joined[static_cast<size_t>(b)]) continue;
+        if (joined[b]) continue;
         const index first = m.bodies.particle_range[2 * b], last = m.bodies.particle_range[2 * b + 1];
         double total = 0.0;
         V3 centre = {0.0, 0.0, 0.0};
@@ -255,7 +260,7 @@ inline void keep_own_torque(const Model& m, const Control& c, double h, bool bdf
 /// (keep_own_torque). Returns the CG iterations used.
 inline index step(const Model& m, const Control& c, double t, double dt, double* q, double* qd,
                   const ImplicitBuffers& w, const MultigridView* mg, double tolerance,
-                  index max_iterations, bool bdf2) {
+                  index max_iterations, bool bdf2, const unsigned char* joined) {
     const index n = m.particles.count;
     const double* inv_mass = m.particles.inv_mass;
     const double h = bdf2 ? dt * (2.0 / 3.0) : dt;
@@ -326,7 +331,7 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
             for (index k = 0; k < 3 * n; ++k) w.cg_p[k] = w.cg_z[k] + beta * w.cg_p[k];
         }
     }
-    keep_own_torque(m, c, h, bdf2, w);
+    keep_own_torque(m, c, h, bdf2, joined, w);
     for (index i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {
             const index r = 3 * i + k;
@@ -360,6 +365,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
                           const MultigridView* mg) {
     const index n3 = 3 * m.particles.count;
     const bool flowing = gas_state::flowing(m, c);
+    const std::vector<unsigned char> joined = joined_bodies(m);  // for keep_own_torque
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
@@ -374,7 +380,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
         if (flowing) gas_state::forward_euler(m, c, t, p.dt, s.q, s.qd, s, w.gas);
         const bool two_step = ip.bdf2 && (step_index > 0 || ip.history) && w.contacts_acted[0] == 0;
         const index its = step(m, c, t, p.dt, s.q, s.qd, w, mg, ip.tolerance, ip.max_iterations,
-                               two_step);
+                               two_step, joined.data());
         w.cg_stats[0] += 1;
         w.cg_stats[1] += its;
         w.cg_stats[2] = std::max(w.cg_stats[2], its);
