@@ -25,25 +25,11 @@ import time
 import numpy as np
 
 import softbody as sb
+from ball_drop import ball_drop
 from results_io import RESULTS, run_record, write_json
 from softbody.collision.crossings import edge_crossings
 from softbody.diagnostics import body_volume
 from softbody.mesh.topology import unique_edges
-
-
-def ball_drop(subdivisions: int, self_contact: bool) -> sb.Model:
-    builder = sb.ModelBuilder()
-    if self_contact:
-        builder.set_soft_contact("surface", self_contact=True)
-    builder.add_soft_body(
-        sb.icosphere(subdivisions, radius=1.0, center=(0.0, 2.0, 0.0)),
-        mass=1.0,
-        stiffness=500.0,
-        damping=0.5,
-        gas=sb.Gas.isothermal(300.0),
-    )
-    builder.add_collider(sb.ColliderPlane(restitution=0.5, friction=0.1))
-    return builder.finalize()
 
 
 def simulator(model: sb.Model, integrator: str) -> sb.Simulator:
@@ -120,19 +106,20 @@ def main() -> None:
     for integrator in ("symplectic_euler", "implicit_euler"):
         for phase, (t0, t1) in (("fall", (0.0, 0.1)), ("impact", (0.4, 0.6))):
             # the same start for both: the drop without self-contact up to t0
-            plain = ball_drop(args.subdivisions, False)
+            plain = ball_drop(args.subdivisions)
             start = plain.state()
             first = simulator(plain, integrator)
             first.run(start, round(t0 / first.dt))
             off = rate(plain, integrator, t0, t1, args.rounds, start)
-            on = rate(ball_drop(args.subdivisions, True), integrator, t0, t1, args.rounds, start)
+            touching = ball_drop(args.subdivisions, self_contact=True)
+            on = rate(touching, integrator, t0, t1, args.rounds, start)
             row = {"integrator": integrator, "phase": phase, "steps_per_s_off": off,
                    "steps_per_s_on": on, "ratio": on / off}  # fmt: skip
             print(row, flush=True)
             rows.append(row)
     vac = vacuum(args.vacuum_subdivisions)
     print(vac, flush=True)
-    model = ball_drop(args.subdivisions, False)
+    model = ball_drop(args.subdivisions)
     write_json(
         RESULTS / "self_contact.json",
         run_record("self_contact", vertices=model.particle_count, drop=rows, vacuum=vac),
