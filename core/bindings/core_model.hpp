@@ -32,7 +32,7 @@ public:
     }
 #define SOFTBODY_CHECK_none (void)ptr, (void)elems;
 #define SOFTBODY_CHECK_index(lo, hi) check_indices(ptr, elems, lo, hi, name);
-#define SOFTBODY_CHECK_range(limit) check_ranges(ptr, dims[0], limit, name);
+#define SOFTBODY_CHECK_range(limit) (void)elems, check_ranges(ptr, dims[0], limit, name);
 #define SOFTBODY_CHECK_finite check_finite(ptr, elems, name, false);
 #define SOFTBODY_CHECK_finite_nonneg check_finite(ptr, elems, name, true);
 #define SOFTBODY_READ_PART(Type, part, fields, extra) fields(SOFTBODY_READ_FIELD)
