@@ -128,6 +128,39 @@ def test_clean_meshes_report_zero(make):
     assert len(self_intersections(m.vertices, m.faces)) == 0
 
 
+def test_coplanar_fans_cross_exactly_when_their_sectors_overlap():
+    """Two triangles in one plane sharing only a vertex overlap beyond it exactly when their
+    angular sectors about that vertex overlap (each contains its sector's wedge near the
+    vertex; disjoint sectors are separated by a line through it). Random fans, fixed seed:
+    disjoint sectors (a flat fan, such as a stair's side) were reported crossing when the
+    segment-against-triangle test lacked the triangle's own in-plane edge normals."""
+    rng = np.random.default_rng(7)
+    faces = np.array([[0, 1, 2], [0, 3, 4]])
+    disjoint = overlapping = 0
+    for _ in range(400):
+        angle = np.sort(rng.uniform(0.0, 2.0 * np.pi, 4))
+        radius = rng.uniform(0.2, 3.0, 4)
+        if overlap := bool(rng.integers(2)):  # the second sector starts inside the first
+            angle[2] = angle[0] + rng.uniform(0.1, 0.9) * (angle[1] - angle[0])
+            angle[3] = angle[2] + rng.uniform(0.1, 3.0)
+        if angle[1] - angle[0] >= np.pi - 0.05 or angle[3] - angle[2] >= np.pi - 0.05:
+            continue
+        ring = np.stack([radius * np.cos(angle), radius * np.sin(angle), 0 * angle], axis=1)
+        v = np.vstack([np.zeros(3), ring]) @ _rotation(rng).T
+        found = len(self_intersections(v, faces))
+        assert found == int(overlap), (angle, radius)
+        overlapping += overlap
+        disjoint += not overlap
+    assert disjoint > 100 and overlapping > 100
+
+
+def _rotation(rng: np.random.Generator) -> np.ndarray:
+    """A random rotation (3, 3): the QR factor of a Gaussian matrix, signs fixed."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q * np.sign(np.linalg.det(q))
+
+
 def test_folded_neighbours_and_duplicate_triangles_count():
     """Neighbours across an edge cross only when folded flat onto each other; a triangle
     listed twice overlaps itself. Unfolded neighbours do not count."""

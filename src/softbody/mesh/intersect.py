@@ -13,9 +13,11 @@ The search is vectorised NumPy throughout (no Python loop over triangles):
   two boxes, so no pair is tested twice, and only when the boxes really overlap.
 * narrow phase, by how many vertices the two triangles share:
 
-  - none: the separating axis theorem with all 17 candidate axes (both normals, the 9
-    cross products of edge pairs, and the 6 in-plane edge normals that decide coplanar
-    pairs), so crossing, coplanar-overlapping and contained triangles are all found;
+  - none: the separating axis theorem with 20 candidate axes (both normals, the 9
+    cross products of edge pairs, and the in-plane edge normals that decide coplanar
+    pairs: each triangle's edges across the other's normal, and the second's edges across
+    its own, which a segment given as a flat first triangle needs), so crossing,
+    coplanar-overlapping and contained triangles are all found;
   - one (a fan around a vertex): they overlap beyond that vertex exactly when the edge
     opposite the shared vertex of one triangle meets the other triangle (the two pieces
     of the planes' common line start at the shared vertex; the shorter one ends on its
@@ -44,8 +46,13 @@ CELLS_PER_TRIANGLE = 8
 
 
 def _cross_axes(p1: np.ndarray, p2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The 17 candidate separating axes of triangles ``p1``, ``p2`` (P, 3, 3), unit length,
-    and whether each is usable (a cross product of parallel or zero vectors is not)."""
+    """The 20 candidate separating axes of triangles ``p1``, ``p2`` (P, 3, 3), unit length,
+    and whether each is usable (a cross product of parallel or zero vectors is not).
+
+    The in-plane normals of the second triangle's edges are taken across both normals:
+    across ``n1`` they are lost when the first "triangle" is a segment (a, b, b), whose
+    normal is 0, and a coplanar segment beside the triangle is then separated by no axis.
+    """
     e1 = np.roll(p1, -1, axis=1) - p1  # (P, 3, 3): edges k -> k+1
     e2 = np.roll(p2, -1, axis=1) - p2
     n1 = np.cross(e1[:, 0], e1[:, 1])
@@ -59,10 +66,11 @@ def _cross_axes(p1: np.ndarray, p2: np.ndarray) -> tuple[np.ndarray, np.ndarray]
             e1[:, i],
             np.repeat(n2[:, None], 3, axis=1),
             np.repeat(n1[:, None], 3, axis=1),
+            np.repeat(n2[:, None], 3, axis=1),
         ],
         axis=1,
     )
-    v = np.concatenate([e1[:, 1:2], e2[:, 1:2], e2[:, j], e1, e2], axis=1)
+    v = np.concatenate([e1[:, 1:2], e2[:, 1:2], e2[:, j], e1, e2, e2], axis=1)
     axes = np.cross(u, v)
     length = np.linalg.norm(axes, axis=2)
     # an axis from (nearly) parallel factors has no direction: it separates nothing
