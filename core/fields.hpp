@@ -199,6 +199,9 @@
     F(collider_meshes, edge_normals, collider_mesh_edge_normals, f64, (CT, 3, 3), finite, "",     \
       "pseudo-normal (unit mean of its two faces' normals) of each triangle's edges (corner k "  \
       "to corner k + 1)")                                                                         \
+    F(collider_meshes, sharp_edges, collider_mesh_sharp_edges, i64, (CT, 3), index(-1, CT), "",   \
+      "the triangle across edge k of each triangle where that edge is sharp and convex and this " \
+      "triangle owns it (its first vertex row below its second): the edge contacts; else -1")    \
     F(collider_meshes, node_children, collider_mesh_node_children, i64, (CN, 2), index(0, CN),    \
       "",                                                                                         \
       "the two child rows of each inner tree node (after its own row); 0 0 for a leaf")          \
