@@ -201,9 +201,7 @@ def build_tree(vertices: np.ndarray, faces: np.ndarray):
     )
 
 
-def mesh_collider_data(
-    mesh: TriMesh, sharp_angle: float | None = SHARP_ANGLE
-) -> MeshColliderData:
+def mesh_collider_data(mesh: TriMesh, sharp_angle: float | None = SHARP_ANGLE) -> MeshColliderData:
     """The arrays of a checked closed ``mesh`` (see :func:`checked_mesh`), in the local
     frame centred on its bounding box; edges sharper than ``sharp_angle`` [deg] (None:
     none) take part in edge contacts (:func:`sharp_edges`)."""
