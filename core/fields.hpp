@@ -207,6 +207,8 @@
       "the two child rows of each inner tree node (after its own row); 0 0 for a leaf")          \
     F(collider_meshes, node_tris, collider_mesh_node_tris, i64, (CN, 2), range(CT), "",           \
       "[begin, end) triangle rows of each leaf; empty for an inner node")                         \
+    F(collider_meshes, node_sharp, collider_mesh_node_sharp, i64, (CN), index(0, 2), "",          \
+      "1 where a tree node's triangles hold a sharp edge (collider_mesh_sharp_edges), else 0")   \
     F(collider_meshes, node_bounds, collider_mesh_node_bounds, f64, (CN, 2, 3), finite, "m",      \
       "lower and upper corner of each tree node's box, in the local frame")
 

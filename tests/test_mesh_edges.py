@@ -93,6 +93,26 @@ def test_a_box_has_twelve_sharp_edges_listed_once():
     assert np.count_nonzero(sharp_edges(ball.vertices, ball.faces, 1.0) >= 0) == 1920
 
 
+def test_tree_nodes_know_whether_they_hold_a_sharp_edge():
+    """The tree's node flags (the edge contacts skip a subtree without a sharp edge): a
+    node is flagged exactly when one of the triangles below it (found by walking its
+    children) has a sharp edge. On a box of 8 x 8 squares a side, the 96 sharp edge pieces
+    lie along its 12 edges, so some nodes (inside the faces) are not flagged."""
+    data = sb.ColliderMesh(sb.box((1.0, 1.0, 1.0), subdivisions=3)).data
+    assert np.count_nonzero(data.sharp_edges >= 0) == 96
+
+    def below(node):
+        b, e = data.node_tris[node]
+        if e > b:
+            return list(range(b, e))
+        return below(data.node_children[node, 0]) + below(data.node_children[node, 1])
+
+    expected = [int(np.any(data.sharp_edges[below(k)] >= 0)) for k in range(len(data.node_tris))]
+    np.testing.assert_array_equal(data.node_sharp, expected)
+    assert data.node_sharp[0] == 1 and 0 in data.node_sharp
+    assert not np.any(sb.ColliderMesh(sb.box((1, 1, 1)), sharp_angle=None).data.node_sharp)
+
+
 def test_concave_edges_are_not_sharp():
     """A unit cube whose top face is a funnel (4 triangles down to a centre 0.3 m below the
     top): the 4 funnel edges between its faces are valleys (concave: soft vertices meet

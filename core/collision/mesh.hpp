@@ -141,6 +141,8 @@ struct View {
     /// The triangle across edge k of triangle t when that edge takes part in edge contacts
     /// (sharp, convex, owned by t); -1 otherwise.
     index sharp_twin(index t, int k) const { return m.collider_meshes.sharp_edges[3 * t + k]; }
+    /// Whether a tree node's triangles hold a sharp edge.
+    bool has_sharp(index node) const { return m.collider_meshes.node_sharp[node] != 0; }
     V3 face_normal(index t) const {
         return unit(cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0)));
     }
@@ -354,7 +356,7 @@ inline bool boxes_meet(const double* lo, const double* hi, const double* b) {
 
 /// Each sharp edge (triangle t, edge k: corner k to k + 1) below `root` whose box meets the
 /// box [lo, hi] (local frame): calls visit(t, k). Each sharp edge has one owner, so it is
-/// visited once.
+/// visited once; subtrees without one are not entered (flat tessellation costs nothing).
 template <class Visit>
 inline void each_sharp_edge(const View& v, index root, const double* lo, const double* hi,
                             Visit visit) {
@@ -363,7 +365,7 @@ inline void each_sharp_edge(const View& v, index root, const double* lo, const d
     stack[top++] = root;
     while (top > 0) {
         const index node = stack[--top];
-        if (!boxes_meet(lo, hi, v.bounds(node))) continue;
+        if (!v.has_sharp(node) || !boxes_meet(lo, hi, v.bounds(node))) continue;
         const index tb = v.begin(node), te = v.end(node);
         if (te > tb) {
             for (index t = tb; t < te; ++t)
@@ -461,11 +463,8 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                           double e, double keep, double* q, double* qd, V3& j,
                           colliders::Seen* seen) {
     const index root = m.colliders.mesh_root[k];
-    const index tb = m.colliders.mesh_range[2 * k], te = m.colliders.mesh_range[2 * k + 1];
-    bool any = false;
-    for (index t = 3 * tb; t < 3 * te && !any; ++t) any = m.collider_meshes.sharp_edges[t] >= 0;
-    if (!any) return;
     const View v{m};
+    if (root < 0 || !v.has_sharp(root)) return;  // no sharp edge
     const Frame f{m, c, r, vc, wc, e, keep};
     const double margin = m.colliders.mesh_margin[k];
     const double* rb = v.bounds(root);

@@ -243,6 +243,7 @@ class ColliderArrays:
     mesh_vertex_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     mesh_edge_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
     mesh_sharp_edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    mesh_node_sharp: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     mesh_node_children: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
     mesh_node_tris: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
     mesh_node_bounds: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
@@ -328,7 +329,7 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
     mesh_margin = np.zeros(count)
     parts: dict[str, list[np.ndarray]] = {key: [] for key in (
         "vertices", "triangles", "vertex_normals", "edge_normals", "node_children",
-        "node_tris", "node_bounds", "sharp_edges")}  # fmt: skip
+        "node_tris", "node_bounds", "sharp_edges", "node_sharp")}  # fmt: skip
     nv = nt = nn = 0
     for k, data, margin in meshes:
         inner = data.node_tris[:, 1] == data.node_tris[:, 0]
@@ -343,6 +344,7 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
         parts["node_children"].append(np.where(inner[:, None], data.node_children + nn, 0))
         parts["node_tris"].append(np.where(inner[:, None], 0, data.node_tris + nt))
         parts["node_bounds"].append(data.node_bounds)
+        parts["node_sharp"].append(data.node_sharp)
         nv, nt, nn = nv + len(data.vertices), nt + len(data.triangles), nn + len(data.node_tris)
     empty = ColliderArrays()
 
@@ -370,6 +372,7 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
         mesh_vertex_normals=joined("vertex_normals"),
         mesh_edge_normals=joined("edge_normals"),
         mesh_sharp_edges=joined("sharp_edges"),
+        mesh_node_sharp=joined("node_sharp"),
         mesh_node_children=joined("node_children"),
         mesh_node_tris=joined("node_tris"),
         mesh_node_bounds=joined("node_bounds"),

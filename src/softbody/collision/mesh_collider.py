@@ -61,6 +61,9 @@ class MeshColliderData:
     """[begin, end) triangles of each leaf, (K, 2) int64; empty for an inner node."""
     node_bounds: np.ndarray
     """Lower and upper corner of each node's box [m], (K, 2, 3)."""
+    node_sharp: np.ndarray
+    """1 where a node's triangles hold a sharp edge (``sharp_edges``), else 0; (K,) int64:
+    the edge contacts do not enter a subtree without one."""
 
 
 def _source_name(mesh: Any) -> str:
@@ -161,6 +164,20 @@ def sharp_edges(vertices: np.ndarray, faces: np.ndarray, angle: float | None) ->
     return out
 
 
+def sharp_nodes(children: np.ndarray, tris: np.ndarray, sharp: np.ndarray) -> np.ndarray:
+    """(K,) int64: 1 where the triangles below tree node k (``build_tree``'s children and
+    tris) hold an edge with ``sharp`` (T, 3) >= 0."""
+    has = np.zeros(len(children), np.int64)
+    any_sharp = np.any(sharp >= 0, axis=1)
+    for node in range(len(children) - 1, -1, -1):  # children come after their parent
+        b, e = tris[node]
+        if e > b:
+            has[node] = int(any_sharp[b:e].any())
+        else:
+            has[node] = has[children[node, 0]] | has[children[node, 1]]
+    return has
+
+
 def build_tree(vertices: np.ndarray, faces: np.ndarray):
     """Bounding-volume tree over ``faces``: (order (T,), children (K, 2), tris (K, 2),
     bounds (K, 2, 3)); ``faces[order]`` are the triangles in leaf order."""
@@ -211,6 +228,7 @@ def mesh_collider_data(mesh: TriMesh, sharp_angle: float | None = SHARP_ANGLE) -
     order, children, tris, bounds = build_tree(vertices, mesh.faces)
     faces = np.ascontiguousarray(mesh.faces[order])
     vertex_n, edge_n = pseudo_normals(vertices, faces)
+    sharp = sharp_edges(vertices, faces, sharp_angle)
     return MeshColliderData(
         center=center,
         half_extents=0.5 * (hi - lo),
@@ -218,10 +236,11 @@ def mesh_collider_data(mesh: TriMesh, sharp_angle: float | None = SHARP_ANGLE) -
         triangles=faces,
         vertex_normals=np.ascontiguousarray(vertex_n),
         edge_normals=np.ascontiguousarray(edge_n),
-        sharp_edges=sharp_edges(vertices, faces, sharp_angle),
+        sharp_edges=sharp,
         node_children=children,
         node_tris=tris,
         node_bounds=bounds,
+        node_sharp=sharp_nodes(children, tris, sharp),
     )
 
 
