@@ -274,3 +274,43 @@ def test_every_solver_keeps_the_ridge_out_of_the_ball(integrator, dt, kw):
         lowest = min(lowest, state.particle_q[:, 1].min())
     assert lowest < RIDGE_TOP + 0.05  # it fell onto the edge (from 0.09 above it)
     assert state.particle_q[:, 1].min() > RIDGE_TOP - 0.02
+
+
+SCENE = """
+[simulation]
+integrator = "midpoint"
+dt = 0.0005
+duration = 0.01
+
+[[colliders]]
+type = "mesh"
+mesh = {{ shape = "box", extents = [1.0, 0.4, 1.0] }}
+{extra}
+
+[[bodies]]
+mesh = {{ shape = "icosphere", subdivisions = 1, radius = 0.2 }}
+position = [0.0, 0.8, 0.0]
+mass = 1.0
+stiffness = 800.0
+gas = {{ law = "isothermal", nrt = 200.0 }}
+"""
+
+
+def test_scene_mesh_colliders_take_sharp_angle(tmp_path, capsys):
+    """A scene's mesh collider has the box's 12 sharp edges by default, none with
+    ``sharp_angle = 180`` (the edge contacts off); an angle outside [0, 180] is one line on
+    stderr from ``softbody run`` naming the key, exit 2."""
+    from softbody.cli import main
+    from softbody.scenes.loader import load_scene
+
+    counts = []
+    for name, extra in [("a", ""), ("b", "sharp_angle = 180")]:
+        (tmp_path / f"{name}.toml").write_text(SCENE.format(extra=extra))
+        model = load_scene(tmp_path / f"{name}.toml").model
+        counts.append(int(np.count_nonzero(model.collider_mesh_sharp_edges >= 0)))
+    assert counts == [12, 0]
+    (tmp_path / "bad.toml").write_text(SCENE.format(extra="sharp_angle = 200"))
+    code = main(["run", str(tmp_path / "bad.toml"), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err
+    assert "colliders.0.sharp_angle" in err, err

@@ -170,7 +170,7 @@ class ColliderMesh(_ColliderBase):
     the soft bodies' edges and triangles, so that a ridge or a corner cannot pass between
     soft vertices: a soft edge across a sharp edge is pushed out to ``margin`` beyond it, a
     soft triangle a corner pokes through past the corner (``core/collision/mesh.hpp``).
-    ``sharp_angle=None``: soft vertices against the mesh only.
+    ``sharp_angle=None`` (or 180): soft vertices against the mesh only.
 
     After construction, ``mesh`` is the checked (welded, outward-wound) TriMesh, ``name``
     the file it came from (or "mesh"), and ``data`` its arrays for the core
