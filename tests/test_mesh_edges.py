@@ -225,6 +225,35 @@ def test_edge_contact_impulse_is_the_ball_s_momentum_change():
     assert np.linalg.norm(out[30.0] - out[None]) > 0.01 * np.linalg.norm(out[None])
 
 
+@pytest.mark.parametrize(
+    ("motion", "center"),
+    [
+        (sb.MotionTranslation(velocity=(0.0, 1.5, 0.0)), (0.0, 1.1, 0.0)),
+        (sb.MotionRotation(angular_velocity=(0.0, 0.0, 2.0)), (0.0, 1.0, 0.0)),
+    ],
+)
+def test_a_moving_ridge_pushes_the_ball_without_cutting_it(motion, center):
+    """No gravity, the ridge moving: rising at 1.5 m/s into a ball at rest above it, or
+    the box spinning at 2 rad/s about its axis under a ball touching it (its edges sweep
+    through where the ball is). The edges' speed enters the contacts' relative velocity:
+    at every 5th step of 0.25 s no box edge passes through a ball triangle (brute-force
+    segment-triangle test), and the impulses the collider received are minus the ball's
+    momentum change (to 1e-9 of it), which is not small: the ridge pushed it."""
+    collider = ridge(motion=motion, friction=0.5, restitution=0.3)
+    model, sim = ball_over(collider, gravity=(0.0, 0.0, 0.0), center=center)
+    state = model.state()
+    m = model.particle_mass[:, None]
+    p0 = (m * state.particle_qd).sum(axis=0)
+    impulse = np.zeros(3)
+    for _ in range(100):
+        sim.run(state, 5)
+        impulse += state.collider_impulse[0]
+        assert collider_crossings(model, state, collider) == 0
+    dp = (m * state.particle_qd).sum(axis=0) - p0
+    np.testing.assert_allclose(impulse, -dp, atol=1e-9 * np.linalg.norm(dp))
+    assert np.linalg.norm(dp) > 0.5  # [kg m/s], the ball's mass 1 kg
+
+
 def test_vertex_contacts_are_unchanged_away_from_sharp_edges():
     """A ball bouncing in the middle of a box mesh's top face, far from its edges: the run
     with edge contacts is bit for bit the run without them (the edge stage changes
