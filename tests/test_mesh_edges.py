@@ -220,6 +220,30 @@ def test_cloth_draped_over_a_box_corner_is_not_pierced(angle):
         assert state.particle_q[:, 1].max() > tip
 
 
+def test_cloth_resting_on_a_corner_presses_with_its_weight():
+    """The cloth over the cube's corner (implicit Euler at 2 ms, no ground), settled for 3
+    s: over the next second the impulse the cube receives is the cloth's weight m g
+    (static equilibrium) within 0.1 % (measured 6e-6), with the cloth lying on the tip
+    (its highest point above the tip, held by the corner contacts) and no cube edge
+    through it."""
+    collider = sb.ColliderMesh(sb.box((0.5, 0.5, 0.5)), restitution=0.0, friction=0.5,
+                               rotation=corner_up())  # fmt: skip
+    sheet = sb.rectangle((0.8, 0.8), (16, 16))
+    flat = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0] + [0.013, 0.52, 0.021]
+    builder = sb.ModelBuilder()
+    builder.add_cloth(sb.TriMesh(flat, sheet.faces), mass=0.1, stiffness=300.0, damping=0.05)
+    builder.add_collider(collider)
+    model = builder.finalize()
+    sim = sb.Simulator(model, integrator="implicit_euler", dt=2e-3)
+    state = model.state()
+    sim.run(state, 1500)
+    sim.run(state, 500)  # this call's impulses: 1 s
+    np.testing.assert_allclose(state.collider_impulse[0], [0.0, -0.1 * 9.81, 0.0],
+                               atol=1e-3 * 0.1 * 9.81)  # fmt: skip
+    assert state.particle_q[:, 1].max() > 0.25 * np.sqrt(3.0)
+    assert collider_crossings(model, state, collider) == 0
+
+
 def test_edge_contact_impulse_is_the_ball_s_momentum_change():
     """No gravity, a ball thrown down at 3 m/s onto the ridge (restitution 0.5, friction
     0.5): the impulse the collider receives over the run is minus the change of the ball's
