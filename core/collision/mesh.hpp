@@ -17,13 +17,30 @@
 // A caught particle goes to the surface point plus `margin` along the contact normal (so
 // that its next path starts strictly outside) and responds as against the analytic
 // colliders (colliders::respond): restitution, friction, the opposite impulse to the
-// collider. Vertices of the soft bodies against the mesh only: mesh edges against soft
-// edges are not computed.
+// collider.
+// Then the mesh's sharp edges (convex, flagged once in Python: collider_mesh_sharp_edges)
+// against the soft bodies' edges and triangles, so that a ridge or a corner of the mesh
+// cannot pass between soft vertices that all stay outside (edge_contacts below): a
+// closest-distance push at the step's end positions, in the collider's frame, after the
+// vertex contacts. Per soft triangle, the sharp edges near its box are found through the
+// tree; its edges (each soft edge once) against them: a soft edge that passes through one
+// of the sharp edge's two faces with its closest point to the edge inside the edge's wedge
+// (behind both faces) is pushed out along the two edges' common perpendicular to `margin`
+// beyond the edge; one resting on the edge within the margin (in the cone of its two face
+// normals) and approaching it is held there. Then a corner: a sharp edge through the soft
+// triangle whose end projects into the triangle and lies beyond it (along the end's
+// pseudo-normal) pushes the triangle past that end by the margin. The soft side moves with
+// barycentric weights w_k, mass-weighted (particle k by w_k / m_k / sum_l w_l^2 / m_l times
+// the contact point's move), and the contact point's velocity relative to the collider takes
+// restitution and friction as a vertex's does; the collider receives the opposite impulse.
+// Flat tessellation edges and concave edges take no part.
 #pragma once
 
 #include <limits>
 
 #include "collision/colliders.hpp"
+#include "collision/soft.hpp"
+#include "collision/thick.hpp"
 #include "model.hpp"
 #include "vec.hpp"
 
@@ -121,6 +138,14 @@ struct View {
     index begin(index node) const { return m.collider_meshes.node_tris[2 * node]; }
     index end(index node) const { return m.collider_meshes.node_tris[2 * node + 1]; }
     index child(index node, int k) const { return m.collider_meshes.node_children[2 * node + k]; }
+    /// The triangle across edge k of triangle t when that edge takes part in edge contacts
+    /// (sharp, convex, owned by t); -1 otherwise.
+    index sharp_twin(index t, int k) const { return m.collider_meshes.sharp_edges[3 * t + k]; }
+    /// Whether a tree node's triangles hold a sharp edge.
+    bool has_sharp(index node) const { return m.collider_meshes.node_sharp[node] != 0; }
+    V3 face_normal(index t) const {
+        return unit(cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0)));
+    }
     /// The pseudo-normal of feature f of triangle t (closest_on_triangle's numbering).
     V3 pseudo_normal(index t, int f) const {
         if (f < 3) return load(m.collider_meshes.vertex_normals, m.collider_meshes.triangles[3 * t + f]);
@@ -322,6 +347,214 @@ inline colliders::Hit resolve(const View& v, index root, double margin, V3 l0, V
     return {true, near.x + margin * normal, normal};
 }
 
+/// Whether the boxes [lo, hi] and b (lo, hi) meet.
+inline bool boxes_meet(const double* lo, const double* hi, const double* b) {
+    for (int k = 0; k < 3; ++k)
+        if (hi[k] < b[k] || b[3 + k] < lo[k]) return false;
+    return true;
+}
+
+/// Each sharp edge (triangle t, edge k: corner k to k + 1) below `root` whose box meets the
+/// box [lo, hi] (local frame): calls visit(t, k). Each sharp edge has one owner, so it is
+/// visited once; subtrees without one are not entered (flat tessellation costs nothing).
+template <class Visit>
+inline void each_sharp_edge(const View& v, index root, const double* lo, const double* hi,
+                            Visit visit) {
+    index stack[kStack];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0) {
+        const index node = stack[--top];
+        if (!v.has_sharp(node) || !boxes_meet(lo, hi, v.bounds(node))) continue;
+        const index tb = v.begin(node), te = v.end(node);
+        if (te > tb) {
+            for (index t = tb; t < te; ++t)
+                for (int k = 0; k < 3; ++k) {
+                    if (v.sharp_twin(t, k) < 0) continue;
+                    const V3 a = v.corner(t, k), b = v.corner(t, (k + 1) % 3);
+                    double box[6];
+                    for (int d = 0; d < 3; ++d) {
+                        box[d] = std::min((&a.x)[d], (&b.x)[d]);
+                        box[3 + d] = std::max((&a.x)[d], (&b.x)[d]);
+                    }
+                    if (boxes_meet(lo, hi, box)) visit(t, k);
+                }
+            continue;
+        }
+        if (top + 2 > kStack) continue;
+        stack[top++] = v.child(node, 0);
+        stack[top++] = v.child(node, 1);
+    }
+}
+
+/// Whether segment a-b meets triangle (p0, p1, p2), its edges included (Moller-Trumbore
+/// with a tolerance: a soft edge through the sharp edge itself meets both its faces).
+inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
+    const V3 d = b - a, e1 = p1 - p0, e2 = p2 - p0;
+    const V3 h = cross(d, e2);
+    const double det = dot(e1, h);
+    if (!(std::fabs(det) > 1e-300)) return false;
+    const double inv = 1.0 / det;
+    const V3 sv = a - p0;
+    const double u = inv * dot(sv, h);
+    const V3 qv = cross(sv, e1);
+    const double w = inv * dot(d, qv), s = inv * dot(e2, qv);
+    constexpr double kTol = 1e-9;
+    return u >= -kTol && w >= -kTol && u + w <= 1.0 + kTol && s >= 0.0 && s <= 1.0;
+}
+
+/// A mesh collider's pose, velocities and coefficients at the step's end.
+struct Frame {
+    const Model& m;
+    V3 c;             // the collider's centre [m]
+    const double* r;  // its rotation (3, 3)
+    V3 vc, wc;        // its velocity [m/s] and angular velocity [rad/s]
+    double e, keep;   // restitution, 1 - friction
+};
+
+/// The soft side of one edge or corner contact: particles idx[0..n) with barycentric
+/// weights w (n) at the contact point x_local, local positions l (n, updated). The contact
+/// point moves by `move` (local frame), and its velocity relative to the collider, when
+/// approaching along the unit normal (local), takes restitution and friction. Returns false
+/// (nothing changed) when every particle is pinned, or when `resting` and the contact point
+/// is not approaching (within the margin but leaving).
+inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l, V3 x_local,
+                 V3 move, V3 normal, bool resting, double* q, double* qd, V3& j,
+                 colliders::Seen* seen) {
+    const Model& m = f.m;
+    double sum = 0.0, free_weight = 0.0;
+    V3 vel{0.0, 0.0, 0.0};
+    for (int k = 0; k < n; ++k) {
+        const double inv = m.particles.inv_mass[idx[k]];
+        sum += w[k] * w[k] * inv;
+        if (inv > 0.0) free_weight += w[k];
+        vel = vel + w[k] * load(qd, idx[k]);
+    }
+    if (!(sum > 0.0)) return false;
+    const V3 nw = to_world(f.r, normal);
+    const V3 xw = f.c + to_world(f.r, x_local);
+    const V3 rel = vel - (f.vc + cross(f.wc, xw - f.c));
+    const double vn = dot(rel, nw);
+    if (resting && vn >= 0.0) return false;  // within the margin but leaving: free
+    const V3 dx = to_world(f.r, move);
+    V3 dv{0.0, 0.0, 0.0};
+    if (vn < 0.0) {
+        const V3 tangent = rel - vn * nw;
+        dv = (-(1.0 + f.e) * vn) * nw + (f.keep - 1.0) * tangent;
+        j = j - (free_weight / sum) * dv;
+    }
+    for (int k = 0; k < n; ++k) {
+        const index i = idx[k];
+        const double share = w[k] * m.particles.inv_mass[i] / sum;
+        if (share == 0.0) continue;
+        store(q, i, load(q, i) + share * dx);
+        store(qd, i, load(qd, i) + share * dv);
+        l[k] = l[k] + share * move;
+        if (seen != nullptr) seen->add(load(q, i), load(qd, i));
+    }
+    return true;
+}
+
+/// Mesh collider k's sharp edges against the soft bodies' edges and triangles (the header's
+/// edge contacts), at the positions q (N, 3) the vertex contacts left; q, qd change in place,
+/// j gathers the impulse the collider receives [N s]. c, r, vc, wc: the collider's pose and
+/// velocities at the step's end.
+inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc,
+                          double e, double keep, double* q, double* qd, V3& j,
+                          colliders::Seen* seen) {
+    const index root = m.colliders.mesh_root[k];
+    const View v{m};
+    if (root < 0 || !v.has_sharp(root)) return;  // no sharp edge
+    const Frame f{m, c, r, vc, wc, e, keep};
+    const double margin = m.colliders.mesh_margin[k];
+    const double* rb = v.bounds(root);
+    double root_box[6];
+    for (int d = 0; d < 3; ++d) {
+        root_box[d] = rb[d] - margin;
+        root_box[3 + d] = rb[3 + d] + margin;
+    }
+    for (index t = 0; t < m.triangles.count; ++t) {
+        const index* tri = m.triangles.indices + 3 * t;
+        V3 l[3];
+        double lo[3], hi[3];
+        for (int d = 0; d < 3; ++d) {
+            lo[d] = std::numeric_limits<double>::infinity();
+            hi[d] = -std::numeric_limits<double>::infinity();
+        }
+        for (int a = 0; a < 3; ++a) {
+            l[a] = to_local(r, load(q, tri[a]) - c);
+            for (int d = 0; d < 3; ++d) {
+                lo[d] = std::min(lo[d], (&l[a].x)[d] - margin);
+                hi[d] = std::max(hi[d], (&l[a].x)[d] + margin);
+            }
+        }
+        if (!boxes_meet(lo, hi, root_box)) continue;
+        each_sharp_edge(v, root, lo, hi, [&](index mt, int mk) {
+            const V3 p = v.corner(mt, mk), pq = v.corner(mt, (mk + 1) % 3);
+            const index twin = v.sharp_twin(mt, mk);
+            const V3 n1 = v.face_normal(mt), n2 = v.face_normal(twin);
+            const V3 ne = v.pseudo_normal(mt, 3 + mk);
+            // the soft triangle's edges (each soft edge by its owner) against the sharp edge
+            for (int a = 0; a < 3; ++a) {
+                if (m.triangles.edge_owner[3 * t + a] == 0) continue;
+                const int b = (a + 1) % 3;
+                double s = 0.0, u = 0.0;
+                thick::closest_segments(l[a], l[b], p, pq, s, u);
+                const V3 xs = l[a] + s * (l[b] - l[a]), xm = p + u * (pq - p);
+                const V3 d = xs - xm;
+                const double dist = std::sqrt(dot(d, d));
+                const double d1 = dot(d, n1), d2 = dot(d, n2);
+                bool inside = false;
+                if ((d1 < 0.0 && d2 < 0.0) || dist == 0.0) {
+                    // behind both faces: inside when the soft edge passes through one of them
+                    const index* t1 = m.collider_meshes.triangles + 3 * mt;
+                    const index* t2 = m.collider_meshes.triangles + 3 * twin;
+                    inside = segment_meets_triangle(
+                                 l[a], l[b], v.vertex(t1[0]), v.vertex(t1[1]), v.vertex(t1[2])) ||
+                             segment_meets_triangle(
+                                 l[a], l[b], v.vertex(t2[0]), v.vertex(t2[1]), v.vertex(t2[2]));
+                    if (!inside) continue;
+                } else if (!(d1 >= 0.0 && d2 >= 0.0 && dist < margin)) {
+                    continue;  // beside a face (the vertex contacts' business), or far
+                }
+                const V3 n = dist > 0.0 ? (inside ? -1.0 / dist : 1.0 / dist) * d : ne;
+                const index idx[2] = {tri[a], tri[b]};
+                const double w[2] = {1.0 - s, s};
+                V3 ls[2] = {l[a], l[b]};
+                if (push(f, 2, idx, w, ls, xm, (xm + margin * n) - xs, n, !inside, q, qd, j,
+                         seen)) {
+                    l[a] = ls[0];
+                    l[b] = ls[1];
+                }
+            }
+            // a corner through the soft triangle: the sharp edge's end beyond it
+            if (!segment_meets_triangle(p, pq, l[0], l[1], l[2])) return;
+            const V3 tn = unit(cross(l[1] - l[0], l[2] - l[0]));
+            double best = std::numeric_limits<double>::infinity();
+            soft::TrianglePoint at{};
+            V3 nbest{0.0, 0.0, 0.0};
+            for (int end = 0; end < 2; ++end) {
+                const index vi = m.collider_meshes.triangles[3 * mt + (mk + end) % 3];
+                const V3 x = v.vertex(vi);
+                const V3 nv = load(m.collider_meshes.vertex_normals, vi);
+                const double side = dot(tn, nv);
+                if (side == 0.0) continue;
+                const V3 n = side > 0.0 ? tn : -1.0 * tn;
+                const soft::TrianglePoint tp = soft::closest_point_on_triangle(x, l[0], l[1], l[2]);
+                if (!(tp.wa > 0.0 && tp.wb > 0.0 && tp.wc > 0.0)) continue;  // beside it
+                const double h = dot(x - tp.x, n);  // > 0: the end beyond the triangle
+                if (h < 0.0 || h >= best) continue;
+                best = h;
+                at = tp;
+                nbest = n;
+            }
+            if (!std::isfinite(best)) return;
+            const double w[3] = {at.wa, at.wb, at.wc};
+            push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false, q, qd, j, seen);
+        });
+    }
+}
+
 /// Mesh collider k (centre c, rotation r at the step's end; velocity vc [m/s], angular
 /// velocity wc [rad/s]) against every particle: q_start (N, 3) the positions at the step's
 /// start, dt [s] the step (the collider's pose at its start is taken back along vc, wc);
@@ -360,6 +593,7 @@ inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 w
         colliders::respond(m, i, hit, vc + cross(wc, hit.x - c), e, keep, q, qd, j);
         if (seen != nullptr) seen->add(load(q, i), load(qd, i));
     }
+    edge_contacts(m, k, c, r, vc, wc, e, keep, q, qd, j, seen);
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::mesh_collider

@@ -163,8 +163,14 @@ class ColliderMesh(_ColliderBase):
     ``motion`` and ``Control.collider_target`` move that centre as for the other
     colliders. A particle that enters it during a step, or passes through a thin part of
     it, is put back where its path entered, ``margin`` [m] outside the surface (default
-    ``1e-4`` of the mesh's bounding-box diagonal). Soft vertices against the mesh only:
-    mesh edges against soft edges are not computed.
+    ``1e-4`` of the mesh's bounding-box diagonal).
+
+    The mesh's sharp edges (convex, their two faces' normals more than ``sharp_angle``
+    [deg] apart; default 30: a box's edges, not a smooth surface's tessellation) also meet
+    the soft bodies' edges and triangles, so that a ridge or a corner cannot pass between
+    soft vertices: a soft edge across a sharp edge is pushed out to ``margin`` beyond it, a
+    soft triangle a corner pokes through past the corner (``core/collision/mesh.hpp``).
+    ``sharp_angle=None`` (or 180): soft vertices against the mesh only.
 
     After construction, ``mesh`` is the checked (welded, outward-wound) TriMesh, ``name``
     the file it came from (or "mesh"), and ``data`` its arrays for the core
@@ -175,6 +181,7 @@ class ColliderMesh(_ColliderBase):
     center: ArrayLike | None = None
     rotation: ArrayLike | None = None
     margin: float | None = None
+    sharp_angle: float | None = 30.0
 
     def __init__(
         self,
@@ -186,14 +193,20 @@ class ColliderMesh(_ColliderBase):
         center: ArrayLike | None = None,
         rotation: ArrayLike | None = None,
         margin: float | None = None,
+        sharp_angle: float | None = 30.0,
     ) -> None:
         from softbody.collision.mesh_collider import checked_mesh, mesh_collider_data
 
+        if sharp_angle is not None:
+            angle = float(sharp_angle)
+            if not (np.isfinite(angle) and 0.0 <= angle <= 180.0):
+                raise ValueError(f"sharp_angle must be in [0, 180] degrees, got {sharp_angle!r}")
         checked, name = checked_mesh(mesh)
-        data = mesh_collider_data(checked)
+        data = mesh_collider_data(checked, sharp_angle)
         for key, value in (("restitution", restitution), ("friction", friction),
                            ("motion", motion), ("center", center), ("rotation", rotation),
-                           ("margin", margin), ("mesh", checked)):  # fmt: skip
+                           ("margin", margin), ("sharp_angle", sharp_angle),
+                           ("mesh", checked)):  # fmt: skip
             object.__setattr__(self, key, value)
         object.__setattr__(self, "name", name)
         object.__setattr__(self, "data", data)
@@ -229,6 +242,8 @@ class ColliderArrays:
     mesh_triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
     mesh_vertex_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     mesh_edge_normals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    mesh_sharp_edges: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.int64))
+    mesh_node_sharp: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     mesh_node_children: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
     mesh_node_tris: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
     mesh_node_bounds: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
@@ -314,7 +329,7 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
     mesh_margin = np.zeros(count)
     parts: dict[str, list[np.ndarray]] = {key: [] for key in (
         "vertices", "triangles", "vertex_normals", "edge_normals", "node_children",
-        "node_tris", "node_bounds")}  # fmt: skip
+        "node_tris", "node_bounds", "sharp_edges", "node_sharp")}  # fmt: skip
     nv = nt = nn = 0
     for k, data, margin in meshes:
         inner = data.node_tris[:, 1] == data.node_tris[:, 0]
@@ -325,9 +340,11 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
         parts["triangles"].append(data.triangles + nv)
         parts["vertex_normals"].append(data.vertex_normals)
         parts["edge_normals"].append(data.edge_normals)
+        parts["sharp_edges"].append(np.where(data.sharp_edges >= 0, data.sharp_edges + nt, -1))
         parts["node_children"].append(np.where(inner[:, None], data.node_children + nn, 0))
         parts["node_tris"].append(np.where(inner[:, None], 0, data.node_tris + nt))
         parts["node_bounds"].append(data.node_bounds)
+        parts["node_sharp"].append(data.node_sharp)
         nv, nt, nn = nv + len(data.vertices), nt + len(data.triangles), nn + len(data.node_tris)
     empty = ColliderArrays()
 
@@ -354,6 +371,8 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
         mesh_triangles=joined("triangles"),
         mesh_vertex_normals=joined("vertex_normals"),
         mesh_edge_normals=joined("edge_normals"),
+        mesh_sharp_edges=joined("sharp_edges"),
+        mesh_node_sharp=joined("node_sharp"),
         mesh_node_children=joined("node_children"),
         mesh_node_tris=joined("node_tris"),
         mesh_node_bounds=joined("node_bounds"),

@@ -9,7 +9,8 @@ import numpy as np
 
 
 def _cells(lo: np.ndarray, hi: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
-    """(owner, cell key) of every grid cell each box [lo, hi] (K, 3) covers."""
+    """(owner, cell key) of every grid cell each box [lo, hi] (K, 3) covers; the boxes are
+    given from a common origin (lo >= 0), so that every caller's keys name the same cells."""
     a = np.floor(lo / size).astype(np.int64)
     b = np.floor(hi / size).astype(np.int64)
     span = b - a + 1
@@ -18,7 +19,6 @@ def _cells(lo: np.ndarray, hi: np.ndarray, size: float) -> tuple[np.ndarray, np.
     k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
     sy, sz = span[owner, 1], span[owner, 2]
     cell = a[owner] + np.stack([k // (sy * sz), (k // sz) % sy, k % sz], axis=1)
-    cell -= cell.min(axis=0) if len(cell) else 0
     key = (cell[:, 0] * (1 << 21) + cell[:, 1]) * (1 << 21) + cell[:, 2]
     return owner, key
 
@@ -38,7 +38,7 @@ def candidate_pairs(elo, ehi, tlo, thi) -> tuple[np.ndarray, np.ndarray]:
     e = np.repeat(e_owner, n)
     t = t_owner[np.repeat(first, n) + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)]
     pairs = np.sort(e * len(tlo) + t)  # each pair once (a sort: no hash table)
-    pairs = pairs[np.concatenate([[True], pairs[1:] != pairs[:-1]])]
+    pairs = pairs[np.concatenate([[True], pairs[1:] != pairs[:-1]])[: len(pairs)]]
     e, t = pairs // len(tlo), pairs % len(tlo)
     meet = np.all((elo[e] <= thi[t]) & (tlo[t] <= ehi[e]), axis=1)
     return e[meet], t[meet]

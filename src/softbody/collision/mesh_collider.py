@@ -23,6 +23,11 @@ from softbody.mesh.tri_mesh import TriMesh
 #: Most triangles in one leaf of the tree.
 LEAF_SIZE = 4
 
+#: Default angle [deg] between the normals of an edge's two faces above which a convex mesh
+#: edge is sharp: it takes part in edge contacts (a 12-triangle box's edges: 90; a 5,000-
+#: triangle sphere's: about 4).
+SHARP_ANGLE = 30.0
+
 #: Default margin [m] as a fraction of the mesh's bounding-box diagonal: how far outside
 #: the surface a caught particle is put, so that its next path starts strictly outside.
 MARGIN_FRACTION = 1e-4
@@ -46,12 +51,19 @@ class MeshColliderData:
     """Angle-weighted unit pseudo-normals of the vertices, (V, 3)."""
     edge_normals: np.ndarray
     """Unit pseudo-normal of edge k (corner k to k + 1) of each triangle, (T, 3, 3)."""
+    sharp_edges: np.ndarray
+    """The triangle across edge k of each triangle where that edge takes part in edge
+    contacts (sharp and convex, see :func:`sharp_edges`, and owned by this triangle: its first
+    vertex index below its second), else -1; (T, 3) int64."""
     node_children: np.ndarray
     """Child nodes of each inner node, (K, 2) int64; (0, 0) for a leaf."""
     node_tris: np.ndarray
     """[begin, end) triangles of each leaf, (K, 2) int64; empty for an inner node."""
     node_bounds: np.ndarray
     """Lower and upper corner of each node's box [m], (K, 2, 3)."""
+    node_sharp: np.ndarray
+    """1 where a node's triangles hold a sharp edge (``sharp_edges``), else 0; (K,) int64:
+    the edge contacts do not enter a subtree without one."""
 
 
 def _source_name(mesh: Any) -> str:
@@ -123,6 +135,49 @@ def pseudo_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     return _unit(vertex_n), edge_n
 
 
+def sharp_edges(vertices: np.ndarray, faces: np.ndarray, angle: float | None) -> np.ndarray:
+    """The edges of a closed, outward-wound mesh that take part in edge contacts: (T, 3)
+    int64, the triangle across edge k (corner k to k + 1) of triangle t where that edge is
+    convex, its two faces' normals differ by more than ``angle`` [deg], and t owns it (its
+    first vertex index is below its second, so that each edge is listed once); else -1.
+    ``angle`` None: none (-1 everywhere)."""
+    out = np.full((len(faces), 3), -1, np.int64)
+    if angle is None or len(faces) == 0:
+        return out
+    p = vertices[faces]
+    face_n = _unit(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
+    he = half_edges(faces)  # row 3 t + k: corner k -> k + 1
+    count = len(vertices)
+    key = he[:, 0] * count + he[:, 1]
+    twin_key = he[:, 1] * count + he[:, 0]
+    order = np.argsort(key)
+    twin = order[np.searchsorted(key[order], twin_key)] // 3
+    own = np.arange(len(he)) // 3
+    n1, n2 = face_n[own], face_n[twin]
+    cos = np.einsum("ij,ij->i", n1, n2)
+    # convex: the edge runs along n1 x n2 (outward winding), i.e. the twin's far side is
+    # behind this face
+    direction = vertices[he[:, 1]] - vertices[he[:, 0]]
+    convex = np.einsum("ij,ij->i", np.cross(n1, n2), direction) > 0.0
+    sharp = (cos < np.cos(np.radians(float(angle)))) & convex & (he[:, 0] < he[:, 1])
+    out.reshape(-1)[sharp] = twin[sharp]
+    return out
+
+
+def sharp_nodes(children: np.ndarray, tris: np.ndarray, sharp: np.ndarray) -> np.ndarray:
+    """(K,) int64: 1 where the triangles below tree node k (``build_tree``'s children and
+    tris) hold an edge with ``sharp`` (T, 3) >= 0."""
+    has = np.zeros(len(children), np.int64)
+    any_sharp = np.any(sharp >= 0, axis=1)
+    for node in range(len(children) - 1, -1, -1):  # children come after their parent
+        b, e = tris[node]
+        if e > b:
+            has[node] = int(any_sharp[b:e].any())
+        else:
+            has[node] = has[children[node, 0]] | has[children[node, 1]]
+    return has
+
+
 def build_tree(vertices: np.ndarray, faces: np.ndarray):
     """Bounding-volume tree over ``faces``: (order (T,), children (K, 2), tris (K, 2),
     bounds (K, 2, 3)); ``faces[order]`` are the triangles in leaf order."""
@@ -163,15 +218,17 @@ def build_tree(vertices: np.ndarray, faces: np.ndarray):
     )
 
 
-def mesh_collider_data(mesh: TriMesh) -> MeshColliderData:
+def mesh_collider_data(mesh: TriMesh, sharp_angle: float | None = SHARP_ANGLE) -> MeshColliderData:
     """The arrays of a checked closed ``mesh`` (see :func:`checked_mesh`), in the local
-    frame centred on its bounding box."""
+    frame centred on its bounding box; edges sharper than ``sharp_angle`` [deg] (None:
+    none) take part in edge contacts (:func:`sharp_edges`)."""
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
     center = 0.5 * (lo + hi)
     vertices = np.ascontiguousarray(mesh.vertices - center)
     order, children, tris, bounds = build_tree(vertices, mesh.faces)
     faces = np.ascontiguousarray(mesh.faces[order])
     vertex_n, edge_n = pseudo_normals(vertices, faces)
+    sharp = sharp_edges(vertices, faces, sharp_angle)
     return MeshColliderData(
         center=center,
         half_extents=0.5 * (hi - lo),
@@ -179,9 +236,11 @@ def mesh_collider_data(mesh: TriMesh) -> MeshColliderData:
         triangles=faces,
         vertex_normals=np.ascontiguousarray(vertex_n),
         edge_normals=np.ascontiguousarray(edge_n),
+        sharp_edges=sharp,
         node_children=children,
         node_tris=tris,
         node_bounds=bounds,
+        node_sharp=sharp_nodes(children, tris, sharp),
     )
 
 

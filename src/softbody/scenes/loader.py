@@ -567,6 +567,7 @@ def build_scene(name: str, data: dict, base: Path | None = None) -> Scene:
                     center=col.center,
                     rotation=_rotation(col.rotation),
                     margin=col.margin,
+                    sharp_angle=col.sharp_angle,
                     **common,
                 )
             builder.add_collider(made)

@@ -905,6 +905,13 @@ class MeshCollider(_ColliderBase):
         description="how far outside the surface caught vertices are put [m] "
         "(default: 1e-4 of the mesh's bounding-box diagonal)",
     )
+    sharp_angle: Real = Field(
+        30.0,
+        ge=0,
+        le=180,
+        description="convex edges whose faces' normals are more than this apart [deg] meet "
+        "the soft edges and triangles too (180: none, vertices only)",
+    )
 
     @model_validator(mode="after")
     def _one_mesh(self) -> MeshCollider:

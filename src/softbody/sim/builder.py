@@ -1087,6 +1087,8 @@ class ModelBuilder:
             collider_mesh_triangles=colliders.mesh_triangles,
             collider_mesh_vertex_normals=colliders.mesh_vertex_normals,
             collider_mesh_edge_normals=colliders.mesh_edge_normals,
+            collider_mesh_sharp_edges=colliders.mesh_sharp_edges,
+            collider_mesh_node_sharp=colliders.mesh_node_sharp,
             collider_mesh_node_children=colliders.mesh_node_children,
             collider_mesh_node_tris=colliders.mesh_node_tris,
             collider_mesh_node_bounds=colliders.mesh_node_bounds,
