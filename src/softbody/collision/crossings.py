@@ -1,7 +1,8 @@
 """Edges that pass through triangles: an independent NumPy check of a surface (every
 edge-triangle pair whose boxes meet, found through a uniform grid, tested exactly), for
 tests and benchmarks of the self-contact stage (core/collision/thick.hpp), which must
-never let one happen."""
+never let one happen; and the distances from vertices to the triangles not touching them,
+which that stage keeps at least its thickness."""
 
 from __future__ import annotations
 
