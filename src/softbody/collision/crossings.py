@@ -9,7 +9,8 @@ import numpy as np
 
 
 def _cells(lo: np.ndarray, hi: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
-    """(owner, cell key) of every grid cell each box [lo, hi] (K, 3) covers."""
+    """(owner, cell key) of every grid cell each box [lo, hi] (K, 3) covers; the boxes are
+    given from one lower corner common to the edges and the triangles (one grid for both)."""
     a = np.floor(lo / size).astype(np.int64)
     b = np.floor(hi / size).astype(np.int64)
     span = b - a + 1
@@ -18,7 +19,6 @@ def _cells(lo: np.ndarray, hi: np.ndarray, size: float) -> tuple[np.ndarray, np.
     k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
     sy, sz = span[owner, 1], span[owner, 2]
     cell = a[owner] + np.stack([k // (sy * sz), (k // sz) % sy, k % sz], axis=1)
-    cell -= cell.min(axis=0) if len(cell) else 0
     key = (cell[:, 0] * (1 << 21) + cell[:, 1]) * (1 << 21) + cell[:, 2]
     return owner, key
 
