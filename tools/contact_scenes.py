@@ -21,7 +21,7 @@ from softbody.scenes import load_scene
 TIMES = {
     "vacuum-gripper": (0.0, 0.5, 1.5),
     "balloon-ring": (0.3, 0.6, 2.0),
-    "cloth-stair": (0.35, 0.6, 2.0),
+    "cloth-stair": (0.3, 0.9, 2.0),
 }
 
 #: Width [px] of each frame in the strip.
