@@ -94,7 +94,8 @@ def _run(name: str) -> Run:
             soft_tri = x[:, 1] < len(model.tri_indices)
             crossing += int(np.count_nonzero(soft_edge != soft_tri))  # soft against mesh
             local = (q - state.collider_q[c]) @ state.collider_rotation[c]
-            inside += int(inside_mesh(data[c], local).sum())
+            boxed = np.all(np.abs(local) <= data[c].half_extents, axis=1)  # others are out
+            inside += int(inside_mesh(data[c], local[boxed]).sum())
         run.collider_crossings.append(crossing)
         run.inside.append(inside)
     return run
