@@ -28,6 +28,9 @@ BUILT_IN = [
     "two-balloons",
     "balloon-tank",
     "bending-actuator",
+    "vacuum-gripper",
+    "balloon-ring",
+    "cloth-stair",
 ]
 
 

@@ -13,7 +13,8 @@ from softbody.scenes import SceneError, list_scenes, load_scene
 def test_all_paper_scenes_are_built_in():
     """The five scenes of the paper's figures, balloon-drop (face drag), the scenes of
     gas that flows (landing-cushion, airbag, punctured-ball, two-balloons) and of
-    membranes (balloon-tank, bending-actuator) ship with the package."""
+    membranes (balloon-tank, bending-actuator) and of contact (vacuum-gripper, balloon-ring,
+    cloth-stair) ship with the package."""
     assert sorted(list_scenes()) == sorted(BUILT_IN)
 
 
@@ -100,7 +101,7 @@ def test_bad_overrides_name_the_key(override, match):
 def test_unknown_scene_lists_the_built_ins():
     """A scene name that is neither built in nor a file is a SceneError that lists the
     built-in scenes."""
-    listed = "unknown scene 'bouncy'; built-in scenes: airbag, balloon-drop, balloon-tank, bend"
+    listed = "unknown scene 'bouncy'; built-in scenes: airbag, balloon-drop, balloon-ring, balloon"
     with pytest.raises(SceneError, match=listed):
         load_scene("bouncy")
 
