@@ -90,12 +90,13 @@ def test_contact_in_the_solve_conserves_momentum(integrator):
     assert (m[a0:a1] * state.particle_qd[a0:a1]).sum(axis=0)[0] < 0.5  # slowed or turned
 
 
-def sheet_and_pushing_box(speed, gap=0.02, h=0.01):
+def sheet_and_pushing_box(speed, gap=0.02, h=0.01, margin=None):
     """A 0.4 m cloth at z = 0 and a small cloth 'gap' below it beside the path of a solid
     0.2 m box driven down through the large one at 'speed' (no gravity): the box carries the
     large cloth's middle down and its springs pull the cloth's edges through the small one."""
     builder = sb.ModelBuilder(gravity=(0, 0, 0))
-    builder.set_soft_contact("surface", thickness=h, restitution=0.0, friction=0.0)
+    builder.set_soft_contact("surface", thickness=h, restitution=0.0, friction=0.0,
+                             margin=margin)  # fmt: skip
     builder.add_cloth(sb.rectangle((0.4, 0.4), (6, 6)), mass=0.1, stiffness=50.0, damping=0.1)
     builder.add_cloth(sb.rectangle((0.16, 0.2), (4, 4), center=(0.19, 0.0, -gap)), mass=0.1,
                       stiffness=50.0, damping=0.1)  # fmt: skip
@@ -115,16 +116,21 @@ def between_bodies(model, q):
 
 
 @pytest.mark.parametrize("integrator", ["implicit_euler", "bdf2", "projective"])
-def test_a_collider_pushing_a_sheet_through_another_stops_the_run_there(integrator):
+@pytest.mark.parametrize("margin", [None, 0.05])
+def test_a_collider_pushing_a_sheet_through_another_stops_the_run_there(integrator, margin):
     """The box collider pushes the large cloth's edges through the small cloth in step 4
-    (it acts after the thickness contacts, which cannot hold what it moves). Reference: the
+    (it acts after the thickness contacts, which cannot hold what it moves). With the
+    default margin (h) the steps move more than half of it and take their pairs from swept
+    boxes: the check builds the pair list at the step's end with its full crossing check;
+    with a 0.05 m margin the steps keep the stage's list, and the check tests the edges of
+    the listed vertex-triangle pairs touching a particle the box moved. Reference: the
     run stops with Status.CROSSED at that step, naming a particle of the large cloth and a
     triangle of the small one and saying a collider pushed it there, with the state left
     at the step's start, where an independent segment-triangle test (edge_crossings) finds
     no edge of one body through the other's triangles; every earlier step passes that test
     too. Before this check the run went on and stopped one step later, at step 5's start."""
     dt = 0.01
-    model = sheet_and_pushing_box(2.0)
+    model = sheet_and_pushing_box(2.0, margin=margin)
     sim = sb.Simulator(model, integrator=integrator, dt=dt)
     state = model.state()
     with pytest.raises(sb.SimulationError, match=r"crossed a surface at step 4 .*particle \d+ "
