@@ -25,7 +25,8 @@
 //    k (d - h - a) in that step only (the next step's set leaves it out). The stage after
 //    the step still runs (bound, response): the no-crossing guarantee is its, unchanged.
 //    Pairs come from the stage's list, valid at x0 or built there (it holds every pair
-//    nearer than 2 h, so a <= h). The coefficients c sum to 0 (the
+//    nearer than 2 h, so a <= h), or, in a step whose forecast motion will make the stage
+//    sweep, from a gather of the pairs nearer than h + a. The coefficients c sum to 0 (the
 //    gap's barycentric weights), so the forces, and the Hessian's products, come in equal
 //    and opposite shares: momentum is conserved; their torque about any point is
 //    sum_k c_k x0_k x n (...) = d n x n (...) = 0 at x0, so within a body they need no turn
@@ -56,6 +57,11 @@ struct System {
     std::vector<double> n;     // (P, 3) the gap's direction at x0
     std::vector<double> k;     // (P,) stiffness [N/m]
     std::vector<double> push;  // (P,) the force at x0, k (h + a - d) [N]
+    // the smoother's blocks between the pairs' particles, by particle: particle i's entries
+    // [ptr[i], ptr[i + 1]) name the other particle j, the pair, and h_s^2 k c_i c_j (the
+    // block of the system matrix is that times n n^T)
+    std::vector<index> ptr, other, pair;
+    std::vector<double> weight;
     index count = 0;
     void clear() {
         v.clear();
@@ -63,6 +69,10 @@ struct System {
         n.clear();
         k.clear();
         push.clear();
+        ptr.clear();
+        other.clear();
+        pair.clear();
+        weight.clear();
         count = 0;
     }
 };
@@ -72,37 +82,71 @@ inline bool enabled(const Model& m) {
     return m.soft_contacts.mode == SoftContactMode::SURFACE && m.soft_contacts.thickness > 0.0;
 }
 
-/// The stage's pair list valid at q0 (N, 3): kept when the particles have drifted by at most
-/// half the margin since it was built (it then holds every pair nearer than 2 h at q0), else
-/// built at q0 as thick::contacts builds it. False when there is none: no pairs can be near
-/// (bodies apart, no self-contact), or the build found a crossing or could not grow its
-/// buffers (the stage after the step finds that again and stops the run).
-inline bool ensure_list(const Model& m, double* q0, const ContactBuffers& w) {
+/// The largest displacement over a step dt [s] at the velocities v0 (N, 3) [m/s], after
+/// the bodies' free particles' mass-weighted mean velocity: a forecast of the motion the
+/// stage measures (its mu) before the solve has made it.
+inline double forecast_motion(const Model& m, const double* v0, double dt) {
+    double mass = 0.0;
+    V3 sum{0.0, 0.0, 0.0};
+    for (index i = 0; i < m.particles.count; ++i) {
+        if (m.particles.inv_mass[i] == 0.0 || m.particles.body[i] < 0) continue;
+        mass += m.particles.mass[i];
+        sum = sum + m.particles.mass[i] * load(v0, i);
+    }
+    const V3 mean = mass > 0.0 ? (1.0 / mass) * sum : V3{0.0, 0.0, 0.0};
+    double most = 0.0;
+    for (index i = 0; i < m.particles.count; ++i) {
+        if (m.particles.body[i] < 0) continue;
+        const V3 u = load(v0, i) - mean;
+        most = std::max(most, dot(u, u));
+    }
+    return dt * std::sqrt(most);
+}
+
+/// The pairs nearer than `reach` (<= 2 h) at q0 (N, 3) in w.pairs' first rows; returns
+/// their count (rows beyond those nearer may follow: begin() filters). The stage's list
+/// when it is valid at q0 (the particles drifted by at most half the margin since it was
+/// built: it then holds every pair nearer than 2 h). Otherwise, when the step's forecast
+/// motion (v0 (N, 3) over dt) is within half the margin, so that the stage will keep a
+/// list, the list is built at q0 as the stage builds it, and the stage then uses it; when
+/// the step will take its pairs from swept boxes, only the pairs nearer than reach are
+/// gathered, the list left dropped. 0 when none can be near (bodies apart, no
+/// self-contact), or when the gather found a crossing at q0 or could not grow its buffers
+/// (the stage after the step finds that again and stops the run).
+inline index near_pairs(const Model& m, double* q0, const double* v0, double dt,
+                        const ContactBuffers& w, double reach) {
     const double h = m.soft_contacts.thickness, g = m.soft_contacts.margin;
-    if (*w.list >= 0 && thick::drift(m, q0, w.q_build) <= 0.5 * g) return true;
-    thick::Stage list{m, q0, q0, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
-                      g, m.soft_contacts.self_contact != 0};
-    list.swept = false;
-    if (!list.self && !thick::any_bodies_near(list)) return false;
-    list.g = 2.0 * h + g;
-    list.keep = list.g;
+    if (*w.list >= 0 && thick::drift(m, q0, w.q_build) <= 0.5 * g) return *w.list;
+    thick::Stage st{m, q0, q0, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
+                    g, m.soft_contacts.self_contact != 0};
+    st.swept = false;
+    if (!st.self && !thick::any_bodies_near(st)) return 0;
     *w.list = -1;
-    const index pairs = thick::gather(list);
-    if (pairs < 0) return false;
+    if (forecast_motion(m, v0, dt) > 0.5 * g) {  // the stage will sweep: the near pairs only
+        st.g = reach;
+        st.keep = reach;
+        return std::max<index>(thick::gather(st), 0);
+    }
+    st.g = 2.0 * h + g;
+    st.keep = st.g;
+    const index pairs = thick::gather(st);
+    if (pairs < 0) return 0;
     const index n3 = 3 * m.particles.count;
     for (index k = 0; k < n3; ++k) w.q_build[k] = q0[k];
     *w.list = pairs;
-    return true;
+    return pairs;
 }
 
-/// The active pairs at the step's start q0 (N, 3) for the solve's step h_s [s] into sys
-/// (emptied first).
-inline void begin(const Model& m, double* q0, const ContactBuffers& w, double h_s, System& sys) {
+/// The active pairs at the step's start q0, v0 (N, 3) for a step dt [s] whose system has
+/// the step h_s [s] (dt, or 2/3 dt for BDF2), into sys (emptied first).
+inline void begin(const Model& m, double* q0, const double* v0, double dt, const ContactBuffers& w,
+                  double h_s, System& sys) {
     sys.clear();
-    if (!enabled(m) || !ensure_list(m, q0, w)) return;
+    if (!enabled(m)) return;
     const double h = m.soft_contacts.thickness, reach = (1.0 + kBand) * h;
+    const index listed = near_pairs(m, q0, v0, dt, w, reach);
     const double* inv_mass = m.particles.inv_mass;
-    for (index p = 0; p < *w.list; ++p) {
+    for (index p = 0; p < listed; ++p) {
         const index* row = w.pairs->data + thick::kSlots * p;
         const index* v = row + 1;
         double c[4];
@@ -124,6 +168,27 @@ inline void begin(const Model& m, double* q0, const ContactBuffers& w, double h_
         sys.push.push_back(k * (reach - d));
         ++sys.count;
     }
+    if (sys.count == 0) return;
+    // the blocks between the pairs' particles, by particle (a counting sort)
+    const index n = m.particles.count, entries = 12 * sys.count;
+    sys.ptr.assign(static_cast<size_t>(n + 1), 0);
+    for (index p = 0; p < sys.count; ++p)
+        for (int l = 0; l < 4; ++l) sys.ptr[static_cast<size_t>(sys.v[4 * p + l] + 1)] += 3;
+    for (index i = 0; i < n; ++i) sys.ptr[static_cast<size_t>(i + 1)] += sys.ptr[static_cast<size_t>(i)];
+    sys.other.resize(static_cast<size_t>(entries));
+    sys.pair.resize(static_cast<size_t>(entries));
+    sys.weight.resize(static_cast<size_t>(entries));
+    for (index p = 0; p < sys.count; ++p)
+        for (int l = 0; l < 4; ++l)
+            for (int o = 0; o < 4; ++o) {
+                if (o == l) continue;
+                const size_t e = static_cast<size_t>(sys.ptr[static_cast<size_t>(sys.v[4 * p + l])]++);
+                sys.other[e] = sys.v[4 * p + o];
+                sys.pair[e] = p;
+                sys.weight[e] = h_s * h_s * sys.k[p] * sys.c[4 * p + l] * sys.c[4 * p + o];
+            }
+    for (index i = n; i > 0; --i) sys.ptr[static_cast<size_t>(i)] = sys.ptr[static_cast<size_t>(i - 1)];
+    sys.ptr[0] = 0;
 }
 
 inline V3 normal(const System& sys, index p) {
@@ -169,6 +234,20 @@ inline void add_blocks(const System& sys, double h_s, double* block) {
             for (int r = 0; r < 3; ++r)
                 for (int k = 0; k < 3; ++k) b[3 * r + k] += s * n[r] * n[k];
         }
+    }
+}
+
+/// s -= the system matrix's blocks between particle i and the other particles of its pairs
+/// times x (N, 3): those to particles j < i (kSide -1), j > i (+1), or all (0), as the
+/// smoother's sweeps take the terms' stencils (implicit_solver::precondition).
+template <int kSide>
+inline void add_entries(const System& sys, const double* x, index i, V3& s) {
+    if (sys.count == 0) return;
+    for (index e = sys.ptr[static_cast<size_t>(i)]; e < sys.ptr[static_cast<size_t>(i + 1)]; ++e) {
+        const index j = sys.other[static_cast<size_t>(e)];
+        if ((kSide < 0 && j > i) || (kSide > 0 && j < i)) continue;
+        const V3 n = normal(sys, sys.pair[static_cast<size_t>(e)]);
+        s = s - (sys.weight[static_cast<size_t>(e)] * dot(n, load(x, j))) * n;
     }
 }
 

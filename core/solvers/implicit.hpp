@@ -91,7 +91,7 @@ inline void solve_row(const MultigridView& mg, index i, V3 s, const double* b) {
 /// level smooths with block Gauss-Seidel on the true spring blocks (forward from 0 down,
 /// backward up) around the Laplacian hierarchy's correction; otherwise Jacobi with diag.
 inline void precondition(const Model& m, const MultigridView* hierarchy, const double* diag,
-                         const double* r, double* z) {
+                         const double* r, double* z, const thick_system::System& contact) {
     const index n = m.particles.count;
     const double* inv_mass = m.particles.inv_mass;
     if (hierarchy == nullptr) {
@@ -108,6 +108,7 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
         }
         V3 s{0.0, 0.0, 0.0};
         forms::add_entries<forms::Span::kEarlier>(mg.stencils, mg.x, i, s);
+        thick_system::add_entries<-1>(contact, mg.x, i, s);
         solve_row(mg, i, s, r);
     }
     // its residual: row i's equation held when x_i was set, with x_j = 0 for j > i, so what
@@ -119,6 +120,7 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
         }
         V3 s{0.0, 0.0, 0.0};
         forms::add_entries<forms::Span::kLater>(mg.stencils, mg.x, i, s);
+        thick_system::add_entries<1>(contact, mg.x, i, s);
         store(mg.r, i, s);
     }
     if (mg.level_count > 0) {  // coarse correction with the Laplacian hierarchy
@@ -139,6 +141,7 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
         if (inv_mass[i] == 0.0) continue;
         V3 s{0.0, 0.0, 0.0};
         forms::add_entries<forms::Span::kAll>(mg.stencils, mg.x, i, s);
+        thick_system::add_entries<0>(contact, mg.x, i, s);
         solve_row(mg, i, s, r);
     }
     for (index k = 0; k < 3 * n; ++k) z[k] = mg.x[k];
@@ -315,7 +318,7 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
     }
     index iterations = 0;
     if (std::sqrt(warm) > tolerance * rhs_norm) {
-        precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z);
+        precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z, contact);
         for (index k = 0; k < 3 * n; ++k) w.cg_p[k] = w.cg_z[k];
         double rz = dot_free(m, w.cg_r, w.cg_z);
         while (iterations < max_iterations) {
@@ -337,7 +340,7 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
             }
             ++iterations;
             if (std::sqrt(res) <= tolerance * rhs_norm) break;
-            precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z);
+            precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z, contact);
             const double rz_new = dot_free(m, w.cg_r, w.cg_z);
             const double beta = rz_new / rz;
             rz = rz_new;
@@ -393,7 +396,8 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
         }
         if (flowing) gas_state::forward_euler(m, c, t, p.dt, s.q, s.qd, s, w.gas);
         const bool two_step = ip.bdf2 && (step_index > 0 || ip.history) && w.contacts_acted[0] == 0;
-        thick_system::begin(m, w.q0, w.contact, two_step ? p.dt * (2.0 / 3.0) : p.dt, contact);
+        thick_system::begin(m, w.q0, w.v0, p.dt, w.contact, two_step ? p.dt * (2.0 / 3.0) : p.dt,
+                            contact);
         thick_system::add_forces(contact, w.f);
         const index its = step(m, c, t, p.dt, s.q, s.qd, w, mg, ip.tolerance, ip.max_iterations,
                                two_step, joined.data(), contact);
