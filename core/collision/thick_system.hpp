@@ -1,15 +1,17 @@
 // The thickness contacts (collision/thick.hpp) where a step's solve or a step's end needs
 // more than the stage: read from the stage's pair list (w.pairs rows: kind, four
 // particles, D; *w.list their count, -1 when there is none), never written but for building
-// the list the way the stage builds it.
+// the list the way the stage builds it, or, where the stage will not keep a list this
+// step, for gathering the pairs near at the step's start into its rows.
 //
 // 1. Contacts inside the implicit solve (backward Euler, BDF2: solvers/implicit.hpp). At a
 //    step's start x0, each listed pair closer than h + a (a = kBand h, the activation
 //    distance; the pair's gap g = sum_k c_k x_k, d = |g|, n = g / d) enters the linear system
 //    as a one-sided penalty E = k / 2 (h + a - d)^2 along n (zero beyond h + a): its force
 //    k (h + a - d) c_k n on particle k in the right-hand side, its Gauss-Newton Hessian
-//    k (c c^T) x n n^T (PSD) in the system's product and in the preconditioner's diagonal
-//    (Jacobi's scalars, the smoother's 3 x 3 blocks). The penalty's zero is a above the
+//    k (c c^T) x n n^T (PSD) in the system's product and in the preconditioner (Jacobi's
+//    diagonal; the smoother's diagonal blocks, and its blocks between a pair's particles in
+//    the Gauss-Seidel sweeps). The penalty's zero is a above the
 //    thickness, like IPC's barrier distance d^ above 0: sheets pressed together settle in
 //    the band [h, h + a), so the stage after the step (which holds h) has nothing to do at
 //    rest; a quadratic penalty keeps the system linear and PSD where a log barrier would
@@ -19,8 +21,9 @@
 //    1 / (1 + kStiffness) of its free value and a pair pushed into the band is taken back
 //    kStiffness / (1 + kStiffness) of the way in one step: with kStiffness = 4 an approach
 //    of up to 5 a = 2.5 h per step ends in the band, above h, without the stage (8 and 16
-//    left the stage less still on a ball resting on a cloth, for 20-50 % more CG
-//    iterations on the vacuum-packed ball). The system is the penalty's linearisation at
+//    left the stage less still on a ball resting on a cloth but, measured with the
+//    smoother's diagonal blocks alone, cost the vacuum-packed ball 20-50 % more CG
+//    iterations than 4). The system is the penalty's linearisation at
 //    x0, as every term's: a pair that opens past h + a within the step is held by
 //    k (d - h - a) in that step only (the next step's set leaves it out). The stage after
 //    the step still runs (bound, response): the no-crossing guarantee is its, unchanged.
