@@ -46,6 +46,7 @@
 
 #include "collision/thick.hpp"
 #include "model.hpp"
+#include "simd.hpp"
 #include "vec.hpp"
 
 namespace softbody::SOFTBODY_KERNELS::thick_system {
@@ -263,7 +264,6 @@ inline bool moved(const double* q, const double* before, index i) {
 /// Calls edge(j) for each face neighbour j of particle i (its ring, and the faces off it).
 template <class Edge>
 inline void each_neighbour(const Model& m, index i, Edge edge) {
-    constexpr index kGroup = 8;
     const Slots& s = m.slots;
     const index g = i / kGroup, lane = i % kGroup;
     for (index k = s.ring_start[g]; k < s.ring_start[g + 1]; ++k) {
