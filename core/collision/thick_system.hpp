@@ -174,24 +174,25 @@ inline void begin(const Model& m, double* q0, const double* v0, double dt, const
     }
     if (sys.count == 0) return;
     // the blocks between the pairs' particles, by particle (a counting sort)
+    auto at = [](index k) { return static_cast<size_t>(k); };
     const index n = m.particles.count, entries = 12 * sys.count;
-    sys.ptr.assign(static_cast<size_t>(n + 1), 0);
+    sys.ptr.assign(at(n + 1), 0);
     for (index p = 0; p < sys.count; ++p)
-        for (int l = 0; l < 4; ++l) sys.ptr[static_cast<size_t>(sys.v[4 * p + l] + 1)] += 3;
-    for (index i = 0; i < n; ++i) sys.ptr[static_cast<size_t>(i + 1)] += sys.ptr[static_cast<size_t>(i)];
-    sys.other.resize(static_cast<size_t>(entries));
-    sys.pair.resize(static_cast<size_t>(entries));
-    sys.weight.resize(static_cast<size_t>(entries));
+        for (int l = 0; l < 4; ++l) sys.ptr[at(sys.v[4 * p + l] + 1)] += 3;
+    for (index i = 0; i < n; ++i) sys.ptr[at(i + 1)] += sys.ptr[at(i)];
+    sys.other.resize(at(entries));
+    sys.pair.resize(at(entries));
+    sys.weight.resize(at(entries));
     for (index p = 0; p < sys.count; ++p)
         for (int l = 0; l < 4; ++l)
             for (int o = 0; o < 4; ++o) {
                 if (o == l) continue;
-                const size_t e = static_cast<size_t>(sys.ptr[static_cast<size_t>(sys.v[4 * p + l])]++);
+                const size_t e = at(sys.ptr[at(sys.v[4 * p + l])]++);
                 sys.other[e] = sys.v[4 * p + o];
                 sys.pair[e] = p;
                 sys.weight[e] = h_s * h_s * sys.k[p] * sys.c[4 * p + l] * sys.c[4 * p + o];
             }
-    for (index i = n; i > 0; --i) sys.ptr[static_cast<size_t>(i)] = sys.ptr[static_cast<size_t>(i - 1)];
+    for (index i = n; i > 0; --i) sys.ptr[at(i)] = sys.ptr[at(i - 1)];  // back to the starts
     sys.ptr[0] = 0;
 }
 
@@ -203,7 +204,8 @@ inline V3 normal(const System& sys, index p) {
 inline void add_forces(const System& sys, double* f) {
     for (index p = 0; p < sys.count; ++p) {
         const V3 n = normal(sys, p);
-        for (int l = 0; l < 4; ++l) add_to(f, sys.v[4 * p + l], (sys.push[p] * sys.c[4 * p + l]) * n);
+        for (int l = 0; l < 4; ++l)
+            add_to(f, sys.v[4 * p + l], (sys.push[p] * sys.c[4 * p + l]) * n);
     }
 }
 
