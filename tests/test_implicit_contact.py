@@ -150,3 +150,31 @@ def test_a_collider_pushing_a_sheet_through_another_stops_the_run_there(integrat
     assert model.particle_body[info.value.particle] == 0
     assert state.step_count == 4
     assert between_bodies(model, state.particle_q) == []
+
+
+def test_an_approach_within_the_band_is_stopped_by_the_solve():
+    """Two parallel cloths 1.45 h apart (inside the band h + a = 1.5 h where the contacts
+    enter the solve) closing at 2 h per step, implicit Euler. Reference: a lone pair's
+    linearised penalty (stiffness 4 m_c / dt^2) ends the step at
+    d0 + (-2 h + 4 (1.5 h - d0)) / 5 = 1.09 h, above h, and the cloths' vertices have
+    several pairs each (stiffer still): so the solve alone keeps every vertex of one cloth
+    above the other by h, and the stage after it, which bounds motion and pushes pairs
+    nearer than h, changes nothing (|x1 - x0 - dt v1| = 0 to round-off). Before, the solve
+    ran the cloths 2 h into each other and the stage's bound held them."""
+    h, dt = 0.01, 1e-3
+    speed = h / dt  # each cloth moves h a step
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("surface", thickness=h, restitution=0.0, friction=0.0)
+    for z, v in ((0.725 * h, -speed), (-0.725 * h, speed)):
+        builder.add_cloth(sb.rectangle((0.4, 0.4), (6, 6), center=(0, 0, z)), mass=0.1,
+                          stiffness=50.0, damping=0.1, velocity=(0, 0, v))  # fmt: skip
+    model = builder.finalize()
+    sim = sb.Simulator(model, integrator="implicit_euler", dt=dt)
+    state = model.state()
+    (a0, a1), (b0, b1) = model.body_particle_range
+    q0 = state.particle_q.copy()
+    sim.run(state, 1)
+    q = state.particle_q
+    assert np.abs(q - q0 - dt * state.particle_qd).max() < 1e-12
+    assert q[a0:a1, 2].min() - q[b0:b1, 2].max() >= h
+    assert q[a0:a1, 2].min() - q[b0:b1, 2].max() < 1.45 * h  # the cloths did close
