@@ -10,7 +10,9 @@
 // smoothed on the finest level: every term's diagonal share and every kStencil term's
 // blocks between particles; the Laplacian hierarchy below) or Jacobi (every term's
 // add_jacobi_diagonal). The
-// start forces are vertex-major on the SIMD paths, term by term on the scalar one.
+// start forces are vertex-major on the SIMD paths, term by term on the scalar one. The
+// thickness contacts' pairs near at the start add their penalty's force to f0 and its
+// stiffness to K, the Jacobi diagonal and the smoother (collision/thick_system.hpp).
 #pragma once
 
 #include <vector>
