@@ -36,9 +36,10 @@ void apply_preconditioner(const Model& m, const Control& c, double t, double h,
                           const ImplicitBuffers& w, const MultigridView* mg, const double* r,
                           double* z) {
     forms::update(Eval{m, c, t, w.q0, w.v0, w.gas});
-    implicit_solver::prepare(m, c, t, h, w, mg);
-    if (mg == nullptr) implicit_solver::jacobi_diagonal(m, c, h, w);
-    implicit_solver::precondition(m, mg, w.cg_diag, r, z);
+    const thick_system::System no_contacts;  // the terms' matrix alone
+    implicit_solver::prepare(m, c, t, h, w, mg, no_contacts);
+    if (mg == nullptr) implicit_solver::jacobi_diagonal(m, c, h, w, no_contacts);
+    implicit_solver::precondition(m, mg, w.cg_diag, r, z, no_contacts);
 }
 
 void apply_multigrid(const MultigridView& mg, const double* r, double* z) {

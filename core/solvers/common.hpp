@@ -7,6 +7,7 @@
 #include "collision/colliders.hpp"
 #include "collision/soft.hpp"
 #include "collision/thick.hpp"
+#include "collision/thick_system.hpp"
 #include "model.hpp"
 #include "simd.hpp"
 #include "solvers/gas_state.hpp"
@@ -107,8 +108,9 @@ inline void begin_run(const Model& m, const Control& c, const RunParams& p, cons
 /// the step's start positions (continuous collider detection, the thickness contacts' bound).
 /// Returns 0, or the spatial-hash entries surface soft contacts need when their buffer could
 /// not grow to them: then the colliders have moved but no contact was resolved, and the caller
-/// undoes the step; or -1 when the thickness contacts found a crossing at the step's start
-/// (w.crossing says where; contact_failure makes either a RunResult).
+/// undoes the step; or -1 when the thickness contacts found a crossing at the step's start,
+/// or the colliders pushed an edge through a triangle (w.crossing says where;
+/// contact_failure makes either a RunResult).
 inline index contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
                       const StateView& s, const double* q_start, const ContactBuffers& w,
                       colliders::Seen* seen = nullptr) {
@@ -127,9 +129,13 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
         const index needed = soft::contacts_surface(m, s.q, s.qd, w);
         if (needed > 0) return needed;
     }
+    // a collider that pushed one sheet through another stops the run here (thick_system)
+    const bool crossing_check = m.colliders.count > 0 && thick_system::enabled(m);
+    if (crossing_check) copy(s.q, w.q_pre, 3 * m.particles.count);
     if (m.colliders.count > 0)
         colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
                             s.q, s.qd, s.collider_impulse, seen, p.dt);
+    if (crossing_check && thick_system::collider_crossing(m, s.q, w.q_pre, w)) return -1;
     return 0;
 }
 

@@ -10,11 +10,14 @@
 // smoothed on the finest level: every term's diagonal share and every kStencil term's
 // blocks between particles; the Laplacian hierarchy below) or Jacobi (every term's
 // add_jacobi_diagonal). The
-// start forces are vertex-major on the SIMD paths, term by term on the scalar one.
+// start forces are vertex-major on the SIMD paths, term by term on the scalar one. The
+// thickness contacts' pairs near at the start add their penalty's force to f0 and its
+// stiffness to K, the Jacobi diagonal and the smoother (collision/thick_system.hpp).
 #pragma once
 
 #include <vector>
 
+#include "collision/thick_system.hpp"
 #include "model.hpp"
 #include "solvers/common.hpp"
 #include "solvers/forms.hpp"
@@ -35,11 +38,13 @@ inline Linearization at_start(const ImplicitBuffers& w) {
 }
 
 /// out = alpha_m M p + alpha_c C p + alpha_k K p at the step's start: the system matrix's
-/// product, term by term (forms::apply_jacobians).
+/// product, term by term (forms::apply_jacobians), and the thickness contacts' stiffness
+/// (collision/thick_system.hpp) in K.
 inline void apply_at_start(const Model& m, const Control& c, const ImplicitBuffers& w,
                            double alpha_m, double alpha_c, double alpha_k, const double* p,
-                           double* out) {
+                           double* out, const thick_system::System& contact) {
     forms::apply_jacobians(m, c, at_start(w), alpha_m, alpha_c, alpha_k, p, out);
+    if (contact.count > 0) thick_system::add_product(contact, alpha_k, p, out);
 }
 
 /// sum over free particles of a_i . b_i (pinned rows are not unknowns).
@@ -69,8 +74,9 @@ inline void invert_3x3(const double* a, double* out) {
 
 /// The finest-level smoother's blocks for step h: each term's share, then the inverses.
 inline void prepare_blocks(const Model& m, const Control& c, double h, const ImplicitBuffers& w,
-                           const MultigridView& mg) {
+                           const MultigridView& mg, const thick_system::System& contact) {
     forms::smoother_blocks(m, c, at_start(w), h, mg.block, mg.stencils);
+    if (contact.count > 0) thick_system::add_blocks(contact, h, mg.block);
     for (index i = 0; i < m.particles.count; ++i) invert_3x3(mg.block + 9 * i, mg.block_inv + 9 * i);
 }
 
@@ -87,7 +93,7 @@ inline void solve_row(const MultigridView& mg, index i, V3 s, const double* b) {
 /// level smooths with block Gauss-Seidel on the true spring blocks (forward from 0 down,
 /// backward up) around the Laplacian hierarchy's correction; otherwise Jacobi with diag.
 inline void precondition(const Model& m, const MultigridView* hierarchy, const double* diag,
-                         const double* r, double* z) {
+                         const double* r, double* z, const thick_system::System& contact) {
     const index n = m.particles.count;
     const double* inv_mass = m.particles.inv_mass;
     if (hierarchy == nullptr) {
@@ -104,6 +110,7 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
         }
         V3 s{0.0, 0.0, 0.0};
         forms::add_entries<forms::Span::kEarlier>(mg.stencils, mg.x, i, s);
+        thick_system::add_entries<-1>(contact, mg.x, i, s);
         solve_row(mg, i, s, r);
     }
     // its residual: row i's equation held when x_i was set, with x_j = 0 for j > i, so what
@@ -115,6 +122,7 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
         }
         V3 s{0.0, 0.0, 0.0};
         forms::add_entries<forms::Span::kLater>(mg.stencils, mg.x, i, s);
+        thick_system::add_entries<1>(contact, mg.x, i, s);
         store(mg.r, i, s);
     }
     if (mg.level_count > 0) {  // coarse correction with the Laplacian hierarchy
@@ -135,6 +143,7 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
         if (inv_mass[i] == 0.0) continue;
         V3 s{0.0, 0.0, 0.0};
         forms::add_entries<forms::Span::kAll>(mg.stencils, mg.x, i, s);
+        thick_system::add_entries<0>(contact, mg.x, i, s);
         solve_row(mg, i, s, r);
     }
     for (index k = 0; k < 3 * n; ++k) z[k] = mg.x[k];
@@ -143,15 +152,18 @@ inline void precondition(const Model& m, const MultigridView* hierarchy, const d
 /// Everything the step's matrix needs at its start (x0 in w.q0, the gas in w.gas): spring
 /// blocks, pressure slopes, the smoother's blocks or the Jacobi diagonal, for step h.
 inline void prepare(const Model& m, const Control& c, double t, double h,
-                    const ImplicitBuffers& w, const MultigridView* mg) {
+                    const ImplicitBuffers& w, const MultigridView* mg,
+                    const thick_system::System& contact) {
     forms::prepare(Eval{m, c, t, w.q0, w.v0, w.gas}, at_start(w));
-    if (mg != nullptr) prepare_blocks(m, c, h, w, *mg);
+    if (mg != nullptr) prepare_blocks(m, c, h, w, *mg, contact);
 }
 
 /// Jacobi's diagonal into w.cg_diag: each particle's mass and every term's share at the
 /// step's start (forms::jacobi_diagonal).
-inline void jacobi_diagonal(const Model& m, const Control& c, double h, const ImplicitBuffers& w) {
+inline void jacobi_diagonal(const Model& m, const Control& c, double h, const ImplicitBuffers& w,
+                            const thick_system::System& contact) {
     forms::jacobi_diagonal(m, c, at_start(w), h, w.cg_diag);
+    if (contact.count > 0) thick_system::add_diagonal(contact, h, w.cg_diag);
 }
 
 /// The terms whose forces come from outside a body (kFromOutside: anchors, the grab, the
@@ -203,13 +215,18 @@ inline std::vector<unsigned char> joined_bodies(const Model& m) {
 }
 
 inline void keep_own_torque(const Model& m, const Control& c, double h, bool bdf2,
-                            const unsigned char* joined, const ImplicitBuffers& w) {
+                            const unsigned char* joined, const ImplicitBuffers& w,
+                            const thick_system::System& contact) {
     const double* inv_mass = m.particles.inv_mass;
     const double* mass = m.particles.mass;
     // C_out dv + h K_out dv into cg_p, K_out y into cg_z: the outside terms alone
     const unsigned own_terms = ~outside_terms();
     forms::apply_jacobians(m, c, at_start(w), 0.0, 1.0, h, w.cg_x, w.cg_p, own_terms);
     forms::apply_jacobians(m, c, at_start(w), 0.0, 0.0, 1.0, w.qs, w.cg_z, own_terms);
+    if (contact.count > 0) {  // the thickness contacts: from outside (no torque within a body)
+        thick_system::add_product(contact, h, w.cg_x, w.cg_p);
+        thick_system::add_product(contact, 1.0, w.qs, w.cg_z);
+    }
     for (index i = 0; i < m.particles.count; ++i)
         for (int k = 0; k < 3; ++k) {
             const index r = 3 * i + k;
@@ -260,15 +277,16 @@ inline void keep_own_torque(const Model& m, const Control& c, double h, bool bdf
 /// (keep_own_torque). Returns the CG iterations used.
 inline index step(const Model& m, const Control& c, double t, double dt, double* q, double* qd,
                   const ImplicitBuffers& w, const MultigridView* mg, double tolerance,
-                  index max_iterations, bool bdf2, const unsigned char* joined) {
+                  index max_iterations, bool bdf2, const unsigned char* joined,
+                  const thick_system::System& contact) {
     const index n = m.particles.count;
     const double* inv_mass = m.particles.inv_mass;
     const double h = bdf2 ? dt * (2.0 / 3.0) : dt;
     for (index k = 0; k < 3 * n; ++k)  // y, the position change before dv
         w.qs[k] = bdf2 ? (w.q0[k] - w.q_prev[k]) / 3.0 + h * w.v0[k] : h * w.v0[k];
-    prepare(m, c, t, h, w, mg);
-    apply_at_start(m, c, w, 0.0, 0.0, 1.0, w.qs, w.ky);  // K y for the right-hand side
-    if (mg == nullptr) jacobi_diagonal(m, c, h, w);
+    prepare(m, c, t, h, w, mg, contact);
+    apply_at_start(m, c, w, 0.0, 0.0, 1.0, w.qs, w.ky, contact);  // K y for the right-hand side
+    if (mg == nullptr) jacobi_diagonal(m, c, h, w, contact);
     double rhs_norm = 0.0;
     for (index i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {
@@ -284,7 +302,7 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
         }
     rhs_norm = std::sqrt(rhs_norm);
     // warm start from the previous dv, kept only if its residual b - A dv_prev is smaller
-    apply_at_start(m, c, w, 1.0, -h, -h * h, w.cg_x, w.cg_ap);
+    apply_at_start(m, c, w, 1.0, -h, -h * h, w.cg_x, w.cg_ap, contact);
     double warm = 0.0;
     for (index i = 0; i < n; ++i)
         if (inv_mass[i] > 0.0)
@@ -302,11 +320,11 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
     }
     index iterations = 0;
     if (std::sqrt(warm) > tolerance * rhs_norm) {
-        precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z);
+        precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z, contact);
         for (index k = 0; k < 3 * n; ++k) w.cg_p[k] = w.cg_z[k];
         double rz = dot_free(m, w.cg_r, w.cg_z);
         while (iterations < max_iterations) {
-            apply_at_start(m, c, w, 1.0, -h, -h * h, w.cg_p, w.cg_ap);
+            apply_at_start(m, c, w, 1.0, -h, -h * h, w.cg_p, w.cg_ap, contact);
             const double pap = dot_free(m, w.cg_p, w.cg_ap);
             // pap < 0 (the pressure Hessian made the matrix indefinite at a large step) is
             // no breakdown: CG's recurrences hold for any symmetric matrix
@@ -324,14 +342,14 @@ inline index step(const Model& m, const Control& c, double t, double dt, double*
             }
             ++iterations;
             if (std::sqrt(res) <= tolerance * rhs_norm) break;
-            precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z);
+            precondition(m, mg, w.cg_diag, w.cg_r, w.cg_z, contact);
             const double rz_new = dot_free(m, w.cg_r, w.cg_z);
             const double beta = rz_new / rz;
             rz = rz_new;
             for (index k = 0; k < 3 * n; ++k) w.cg_p[k] = w.cg_z[k] + beta * w.cg_p[k];
         }
     }
-    keep_own_torque(m, c, h, bdf2, joined, w);
+    keep_own_torque(m, c, h, bdf2, joined, w, contact);
     for (index i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {
             const index r = 3 * i + k;
@@ -366,6 +384,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     const index n3 = 3 * m.particles.count;
     const bool flowing = gas_state::flowing(m, c);
     const std::vector<unsigned char> joined = joined_bodies(m);  // for keep_own_torque
+    thick_system::System contact;  // the thickness contacts in each step's solve
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
@@ -379,8 +398,11 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
         }
         if (flowing) gas_state::forward_euler(m, c, t, p.dt, s.q, s.qd, s, w.gas);
         const bool two_step = ip.bdf2 && (step_index > 0 || ip.history) && w.contacts_acted[0] == 0;
+        thick_system::begin(m, w.q0, w.v0, p.dt, w.contact, two_step ? p.dt * (2.0 / 3.0) : p.dt,
+                            contact);
+        thick_system::add_forces(contact, w.f);
         const index its = step(m, c, t, p.dt, s.q, s.qd, w, mg, ip.tolerance, ip.max_iterations,
-                               two_step, joined.data());
+                               two_step, joined.data(), contact);
         w.cg_stats[0] += 1;
         w.cg_stats[1] += its;
         w.cg_stats[2] = std::max(w.cg_stats[2], its);

@@ -528,13 +528,21 @@ class Simulator:
             msg = f"{who} blew up {where}: particle {index} {what}"
             particle = int(index)
         elif status == Status.CROSSED:
+            # value: the triangle, or -1 - the triangle where a collider pushed the edge
+            # through it in this step (core/collision/thick_system.hpp)
             particle, tri = int(index), int(value)
             body = int(model.particle_body[particle])
+            when = (
+                "at the step's start (an initial self-intersection, or a collider pushed one "
+                "sheet through another)"
+                if tri >= 0
+                else "after a collider pushed it there in this step (the state is left at "
+                "the step's start)"
+            )
+            tri = tri if tri >= 0 else -1 - tri
             msg = (
                 f"body {body} crossed a surface {where}: the edge at particle {particle} "
-                f"passes through triangle {tri} (body {int(model.tri_body[tri])}) at the "
-                "step's start (an initial self-intersection, or a collider pushed one sheet "
-                "through another)"
+                f"passes through triangle {tri} (body {int(model.tri_body[tri])}) {when}"
             )
         elif status == Status.NEED_HASH:
             # the core grows the contacts' hash itself up to 512 entries per triangle
