@@ -248,7 +248,8 @@ def test_two_balloons_pressed_together(integrator, dt):
     rests on the lower one). References, over 6 s of settling sampled every 0.1 s: no edge
     through a triangle (edge_crossings), and every vertex of each balloon at least h less
     5 % from the other's triangles (the response puts each pair at h at every step's end;
-    measured 2e-5 h below it). At rest, over 1 s: the ground's impulse per second is the
+    measured 2e-5 h below it), and touching (under 1.05 h, or under 1.55 h in implicit
+    Euler, whose solve holds contacts in the band below its penalty's zero at 1.5 h). At rest, over 1 s: the ground's impulse per second is the
     total weight (M_1 + M_2) g, and the contact stage's vertical impulse on the upper
     balloon, from its momentum balance (its momentum change less its weight's impulse; the
     frictionless walls push only sideways), is its weight M_2 g, both within 1 % (the
@@ -270,7 +271,10 @@ def test_two_balloons_pressed_together(integrator, dt):
         upper_gap = vertex_triangle_gaps(q, tri[:half], np.arange(b0, b1), radius=2 * BALLOON_H)
         lower_gap = vertex_triangle_gaps(q, tri[half:], np.arange(a0, a1), radius=2 * BALLOON_H)
         assert min(upper_gap.min(), lower_gap.min()) >= 0.95 * BALLOON_H
-    assert upper_gap.min() < 1.05 * BALLOON_H  # they touch
+    # they touch: at h after the stage's response, or, in the implicit solvers, within the
+    # band their solve holds contacts in (the penalty's zero at 1.5 h, thick_system.hpp)
+    band = 1.55 if integrator == "implicit_euler" else 1.05
+    assert upper_gap.min() < band * BALLOON_H
     p_lower, p_upper = body_momentum(model, state, 0), body_momentum(model, state, 1)
     steps = round(1.0 / dt)
     sim.run(state, steps)  # the colliders' impulses: those of this call
