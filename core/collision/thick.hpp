@@ -651,9 +651,9 @@ constexpr double kMostSkin = 2.0;  // a list's skin at most, in margins g
 /// distance, and a step reads only the rows below that (a prefix: w.list[1] rows, their
 /// distance at q0 in slot 5). The skin S is chosen at each build from the motion the last
 /// list saw (sigma + mu over the steps it served), so that a list serves about kServe steps,
-/// between the margin g and the cell size. The list is built again (at q0, with the crossing
-/// check) when sigma + mu > S / 2; a step whose own motion is over half the cell size takes
-/// its pairs from the swept boxes instead (and the list is dropped).
+/// between the margin g and kMostSkin g. The list is built again (at q0, with the crossing
+/// check) when sigma + mu > S / 2; a step whose own motion is over kMostSkin g / 2 takes its
+/// pairs from the swept boxes instead (and the list is dropped).
 inline index contacts(const Model& m, const double* q0, double* q, double* qd,
                       const ContactBuffers& w) {
     Stage st{m, q0, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
