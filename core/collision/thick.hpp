@@ -206,10 +206,11 @@ inline index build_hash(const Stage& st) {
     });
 }
 
-/// Each triangle whose grown box meets the box [lo, hi], once (in the first grid cell the
-/// two share): calls visit(t); stops when visit returns false.
+/// Each triangle from index `from` on whose grown box meets the box [lo, hi], once (in the
+/// first grid cell the two share): calls visit(t); stops when visit returns false.
 template <class Visit>
-inline bool each_triangle(const Stage& st, const double* lo, const double* hi, Visit visit) {
+inline bool each_triangle(const Stage& st, const double* lo, const double* hi, index from,
+                          Visit visit) {
     const ContactBuffers& w = st.w;
     index r[6];
     for (int k = 0; k < 3; ++k) {
@@ -222,6 +223,7 @@ inline bool each_triangle(const Stage& st, const double* lo, const double* hi, V
                 const index h = soft::cell_hash(ix, iy, iz, w.hash_table);
                 for (index e = w.hash_start[h]; e < w.hash_start[h + 1]; ++e) {
                     const index t = w.hash_entries->data[e];
+                    if (t < from) continue;  // before its box is read
                     const double* box = w.tri_box + 6 * t;
                     if (!boxes_meet(lo, hi, box, box + 3, st.g)) continue;
                     // the first cell of the two ranges' overlap: visited there only
@@ -282,7 +284,7 @@ inline index collect(const Stage& st) {
         for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
              ++i) {
             const double* box = particle_box(st, i);
-            each_triangle(st, box, box + 3, [&](index t) {
+            each_triangle(st, box, box + 3, 0, [&](index t) {
                 const index* tri = m.triangles.indices + 3 * t;
                 if (!bodies_pair(st, b, m.triangles.body[t])) return true;
                 if (tri[0] == i || tri[1] == i || tri[2] == i) return true;  // adjacent
@@ -301,8 +303,7 @@ inline index collect(const Stage& st) {
         const index* tri = m.triangles.indices + 3 * t;
         const index body = m.triangles.body[t];
         const double* box = w.tri_box + 6 * t;
-        each_triangle(st, box, box + 3, [&](index t2) {
-            if (t2 < t) return true;  // the pair once
+        each_triangle(st, box, box + 3, t, [&](index t2) {  // t2 >= t: the pair once
             if (!bodies_pair(st, body, m.triangles.body[t2])) return true;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
