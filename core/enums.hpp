@@ -23,7 +23,7 @@
 #define SOFTBODY_ENUM_MEMBRANE_MATERIAL(X) X(NEO_HOOKEAN, 0) X(MOONEY_RIVLIN, 1) X(STVK, 2)
 #define SOFTBODY_ENUM_STATUS(X)                                                              \
     X(OK, 0) X(NONFINITE, 1) X(RUNAWAY, 2) X(BAD_VOLUME, 3) X(SHRUNK, 4) X(EXPLODED, 5)    \
-    X(NEED_HASH, 6) X(STOPPED, 7) X(BAD_GAS, 8) X(CROSSED, 9)
+    X(NEED_HASH, 6) X(STOPPED, 7) X(BAD_GAS, 8) X(CROSSED, 9) X(NEED_PAIRS, 10)
 
 // Every set, with the name of its Python IntEnum.
 #define SOFTBODY_ENUMS(X)                                        \

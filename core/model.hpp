@@ -177,19 +177,25 @@ struct ContactBuffers {
     index* hash_start = nullptr;  // (H + 1,)
     index* hash_count = nullptr;  // (H,)
     // Surface contacts with a thickness (collision/thick.hpp): the candidate pairs, kPairSlots
-    // entries each (kind, four particles, the start distance's bits), grown as needed; the
-    // positions before the response (N, 3), each particle's displacement scale (N,), the
-    // triangles' boxes (T, 6), and where a crossing was found (particle, triangle).
-    static constexpr index kPairSlots = 6;
+    // entries each (kind, four particles, the distance's bits at the step's start, and at
+    // the list's build), grown as needed; the positions before the response (N, 3), each
+    // particle's displacement scale (N,), the triangles' boxes (T, 6), and where a crossing
+    // was found (particle, triangle).
+    static constexpr index kPairSlots = 7;
     HashEntries* pairs = nullptr;
     double* q_pre = nullptr;      // (N, 3)
     double* scale = nullptr;      // (N,)
     double* tri_box = nullptr;    // (T, 6)
     index* crossing = nullptr;    // (2,)
-    // The pair list kept between steps: the positions it was built at (N, 3), and its pair
-    // count (-1: none yet, build it).
+    // The pair list kept between steps: the positions it was built at (N, 3); its pair
+    // count (-1: none yet, build it), the rows the last step read (a prefix of w.pairs, their
+    // distance at the step's start fresh), and which buffer could not grow (0 the hash, 1 the
+    // list); its skin [m] and the steps it has served; each particle's box for a gather
+    // (N, 6: lo, hi).
     double* q_build = nullptr;    // (N, 3)
-    index* list = nullptr;        // (1,)
+    index* list = nullptr;        // (3,)
+    double* list_skin = nullptr;  // (2,)
+    double* particle_box = nullptr;  // (N, 6)
 };
 
 /// Scratch of the vertex-major force pass.
@@ -426,7 +432,8 @@ struct BoundScratch {
 /// spatial hash needs more room; BAD_GAS: a body's gas amount or temperature became
 /// negative or not finite (value: the amount [mol]); CROSSED: surface contacts with a thickness
 /// found an edge through a triangle at a step's start (where: the edge's first particle,
-/// value: the triangle); STOPPED: RunParams::poll asked to stop (an interrupt), the
+/// value: the triangle); NEED_PAIRS: their pair list needs more room than it can grow to
+/// (value: the pairs); STOPPED: RunParams::poll asked to stop (an interrupt), the
 /// steps done are kept (enums.hpp lists them).
 enum Status : int { SOFTBODY_ENUM_STATUS(SOFTBODY_ENUM_MEMBER) };
 

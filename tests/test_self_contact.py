@@ -146,10 +146,11 @@ def test_soft_soft_contact_conserves_momentum(friction):
     assert p0[0] < -0.3  # ball 0 came back
 
 
-def sheets(speed, thickness=0.01, gap=0.05):
+def sheets(speed, thickness=0.01, gap=0.05, self_contact=False, margin=None):
     """Two parallel 0.4 m square cloths 'gap' apart, flying at each other at +-speed."""
     builder = sb.ModelBuilder(gravity=(0, 0, 0))
-    builder.set_soft_contact("surface", thickness=thickness, restitution=0.0, friction=0.0)
+    builder.set_soft_contact("surface", thickness=thickness, restitution=0.0, friction=0.0,
+                             self_contact=self_contact, margin=margin)  # fmt: skip
     for z, v in ((0.5 * gap, -speed), (-0.5 * gap, speed)):
         builder.add_cloth(sb.rectangle((0.4, 0.4), (6, 6), center=(0, 0, z)), mass=0.1,
                           stiffness=50.0, damping=0.1, velocity=(0, 0, v))  # fmt: skip
@@ -192,6 +193,119 @@ def test_fast_sheets_do_not_tunnel(integrator, steps_per_h):
             if contact:
                 assert len(edge_crossings(state.particle_q, model.tri_indices, edges)) == 0
         assert ordered == contact
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "implicit_euler"])
+def test_a_sheet_turning_fast_after_slow_steps_does_not_tunnel(integrator):
+    """The pair list kept between steps sizes its skin from the motion it saw: after 200
+    slow steps (the sheets, 6 h apart, closing at 0.002 h per step: the list, built with a
+    thin skin, holds none of their pairs and serves many steps) the sheets are thrown at
+    each other at 30 h per step. Reference: the
+    bound's proof (a step whose motion passes the list's skin builds the list again or takes
+    the swept boxes): the sheets' heights keep their order at every later step and
+    edge_crossings finds no edge through a triangle, and they end held apart."""
+    h, dt = 0.01, 1e-3
+    model = sheets(0.001 * h / dt, thickness=h, gap=6 * h, self_contact=True)
+    sim = sb.Simulator(model, integrator=integrator, dt=dt)
+    state = model.state()
+    (a0, a1), (b0, b1) = model.body_particle_range
+    sim.run(state, 200)
+    fast = 15.0 * h / dt  # each sheet 15 h per step: 30 h per step closing
+    state.particle_qd[a0:a1, 2] = -fast
+    state.particle_qd[b0:b1, 2] = fast
+    edges = unique_edges(model.tri_indices)
+    for _ in range(10):
+        sim.run(state, 1)
+        z = state.particle_q[:, 2]
+        assert z[a0:a1].min() > z[b0:b1].max()
+        assert len(edge_crossings(state.particle_q, model.tri_indices, edges)) == 0
+    gap = state.particle_q[a0:a1, 2].min() - state.particle_q[b0:b1, 2].max()
+    assert gap > 0.25 * h
+
+
+def test_a_fold_approaching_within_the_list_is_caught():
+    """A listed pair that starts far (beyond the rows a step reads) and closes over many
+    steps: one cloth folded in a U (self-contact, one body), its upper flat part 8 h above
+    its lower one, thrown down at 0.05 h per step. Reference: the sheets never pass (no edge
+    through a triangle at any sampled step; the upper part stays above the lower), they
+    meet (their gap falls under 2 h) and are held at least h / 2 apart."""
+    h, dt, r = 0.01, 1e-3, 0.04  # the fold's radius: the flat parts 2 r = 8 h apart
+    flat = 0.15
+    cloth = sb.rectangle((2 * flat + np.pi * r, 0.2), (17, 8))
+    s, y = cloth.vertices[:, 0] - cloth.vertices[:, 0].min(), cloth.vertices[:, 1]
+    angle = np.clip((s - flat) / r, 0.0, np.pi)
+    x = np.where(s <= flat, s, flat + r * np.sin(angle))
+    x = np.where(s >= flat + np.pi * r, flat - (s - flat - np.pi * r), x)
+    z = r - r * np.cos(angle)
+    mesh = sb.TriMesh(np.stack([x, y, z], axis=1), cloth.faces)
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("surface", self_contact=True, thickness=h, restitution=0.0,
+                             friction=0.0)  # fmt: skip
+    builder.add_cloth(mesh, mass=0.1, stiffness=50.0, damping=0.1)
+    model = builder.finalize()
+    assert model.body_count == 1
+    sim = sb.Simulator(model, integrator="symplectic_euler", dt=dt)
+    state = model.state()
+    upper = np.flatnonzero(s >= flat + np.pi * r - 1e-9)
+    # each upper vertex's partner: the lower vertex below it at the start
+    start = state.particle_q
+    below = np.array([np.flatnonzero((s <= flat + 1e-9) & (np.abs(start[:, 0] - start[i, 0])
+                                     < 1e-9) & (np.abs(start[:, 1] - start[i, 1]) < 1e-9))[0]
+                      for i in upper])  # fmt: skip
+    state.particle_qd[upper, 2] = -0.05 * h / dt
+    edges = unique_edges(model.tri_indices)
+    gaps = []
+    for _ in range(30):
+        sim.run(state, 20)
+        zs = state.particle_q[:, 2]
+        gaps.append((zs[upper] - zs[below]).min())
+        assert len(edge_crossings(state.particle_q, model.tri_indices, edges)) == 0
+    assert min(gaps) > 0.5 * h
+    assert min(gaps) < 2 * h
+
+
+def test_listed_pairs_beyond_the_rows_read_are_read_once_the_list_drifts():
+    """A step reads only the list's rows whose build distance is below 2 (drift + motion)
+    + h. Two sheets listed 2.5 h apart (margin 3 h: a skin of at least 3 h, so the list
+    serves until the sheets have closed by 3 h) closing slowly at 0.02 h per step: their
+    rows must be read once the drift since the build reaches 0.75 h, or the sheets pass
+    each other before the list is built again. Reference: the sheets' heights keep their
+    order at every step, no edge passes through a triangle, and they end held at least
+    h / 2 and at most 2 h apart."""
+    h, dt = 0.01, 1e-3
+    model = sheets(0.01 * h / dt, thickness=h, gap=2.5 * h, self_contact=True, margin=3 * h)
+    sim = sb.Simulator(model, integrator="symplectic_euler", dt=dt)
+    state = model.state()
+    (a0, a1), (b0, b1) = model.body_particle_range
+    edges = unique_edges(model.tri_indices)
+    for _ in range(30):
+        sim.run(state, 5)
+        z = state.particle_q[:, 2]
+        assert z[a0:a1].min() > z[b0:b1].max()
+        assert len(edge_crossings(state.particle_q, model.tri_indices, edges)) == 0
+    gap = state.particle_q[a0:a1, 2].mean() - state.particle_q[b0:b1, 2].mean()
+    assert 0.5 * h < gap < 2 * h
+
+
+def test_a_pair_list_past_its_most_room_stops_the_run():
+    """A thickness far larger than the body (2 m on a 0.5 m ball of 5,120 triangles) makes
+    every vertex-triangle and edge-edge pair a candidate: about 8,300 pairs a triangle, past
+    the 4,096 the pair list grows to. Reference: the run stops at step 0 with
+    Status.NEED_PAIRS, its message naming the contact pair list and the pairs it needed
+    (not the hash's grid cells), and the state is left at its start."""
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("surface", self_contact=True, thickness=2.0)
+    builder.add_soft_body(sb.icosphere(4, radius=0.5), mass=1.0, stiffness=100.0, gas=100.0)
+    model = builder.finalize()
+    sim = sb.Simulator(model, integrator="symplectic_euler", dt=1e-4)
+    state = model.state()
+    with pytest.raises(sb.SimulationError, match=r"at step 0.*contact pair list needs \d+ "
+                       r"pairs, over 4096 per triangle \(5120 triangles\)") as info:  # fmt: skip
+        sim.run(state, 3)
+    assert "grid cells" not in str(info.value)
+    assert np.array_equal(state.particle_q, model.particle_q)
+    pairs = int(str(info.value).split("needs ")[1].split()[0])
+    assert pairs > 4096 * 5120
 
 
 def test_sheets_rest_a_thickness_apart():

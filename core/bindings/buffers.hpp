@@ -73,18 +73,20 @@ public:
             contact.hash_count = hash_count_.data();
             if (m.soft_contacts.thickness > 0.0) {  // collision/thick.hpp
                 const size_t tris = static_cast<size_t>(m.triangles.count);
-                thick_.assign(2 * n3 + n3 / 3 + 6 * tris, 0.0);
+                thick_.assign(4 * n3 + n3 / 3 + 6 * tris + 2, 0.0);
                 contact.q_pre = thick_.data();
                 contact.scale = contact.q_pre + n3;
                 contact.tri_box = contact.scale + n3 / 3;
                 contact.q_build = contact.tri_box + 6 * tris;
+                contact.particle_box = contact.q_build + n3;
+                contact.list_skin = contact.particle_box + 2 * n3;
                 pair_entries_.assign(static_cast<size_t>(softbody::ContactBuffers::kPairSlots) *
                                          (16 * tris + 16),
                                      0);
             }
         }
         contact.crossing = crossing_;
-        contact.list = &list_;
+        contact.list = list_;
         pairs_.capacity = static_cast<Index>(pair_entries_.size());
         pairs_.data = pair_entries_.data();
         pairs_.owner = this;
@@ -119,7 +121,7 @@ private:
     std::vector<double> thick_;
     softbody::HashEntries entries_, pairs_;
     Index crossing_[2] = {-1, -1};
-    Index list_ = -1;  // the thickness contacts' pair list: none yet
+    Index list_[3] = {-1, 0, 0};  // the thickness contacts' pair list: none yet
     Index most_entries_ = 0, most_pairs_ = 0;
 
     /// Room for `needed` pair entries (as grow_entries), up to kMostPairsPerTriangle pairs a

@@ -5,13 +5,16 @@
 // solver reached:
 //   1. T, the mass-weighted mean displacement of the bodies' free particles: a translation
 //      common to all changes no distance, so the broad phase and the bound below look at
-//      u_i = q_i - q0_i - T only (a body in free fall finds no pair from its fall).
+//      u_i = q_i - q0_i - T only (a body in free fall finds no pair from its fall). One pass
+//      finds T and bounds mu >= max |u_i| (and the list's drift) by the displacements' box.
 //   2. Broad phase: a spatial hash of the triangles' boxes over their corners' q0 and
-//      q0 + u, grown by the margin g >= h (soft_contacts.margin); each vertex's and each
-//      edge's box over the same points is looked up in it. Every pair whose boxes meet is a
-//      candidate, with its distance D at the step's start. Any pair of primitives that could
-//      meet below (every path stays in its box grown by h / 2) is a candidate. Most steps
-//      take their candidates from a list kept between steps instead (see contacts()).
+//      q0 + u (each particle's box computed once a gather), grown by the margin g >= h
+//      (soft_contacts.margin); each vertex's box, and each triangle's (for the edge pairs of
+//      the two triangles that own the edges), over the same points is looked up in it.
+//      Every pair whose boxes meet is a candidate, with its distance D at the step's start.
+//      Any pair of primitives that could meet below (every path stays in its box grown by
+//      h / 2) is a candidate. Most steps take their candidates from a list kept between
+//      steps instead, and read only its rows that could matter (see contacts()).
 //   3. A pre-existing crossing (an edge through a non-adjacent triangle at q0: an initial
 //      self-intersection, or a collider that pushed one sheet through another) stops the
 //      run with Status CROSSED and says where; nothing is changed.
@@ -29,6 +32,8 @@
 //      the friction (the surface mode's velocity-level rule); every impulse has its
 //      opposite, so momentum is conserved. Each particle's response move is clipped to
 //      h / 2 (it stays in its grown box), then step 4 runs again on the whole displacement.
+//      Steps 4 and 5 read and write only the particles of the pairs they are given (w.scale
+//      is 1 between calls), so a step with no near pair costs one pass over the particles.
 // Velocities are not changed by the bound (a particle it holds back keeps its velocity,
 // and the response turns it once it is within h).
 #pragma once
@@ -105,6 +110,11 @@ inline V3 gap(const double* x, index kind, const index* v, double* c) {
 /// touching an edge of it or ending on it within round-off does not count).
 inline bool segment_crosses(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
     const V3 d = b - a, e1 = p1 - p0, e2 = p2 - p0;
+    // both ends strictly on one side of the triangle's plane: no crossing (the test below
+    // would find its parameter s outside (0, 1))
+    const V3 n = cross(e1, e2);
+    const double da = dot(a - p0, n), db = dot(b - p0, n);
+    if ((da > 0.0 && db > 0.0) || (da < 0.0 && db < 0.0)) return false;
     const V3 h = cross(d, e2);
     const double det = dot(e1, h);
     const double scale = std::sqrt(dot(d, d) * dot(e1, e1) * dot(e2, e2));
@@ -133,12 +143,33 @@ struct Stage {
 };
 
 /// Box of particle i over q0 and q0 + u (u = q - q0 - T), or q0 alone, into lo, hi.
-inline void particle_box(const Stage& st, index i, double* lo, double* hi) {
+inline void swept_box(const Stage& st, index i, double* lo, double* hi) {
     for (int k = 0; k < 3; ++k) {
         const double a = st.q0[3 * i + k];
         const double b = st.swept ? st.q[3 * i + k] - (&st.T.x)[k] : a;
         lo[k] = std::min(a, b);
         hi[k] = std::max(a, b);
+    }
+}
+
+/// Every particle's box (swept_box) into w.particle_box (N, 6: lo, hi), once per gather.
+inline void fill_boxes(const Stage& st) {
+    for (index i = 0; i < st.m.particles.count; ++i)
+        swept_box(st, i, st.w.particle_box + 6 * i, st.w.particle_box + 6 * i + 3);
+}
+
+/// Particle i's box from w.particle_box: lo, then hi at +3.
+inline const double* particle_box(const Stage& st, index i) {
+    return st.w.particle_box + 6 * i;
+}
+
+/// The box of edge a-b (its particles' boxes joined) into lo, hi.
+inline void edge_box(const Stage& st, index a, index b, double* lo, double* hi) {
+    const double* pa = particle_box(st, a);
+    const double* pb = particle_box(st, b);
+    for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(pa[k], pb[k]);
+        hi[k] = std::max(pa[3 + k], pb[3 + k]);
     }
 }
 
@@ -151,23 +182,19 @@ inline bool boxes_meet(const double* lo, const double* hi, const double* lo2, co
 
 /// Hash of the triangles' boxes (over their corners' boxes, grown by g) into w.hash_*, the
 /// boxes themselves into w.tri_box (T, 6). Counts first; returns the entries needed, and
-/// stores no entry when they exceed the capacity (soft::hash_triangles' contract).
+/// stores no entry when they exceed the capacity (soft::hash_triangles' contract). Reads
+/// w.particle_box (fill_boxes).
 inline index build_hash(const Stage& st) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
     for (index t = 0; t < m.triangles.count; ++t) {
         double* box = w.tri_box + 6 * t;
+        const index* tri = m.triangles.indices + 3 * t;
+        const double *a = particle_box(st, tri[0]), *b = particle_box(st, tri[1]),
+                     *c = particle_box(st, tri[2]);
         for (int k = 0; k < 3; ++k) {
-            box[k] = std::numeric_limits<double>::infinity();
-            box[3 + k] = -std::numeric_limits<double>::infinity();
-        }
-        for (int c = 0; c < 3; ++c) {
-            double lo[3], hi[3];
-            particle_box(st, m.triangles.indices[3 * t + c], lo, hi);
-            for (int k = 0; k < 3; ++k) {
-                box[k] = std::min(box[k], lo[k]);
-                box[3 + k] = std::max(box[3 + k], hi[k]);
-            }
+            box[k] = std::min(std::min(a[k], b[k]), c[k]);
+            box[3 + k] = std::max(std::max(a[3 + k], b[3 + k]), c[3 + k]);
         }
     }
     return soft::hash_triangles(m, w, [&](index t, index* r) {
@@ -179,10 +206,11 @@ inline index build_hash(const Stage& st) {
     });
 }
 
-/// Each triangle whose grown box meets the box [lo, hi], once (in the first grid cell the
-/// two share): calls visit(t); stops when visit returns false.
+/// Each triangle from index `from` on whose grown box meets the box [lo, hi], once (in the
+/// first grid cell the two share): calls visit(t); stops when visit returns false.
 template <class Visit>
-inline bool each_triangle(const Stage& st, const double* lo, const double* hi, Visit visit) {
+inline bool each_triangle(const Stage& st, const double* lo, const double* hi, index from,
+                          Visit visit) {
     const ContactBuffers& w = st.w;
     index r[6];
     for (int k = 0; k < 3; ++k) {
@@ -195,6 +223,7 @@ inline bool each_triangle(const Stage& st, const double* lo, const double* hi, V
                 const index h = soft::cell_hash(ix, iy, iz, w.hash_table);
                 for (index e = w.hash_start[h]; e < w.hash_start[h + 1]; ++e) {
                     const index t = w.hash_entries->data[e];
+                    if (t < from) continue;  // before its box is read
                     const double* box = w.tri_box + 6 * t;
                     if (!boxes_meet(lo, hi, box, box + 3, st.g)) continue;
                     // the first cell of the two ranges' overlap: visited there only
@@ -214,8 +243,9 @@ inline bool each_triangle(const Stage& st, const double* lo, const double* hi, V
 /// self-contact).
 inline bool bodies_pair(const Stage& st, index a, index b) { return a != b || st.self; }
 
-/// Appends a candidate pair (kind, v, start distance D); false when the buffer is full
-/// (the count still grows: the caller grows the buffer to it and starts again).
+/// Appends a candidate pair (kind, v, start distance D, twice: the step's and the gather's);
+/// writes nothing when the buffer is full (the count still grows: the caller grows the
+/// buffer to it and starts again).
 inline void add_pair(const ContactBuffers& w, index& count, index kind, const index* v,
                      double distance) {
     if ((count + 1) * kSlots <= w.pairs->capacity) {
@@ -223,13 +253,22 @@ inline void add_pair(const ContactBuffers& w, index& count, index kind, const in
         row[0] = kind;
         for (int k = 0; k < 4; ++k) row[1 + k] = v[k];
         std::memcpy(row + 5, &distance, sizeof(double));
+        std::memcpy(row + 6, &distance, sizeof(double));
     }
     ++count;
 }
 
+/// A row's distance at the step's start (slot 5).
 inline double pair_distance(const index* row) {
     double d = 0.0;
     std::memcpy(&d, row + 5, sizeof(double));
+    return d;
+}
+
+/// A row's distance where its gather was made (slot 6: the list's build positions).
+inline double build_distance(const index* row) {
+    double d = 0.0;
+    std::memcpy(&d, row + 6, sizeof(double));
     return d;
 }
 
@@ -244,9 +283,8 @@ inline index collect(const Stage& st) {
     for (index b = 0; b < m.bodies.count; ++b)
         for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
              ++i) {
-            double lo[3], hi[3];
-            particle_box(st, i, lo, hi);
-            each_triangle(st, lo, hi, [&](index t) {
+            const double* box = particle_box(st, i);
+            each_triangle(st, box, box + 3, 0, [&](index t) {
                 const index* tri = m.triangles.indices + 3 * t;
                 if (!bodies_pair(st, b, m.triangles.body[t])) return true;
                 if (tri[0] == i || tri[1] == i || tri[2] == i) return true;  // adjacent
@@ -258,46 +296,50 @@ inline index collect(const Stage& st) {
                 return true;
             });
         }
-    // edges against edges (each edge once, in the triangle that owns it), and edges through
-    // triangles at the start
-    for (index t = 0; t < m.triangles.count && !crossed; ++t)
-        for (int k = 0; k < 3 && !crossed; ++k) {
-            const index* tri = m.triangles.indices + 3 * t;
-            if (m.triangles.edge_owner[3 * t + k] == 0) continue;
-            const index a = tri[k], b = tri[(k + 1) % 3];
-            const index body = m.triangles.body[t];
-            double lo[3], hi[3], lo2[3], hi2[3];
-            particle_box(st, a, lo, hi);
-            particle_box(st, b, lo2, hi2);
-            for (int d = 0; d < 3; ++d) {
-                lo[d] = std::min(lo[d], lo2[d]);
-                hi[d] = std::max(hi[d], hi2[d]);
-            }
-            each_triangle(st, lo, hi, [&](index t2) {
-                const index* tri2 = m.triangles.indices + 3 * t2;
-                if (!bodies_pair(st, body, m.triangles.body[t2])) return true;
-                const bool touches = tri2[0] == a || tri2[1] == a || tri2[2] == a ||
-                                     tri2[0] == b || tri2[1] == b || tri2[2] == b;
-                if (!touches &&
-                    segment_crosses(load(st.q0, a), load(st.q0, b), load(st.q0, tri2[0]),
-                                    load(st.q0, tri2[1]), load(st.q0, tri2[2]))) {
-                    w.crossing[0] = a;
-                    w.crossing[1] = t2;
-                    crossed = true;
-                    return false;
+    // edges against edges and edges through triangles, by pairs of triangles t <= t2 whose
+    // boxes meet (each edge pair once: the pair of the triangles that own them), then the
+    // owned edges of each against the other
+    for (index t = 0; t < m.triangles.count && !crossed; ++t) {
+        const index* tri = m.triangles.indices + 3 * t;
+        const index body = m.triangles.body[t];
+        const double* box = w.tri_box + 6 * t;
+        each_triangle(st, box, box + 3, t, [&](index t2) {  // t2 >= t: the pair once
+            if (!bodies_pair(st, body, m.triangles.body[t2])) return true;
+            const index* tri2 = m.triangles.indices + 3 * t2;
+            const double* box2 = w.tri_box + 6 * t2;
+            // an edge of one through the other at the start (their boxes overlap then)
+            if (t2 != t && boxes_meet(box, box + 3, box2, box2 + 3, 0.0)) {
+                for (int side = 0; side < 2; ++side) {
+                    const index te = side == 0 ? t : t2, tf = side == 0 ? t2 : t;
+                    const index* e = m.triangles.indices + 3 * te;
+                    const index* f = m.triangles.indices + 3 * tf;
+                    for (int k = 0; k < 3; ++k) {
+                        if (m.triangles.edge_owner[3 * te + k] == 0) continue;
+                        const index a = e[k], b = e[(k + 1) % 3];
+                        const bool touches = f[0] == a || f[1] == a || f[2] == a ||
+                                             f[0] == b || f[1] == b || f[2] == b;
+                        if (touches || !segment_crosses(load(st.q0, a), load(st.q0, b),
+                                                        load(st.q0, f[0]), load(st.q0, f[1]),
+                                                        load(st.q0, f[2])))
+                            continue;
+                        w.crossing[0] = a;
+                        w.crossing[1] = tf;
+                        crossed = true;
+                        return false;
+                    }
                 }
-                for (int k2 = 0; k2 < 3; ++k2) {
+            }
+            for (int k = 0; k < 3; ++k) {
+                if (m.triangles.edge_owner[3 * t + k] == 0) continue;
+                const index a = tri[k], b = tri[(k + 1) % 3];
+                double lo[3], hi[3];
+                edge_box(st, a, b, lo, hi);
+                for (int k2 = t2 == t ? k + 1 : 0; k2 < 3; ++k2) {
                     if (m.triangles.edge_owner[3 * t2 + k2] == 0) continue;
-                    if (t2 < t || (t2 == t && k2 <= k)) continue;  // the pair once
                     const index c = tri2[k2], d = tri2[(k2 + 1) % 3];
                     if (c == a || c == b || d == a || d == b) continue;  // adjacent
-                    double clo[3], chi[3], dlo[3], dhi[3];
-                    particle_box(st, c, clo, chi);
-                    particle_box(st, d, dlo, dhi);
-                    for (int e = 0; e < 3; ++e) {
-                        clo[e] = std::min(clo[e], dlo[e]);
-                        chi[e] = std::max(chi[e], dhi[e]);
-                    }
+                    double clo[3], chi[3];
+                    edge_box(st, c, d, clo, chi);
                     if (!boxes_meet(lo, hi, clo, chi, st.g)) continue;
                     const index v[4] = {a, b, c, d};
                     double cc[4];
@@ -305,20 +347,23 @@ inline index collect(const Stage& st) {
                     const double dist = std::sqrt(dot(g, g));
                     if (dist < st.keep) add_pair(w, count, kEdgeEdge, v, dist);
                 }
-                return true;
-            });
-        }
+            }
+            return true;
+        });
+    }
     return crossed ? -1 : count;
 }
 
-/// Step 4: the scales s (w.scale) of u = q - q0 - T that keep every candidate pair's
-/// relative displacement within kGamma of its start distance; returns the passes made.
+/// Step 4: the scales s (w.scale) of u = q - q0 - T that keep the relative displacement of
+/// each of the first `pairs` rows within kGamma of its start distance, applied to q. Only
+/// the rows' particles are read and written: w.scale is 1 for every particle before and
+/// after (a scaled particle is stored, then its scale set back to 1).
 inline void bound(const Stage& st, index pairs) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
-    const index n = m.particles.count;
     double* s = w.scale;
-    for (index i = 0; i < n; ++i) s[i] = 1.0;
+    for (index p = 0; p < pairs; ++p)
+        for (int k = 0; k < 4; ++k) s[w.pairs->data[kSlots * p + 1 + k]] = 1.0;
     auto u = [&](index i) { return load(st.q, i) - load(st.q0, i) - st.T; };
     for (index pass = 0; pass <= pairs; ++pass) {
         bool changed = false;
@@ -362,11 +407,12 @@ inline void bound(const Stage& st, index pairs) {
         }
         if (!changed) break;
     }
-    for (index b = 0; b < m.bodies.count; ++b)
-        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
-             ++i) {
+    for (index p = 0; p < pairs; ++p)
+        for (int k = 0; k < 4; ++k) {
+            const index i = w.pairs->data[kSlots * p + 1 + k];
             if (s[i] >= 1.0) continue;
             store(st.q, i, load(st.q0, i) + st.T + s[i] * u(i));
+            s[i] = 1.0;
         }
 }
 
@@ -422,7 +468,7 @@ inline bool any_bodies_near(const Stage& st) {
         for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
              ++i) {
             double a[3], z[3];
-            particle_box(st, i, a, z);
+            swept_box(st, i, a, z);
             for (int k = 0; k < 3; ++k) {
                 lo[k] = std::min(lo[k], a[k]);
                 hi[k] = std::max(hi[k], z[k]);
@@ -438,130 +484,261 @@ inline bool any_bodies_near(const Stage& st) {
 }
 
 /// The candidate pairs of a step into w.pairs, collected (broad phase, narrow phase, the
-/// crossing check) with the stage's settings; grows the list when it must. Returns their
-/// count; -1 for a crossing; or, below -1, minus the entries the hash or the list needed
-/// (less 1) when its buffer could not grow to them.
+/// crossing check) with the stage's settings; grows the hash and the list when they must.
+/// Returns their count; -1 for a crossing; or, below -1, minus the entries the hash needed
+/// (less 1) when its buffer could not grow to them, or minus the pairs the list needed
+/// (less 1) when it could not grow to them, with w.list[2] = 1 (0 for the hash).
 inline index gather(const Stage& st) {
     const ContactBuffers& w = st.w;
+    fill_boxes(st);
     const index needed = build_hash(st);
     if (needed > w.hash_entries->capacity) {
         HashEntries& entries = *w.hash_entries;
+        w.list[2] = 0;
         if (entries.grow == nullptr || !entries.grow(entries, needed)) return -1 - needed;
         build_hash(st);
     }
     index pairs = collect(st);
     if (pairs >= 0 && pairs * kSlots > w.pairs->capacity) {
         HashEntries& list = *w.pairs;
-        if (list.grow == nullptr || !list.grow(list, pairs * kSlots)) return -1 - pairs * kSlots;
+        w.list[2] = 1;
+        if (list.grow == nullptr || !list.grow(list, pairs * kSlots)) return -1 - pairs;
         pairs = collect(st);
     }
     return pairs;
 }
 
-/// The list's particles' largest offset from where it was built, after the common
-/// translation C of the bodies' free particles between the two: max_i |q0_i - q_b,i - C|.
-inline double drift(const Model& m, const double* q0, const double* qb) {
-    double mass = 0.0;
-    V3 sum{0.0, 0.0, 0.0};
-    for (index b = 0; b < m.bodies.count; ++b)
-        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
-             ++i) {
-            if (m.particles.inv_mass[i] == 0.0) continue;
-            mass += m.particles.mass[i];
-            sum = sum + m.particles.mass[i] * (load(q0, i) - load(qb, i));
-        }
-    const V3 c = mass > 0.0 ? (1.0 / mass) * sum : V3{0.0, 0.0, 0.0};
-    double most = 0.0;
-    for (index b = 0; b < m.bodies.count; ++b)
-        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
-             ++i) {
-            const V3 d = load(q0, i) - load(qb, i) - c;
-            most = std::max(most, dot(d, d));
-        }
-    return std::sqrt(most);
+constexpr int kBands = 64;  // the list's rows are ordered by band of build distance, R / 64 wide
+
+/// The band of build distance d in a list of radius R: floor(64 d / R), within [0, 63].
+inline int band_of(double d, double inv_width) {
+    const double b = d * inv_width;
+    return b >= 0.0 && b < kBands - 1 ? static_cast<int>(b) : (b >= 0.0 ? kBands - 1 : 0);
 }
 
+/// Orders rows [0, pairs) by band of their build distance, in place: counts per band, then
+/// each row swapped into its band's next free place (an American flag sort), O(pairs).
+inline void sort_bands(index* rows, index pairs, double inv_width) {
+    index start[kBands + 1] = {}, next[kBands];
+    for (index p = 0; p < pairs; ++p) ++start[band_of(build_distance(rows + kSlots * p), inv_width) + 1];
+    for (int b = 0; b < kBands; ++b) start[b + 1] += start[b];
+    for (int b = 0; b < kBands; ++b) next[b] = start[b];
+    for (int b = 0; b < kBands; ++b)
+        while (next[b] < start[b + 1]) {
+            index* row = rows + kSlots * next[b];
+            const int home = band_of(build_distance(row), inv_width);
+            if (home == b) {
+                ++next[b];
+                continue;
+            }
+            index* there = rows + kSlots * next[home]++;
+            for (index k = 0; k < kSlots; ++k) std::swap(row[k], there[k]);
+        }
+}
+
+/// The rows of a list sorted by sort_bands whose build distance may be below x: all rows
+/// before the first in a band above x's (a binary search).
+inline index rows_below(const index* rows, index pairs, double x, double inv_width) {
+    if (!(x * inv_width < kBands - 1)) return pairs;
+    const int last = band_of(x, inv_width);
+    index lo = 0, hi = pairs;
+    while (lo < hi) {
+        const index mid = lo + (hi - lo) / 2;
+        if (band_of(build_distance(rows + kSlots * mid), inv_width) <= last)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+/// Each of rows [from, to)'s distance at the step's start q0 into its slot 5.
+inline void refresh(const double* q0, index* rows, index from, index to) {
+    for (index p = from; p < to; ++p) {
+        index* row = rows + kSlots * p;
+        double c[4];
+        const V3 g = gap(q0, row[0], row + 1, c);
+        const double d = std::sqrt(dot(g, g));
+        std::memcpy(row + 5, &d, sizeof(double));
+    }
+}
+
+/// The bodies' motion: T, the mass-weighted mean displacement q - q0 of their free
+/// particles; mu >= max_i |q_i - q0_i - T| over their particles; and, with a list (qb, its
+/// build positions), sigma >= max_i |q0_i - qb_i - C| with C the same mean of q0 - qb.
+struct Motion {
+    V3 T{0.0, 0.0, 0.0};
+    double mu = 0.0;
+    double sigma = std::numeric_limits<double>::infinity();
+};
+
+/// The largest distance from c to a point of the box [lo, hi] (an upper bound on the
+/// largest |x - c| over the points x it holds).
+inline double farthest(const double* lo, const double* hi, V3 c) {
+    double sum = 0.0;
+    for (int k = 0; k < 3; ++k) {
+        const double a = hi[k] - (&c.x)[k], b = (&c.x)[k] - lo[k];
+        sum += std::max(a * a, b * b);
+    }
+    return std::sqrt(sum);
+}
+
+/// Motion in one pass over the particles: the means, and mu, sigma bounded by the boxes of
+/// the displacements (exact: true takes a second pass for the largest offsets themselves).
+inline Motion motion(const Model& m, const double* q0, const double* q, const double* qb,
+                     bool exact) {
+    const double inf = std::numeric_limits<double>::infinity();
+    double mass = 0.0, lo_u[3] = {inf, inf, inf}, hi_u[3] = {-inf, -inf, -inf};
+    double lo_d[3] = {inf, inf, inf}, hi_d[3] = {-inf, -inf, -inf};
+    V3 sum_u{0.0, 0.0, 0.0}, sum_d{0.0, 0.0, 0.0};
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            const V3 du = load(q, i) - load(q0, i);
+            const V3 dd = qb != nullptr ? load(q0, i) - load(qb, i) : V3{0.0, 0.0, 0.0};
+            for (int k = 0; k < 3; ++k) {
+                lo_u[k] = std::min(lo_u[k], (&du.x)[k]);
+                hi_u[k] = std::max(hi_u[k], (&du.x)[k]);
+                lo_d[k] = std::min(lo_d[k], (&dd.x)[k]);
+                hi_d[k] = std::max(hi_d[k], (&dd.x)[k]);
+            }
+            if (m.particles.inv_mass[i] == 0.0) continue;
+            const double mi = m.particles.mass[i];
+            mass += mi;
+            sum_u = sum_u + mi * du;
+            sum_d = sum_d + mi * dd;
+        }
+    Motion out;
+    if (mass > 0.0) out.T = (1.0 / mass) * sum_u;
+    const V3 c = mass > 0.0 ? (1.0 / mass) * sum_d : V3{0.0, 0.0, 0.0};
+    if (!(hi_u[0] >= lo_u[0])) return {out.T, 0.0, 0.0};  // no particle in a body
+    if (!exact) {
+        out.mu = farthest(lo_u, hi_u, out.T);
+        if (qb != nullptr) out.sigma = farthest(lo_d, hi_d, c);
+        return out;
+    }
+    double mu = 0.0, sigma = 0.0;
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            const V3 u = load(q, i) - load(q0, i) - out.T;
+            mu = std::max(mu, dot(u, u));
+            if (qb == nullptr) continue;
+            const V3 d = load(q0, i) - load(qb, i) - c;
+            sigma = std::max(sigma, dot(d, d));
+        }
+    out.mu = std::sqrt(mu);
+    if (qb != nullptr) out.sigma = std::sqrt(sigma);
+    return out;
+}
+
+constexpr double kServe = 32.0;  // steps a new list's skin is sized to serve
+constexpr double kMostSkin = 2.0;  // a list's skin at most, in margins g
+
 /// The stage (steps 1-5) on q, qd (N, 3) in place, from the step's start q0 (N, 3). Returns
-/// 0; the entries the hash or the pair list needed when its buffer could not grow to them
-/// (nothing resolved); or -1 for a crossing at q0 (w.crossing: particle, triangle; nothing
-/// changed).
+/// 0; the entries the hash, or the pairs the list, needed when its buffer could not grow to
+/// them (nothing resolved; w.list[2] says which: 0 the hash, 1 the list); or -1 for a
+/// crossing at q0 (w.crossing: particle, triangle; nothing changed).
 ///
 /// The pairs come from a list kept between steps (a Verlet list): the pairs nearer than
-/// R = 2 h + g at the positions q_b where it was built. While the bodies' particles have
-/// drifted by sigma (after a common translation) from q_b and move by mu in the step (after
-/// T), with sigma + mu <= g / 2, a pair off the list starts the step at least R - 2 sigma
-/// apart and ends it (bound, and response moves of h / 2 a side) at least
-/// R - 2 (sigma + mu) - h >= h apart: neither the bound nor the response needs it. The list
-/// is built again (at q0, with the crossing check) when that fails; a step whose own motion
-/// is over g / 2 takes its pairs from the swept boxes instead (and the list is dropped).
+/// R = 2 h + S at the positions q_b where it was built, S its skin. While the bodies'
+/// particles have drifted by sigma (after a common translation) from q_b and move by mu in
+/// the step (after T), with sigma + mu <= S / 2, a pair off the list starts the step at
+/// least R - 2 sigma apart and stays (bound, and response moves of h / 2 a side) at least
+/// R - 2 (sigma + mu) - h >= h apart along the whole step: it can neither cross nor need a
+/// response, so neither the bound nor the response needs it. The same holds for a listed
+/// pair whose build distance is at least 2 sigma + 2 (mu + r) + h, r the largest response
+/// move (0 before the response, at most h / 2): the list's rows are ordered by band of build
+/// distance, and a step reads only the rows below that (a prefix: w.list[1] rows, their
+/// distance at q0 in slot 5). The skin S is chosen at each build from the motion the last
+/// list saw (sigma + mu over the steps it served), so that a list serves about kServe steps,
+/// between the margin g and kMostSkin g. The list is built again (at q0, with the crossing
+/// check) when sigma + mu > S / 2; a step whose own motion is over kMostSkin g / 2 takes its
+/// pairs from the swept boxes instead (and the list is dropped).
 inline index contacts(const Model& m, const double* q0, double* q, double* qd,
                       const ContactBuffers& w) {
     Stage st{m, q0, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
              m.soft_contacts.margin, m.soft_contacts.self_contact != 0};
-    // 1. the common translation, and the step's largest motion after it
-    double mass = 0.0;
-    V3 sum{0.0, 0.0, 0.0};
-    for (index b = 0; b < m.bodies.count; ++b)
-        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
-             ++i) {
-            if (m.particles.inv_mass[i] == 0.0) continue;
-            const double mi = m.particles.mass[i];
-            mass += mi;
-            sum = sum + mi * (load(q, i) - load(q0, i));
-        }
-    if (mass > 0.0) st.T = (1.0 / mass) * sum;
+    // 1. the common translation, the step's largest motion after it, the list's drift
+    const bool listed = w.list[0] >= 0;
+    Motion mo = motion(m, q0, q, listed ? w.q_build : nullptr, false);
+    st.T = mo.T;
     if (!st.self && !any_bodies_near(st)) return 0;
-    double mu = 0.0;
-    for (index b = 0; b < m.bodies.count; ++b)
-        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
-             ++i) {
-            const V3 u = load(q, i) - load(q0, i) - st.T;
-            mu = std::max(mu, dot(u, u));
-        }
-    mu = std::sqrt(mu);
+    double* skin = w.list_skin;  // the list's skin S, and the steps it has served
+    if (listed && mo.sigma + mo.mu > 0.5 * skin[0])  // the boxes' bounds fail: the exact ones
+        mo = motion(m, q0, q, w.q_build, true);
     // 2-3. the pairs: the list (built again when it no longer covers the step), or the
     // step's swept boxes
-    const double h = m.soft_contacts.thickness, slack = 0.5 * st.g;
-    index pairs = 0;
-    const index n3 = 3 * m.particles.count;
-    if (mu <= slack) {
-        if (*w.list < 0 || drift(m, q0, w.q_build) + mu > slack) {
-            Stage list = st;
-            list.swept = false;
-            list.g = 2.0 * h + st.g;
-            list.keep = list.g;
-            *w.list = -1;
-            pairs = gather(list);
-            if (pairs == -1) return -1;  // crossed at the start
-            if (pairs < -1) return -1 - pairs;
-            for (index k = 0; k < n3; ++k) w.q_build[k] = q0[k];
-            *w.list = pairs;
-        }
-        pairs = *w.list;
-        for (index p = 0; p < pairs; ++p) {  // each pair's distance at this step's start
-            index* row = w.pairs->data + kSlots * p;
-            double c[4];
-            const V3 g = gap(q0, row[0], row + 1, c);
-            const double d = std::sqrt(dot(g, g));
-            std::memcpy(row + 5, &d, sizeof(double));
-        }
+    const double h = m.soft_contacts.thickness;
+    const double most_skin = kMostSkin * st.g;
+    index* rows = nullptr;
+    index pairs = 0, active = 0;
+    double radius = 0.0, sigma = 0.0;
+    if (listed && mo.sigma + mo.mu <= 0.5 * skin[0]) {
+        sigma = mo.sigma;
+        skin[1] += 1.0;
+    } else if (2.0 * mo.mu <= most_skin) {
+        // a new list at q0, its skin from the motion per step the last one saw
+        double rate = mo.mu;
+        if (listed) rate = std::max(rate, (mo.sigma + mo.mu) / (skin[1] + 1.0));
+        const double s = std::min(most_skin, std::max(st.g, 2.0 * kServe * rate));
+        Stage list = st;
+        list.swept = false;
+        list.g = 2.0 * h + s;
+        list.keep = list.g;
+        w.list[0] = -1;
+        pairs = gather(list);
+        if (pairs == -1) return -1;  // crossed at the start
+        if (pairs < -1) return -1 - pairs;
+        for (index k = 0; k < 3 * m.particles.count; ++k) w.q_build[k] = q0[k];
+        sort_bands(w.pairs->data, pairs, kBands / list.g);
+        w.list[0] = pairs;
+        skin[0] = s;
+        skin[1] = 1.0;
     } else {
-        *w.list = -1;
+        w.list[0] = -1;
         pairs = gather(st);
         if (pairs == -1) return -1;
         if (pairs < -1) return -1 - pairs;
+        w.list[1] = pairs;  // every row, their distances at q0
+        rows = w.pairs->data;
+        active = pairs;
     }
-    // 4. the bound, 5. the response, its moves clipped to h / 2, and the bound again
-    bound(st, pairs);
-    for (index k = 0; k < n3; ++k) w.q_pre[k] = q[k];
-    respond(st, pairs, qd);
+    if (w.list[0] >= 0) {
+        pairs = w.list[0];
+        rows = w.pairs->data;
+        radius = 2.0 * h + skin[0];
+        active = rows_below(rows, pairs, 2.0 * (sigma + mo.mu) + h, kBands / radius);
+        refresh(q0, rows, 0, active);
+        w.list[1] = active;
+    }
+    // 4. the bound, 5. the response, its moves clipped to h / 2, and the bound again (over
+    // more of the list's rows when the response moved particles)
+    bound(st, active);
+    for (index p = 0; p < active; ++p)
+        for (int k = 0; k < 4; ++k) {
+            const index i = rows[kSlots * p + 1 + k];
+            store(w.q_pre, i, load(q, i));
+        }
+    respond(st, active, qd);
     const double clip = 0.5 * h;
-    for (index i = 0; i < m.particles.count; ++i) {
-        const V3 d = load(q, i) - load(w.q_pre, i);
-        const double len = std::sqrt(dot(d, d));
-        if (len > clip) store(q, i, load(w.q_pre, i) + (clip / len) * d);
+    double moved = 0.0;
+    for (index p = 0; p < active; ++p)
+        for (int k = 0; k < 4; ++k) {
+            const index i = rows[kSlots * p + 1 + k];
+            const V3 d = load(q, i) - load(w.q_pre, i);
+            const double len = std::sqrt(dot(d, d));
+            if (len > clip) store(q, i, load(w.q_pre, i) + (clip / len) * d);
+            moved = std::max(moved, std::min(len, clip));
+        }
+    if (moved > 0.0 && w.list[0] >= 0) {
+        const index more =
+            rows_below(rows, pairs, 2.0 * (sigma + mo.mu + moved) + h, kBands / radius);
+        refresh(q0, rows, active, more);
+        active = more;
+        w.list[1] = active;
     }
-    bound(st, pairs);
+    bound(st, active);
     return 0;
 }
 

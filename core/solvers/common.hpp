@@ -140,9 +140,11 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
 }
 
 /// The run's outcome when contacts() returned `needed` != 0 at step `step`: NEED_HASH (value:
-/// the entries needed), or CROSSED (where: the edge's particle, value: the triangle).
+/// the entries needed), NEED_PAIRS (the thickness contacts' pair list; value: the pairs
+/// needed), or CROSSED (where: the edge's particle, value: the triangle).
 inline RunResult contact_failure(index needed, index step, const ContactBuffers& w) {
     if (needed < 0) return {CROSSED, step, w.crossing[0], static_cast<double>(w.crossing[1])};
+    if (w.list != nullptr && w.list[2] == 1) return {NEED_PAIRS, step, -1, static_cast<double>(needed)};
     return {NEED_HASH, step, -1, static_cast<double>(needed)};
 }
 

@@ -552,6 +552,15 @@ class Simulator:
                 f"over 512 per triangle ({model.tri_count} triangles); a triangle has "
                 "stretched far past its rest size"
             )
+        elif status == Status.NEED_PAIRS:
+            # the core grows the thickness contacts' pair list itself up to 4096 per triangle
+            body, particle = -1, -1
+            msg = (
+                f"surface contacts blew up {where}: the contact pair list needs {value:.0f} "
+                f"pairs, over 4096 per triangle ({model.tri_count} triangles); sheets are "
+                "packed far closer than the thickness, or a triangle has stretched far past "
+                "its rest size"
+            )
         else:
             body, particle = int(index), -1
             lo, hi = self.volume_limits

@@ -30,6 +30,7 @@ class Status(IntEnum):
     STOPPED = 7  # a signal handler or the progress callback raised (the core raises it)
     BAD_GAS = 8  # a body's gas amount or temperature became negative or not finite
     CROSSED = 9  # an edge passes through a triangle (index: its particle, value: the triangle)
+    NEED_PAIRS = 10  # the self-contact pair list would need > 4096 pairs a triangle (value: pairs)
 
 
 @dataclass(frozen=True)
