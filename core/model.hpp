@@ -196,6 +196,11 @@ struct ContactBuffers {
     index* list = nullptr;        // (3,)
     double* list_skin = nullptr;  // (2,)
     double* particle_box = nullptr;  // (N, 6)
+    // the positions the colliders left before the thickness contacts (N, 3), and the
+    // inverse masses the stage sees (N,): 0 for the particles the colliders caught
+    double* q_collided = nullptr;
+    double* held_inv_mass = nullptr;
+    double* q_solved = nullptr;  // (N, 3) the solver's positions, before any contact
 };
 
 /// Scratch of the vertex-major force pass.

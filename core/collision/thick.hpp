@@ -586,7 +586,7 @@ inline double farthest(const double* lo, const double* hi, V3 c) {
 /// Motion in one pass over the particles: the means, and mu, sigma bounded by the boxes of
 /// the displacements (exact: true takes a second pass for the largest offsets themselves).
 inline Motion motion(const Model& m, const double* q0, const double* q, const double* qb,
-                     bool exact) {
+                     bool exact, bool translate = true) {
     const double inf = std::numeric_limits<double>::infinity();
     double mass = 0.0, lo_u[3] = {inf, inf, inf}, hi_u[3] = {-inf, -inf, -inf};
     double lo_d[3] = {inf, inf, inf}, hi_d[3] = {-inf, -inf, -inf};
@@ -609,7 +609,7 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
             sum_d = sum_d + mi * dd;
         }
     Motion out;
-    if (mass > 0.0) out.T = (1.0 / mass) * sum_u;
+    if (mass > 0.0 && translate) out.T = (1.0 / mass) * sum_u;
     const V3 c = mass > 0.0 ? (1.0 / mass) * sum_d : V3{0.0, 0.0, 0.0};
     if (!(hi_u[0] >= lo_u[0])) return {out.T, 0.0, 0.0};  // no particle in a body
     if (!exact) {
@@ -635,7 +635,33 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
 constexpr double kServe = 32.0;  // steps a new list's skin is sized to serve
 constexpr double kMostSkin = 2.0;  // a list's skin at most, in margins g
 
-/// The stage (steps 1-5) on q, qd (N, 3) in place, from the step's start q0 (N, 3). Returns
+/// The list at st.q0 with skin s [m]: the pairs nearer than 2 h + s (gather, with its
+/// crossing check), their rows ordered by band of build distance, the build positions in
+/// w.q_build, w.list[0] their count and w.list_skin (s, 1 step served). Returns gather's
+/// value (the count, -1 for a crossing, below -1 no room); the list stays dropped unless it
+/// was built. Every builder of the list (the stage, the implicit solve's contacts, the
+/// collider crossing check) builds it here, so the stage can read it.
+inline index build_list(const Stage& st, double s) {
+    const ContactBuffers& w = st.w;
+    Stage list = st;
+    list.swept = false;
+    list.g = 2.0 * st.m.soft_contacts.thickness + s;
+    list.keep = list.g;
+    w.list[0] = -1;
+    const index pairs = gather(list);
+    if (pairs < 0) return pairs;
+    for (index k = 0; k < 3 * st.m.particles.count; ++k) w.q_build[k] = st.q0[k];
+    sort_bands(w.pairs->data, pairs, kBands / list.g);
+    w.list[0] = pairs;
+    w.list_skin[0] = s;
+    w.list_skin[1] = 1.0;
+    return pairs;
+}
+
+/// The stage (steps 1-5) on q, qd (N, 3) in place, from the step's start q0 (N, 3); with
+/// translate false, T = 0 (with rigid colliders: the bound then holds particles back toward
+/// where they started, outside the colliders, not toward q0 + T, which may be inside one).
+/// Returns
 /// 0; the entries the hash, or the pairs the list, needed when its buffer could not grow to
 /// them (nothing resolved; w.list[2] says which: 0 the hash, 1 the list); or -1 for a
 /// crossing at q0 (w.crossing: particle, triangle; nothing changed).
@@ -656,17 +682,17 @@ constexpr double kMostSkin = 2.0;  // a list's skin at most, in margins g
 /// check) when sigma + mu > S / 2; a step whose own motion is over kMostSkin g / 2 takes its
 /// pairs from the swept boxes instead (and the list is dropped).
 inline index contacts(const Model& m, const double* q0, double* q, double* qd,
-                      const ContactBuffers& w) {
+                      const ContactBuffers& w, bool translate = true) {
     Stage st{m, q0, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
              m.soft_contacts.margin, m.soft_contacts.self_contact != 0};
     // 1. the common translation, the step's largest motion after it, the list's drift
     const bool listed = w.list[0] >= 0;
-    Motion mo = motion(m, q0, q, listed ? w.q_build : nullptr, false);
+    Motion mo = motion(m, q0, q, listed ? w.q_build : nullptr, false, translate);
     st.T = mo.T;
     if (!st.self && !any_bodies_near(st)) return 0;
     double* skin = w.list_skin;  // the list's skin S, and the steps it has served
     if (listed && mo.sigma + mo.mu > 0.5 * skin[0])  // the boxes' bounds fail: the exact ones
-        mo = motion(m, q0, q, w.q_build, true);
+        mo = motion(m, q0, q, w.q_build, true, translate);
     // 2-3. the pairs: the list (built again when it no longer covers the step), or the
     // step's swept boxes
     const double h = m.soft_contacts.thickness;
@@ -682,19 +708,9 @@ inline index contacts(const Model& m, const double* q0, double* q, double* qd,
         double rate = mo.mu;
         if (listed) rate = std::max(rate, (mo.sigma + mo.mu) / (skin[1] + 1.0));
         const double s = std::min(most_skin, std::max(st.g, 2.0 * kServe * rate));
-        Stage list = st;
-        list.swept = false;
-        list.g = 2.0 * h + s;
-        list.keep = list.g;
-        w.list[0] = -1;
-        pairs = gather(list);
+        pairs = build_list(st, s);
         if (pairs == -1) return -1;  // crossed at the start
         if (pairs < -1) return -1 - pairs;
-        for (index k = 0; k < 3 * m.particles.count; ++k) w.q_build[k] = q0[k];
-        sort_bands(w.pairs->data, pairs, kBands / list.g);
-        w.list[0] = pairs;
-        skin[0] = s;
-        skin[1] = 1.0;
     } else {
         w.list[0] = -1;
         pairs = gather(st);

@@ -109,7 +109,7 @@ inline double forecast_motion(const Model& m, const double* v0, double dt) {
 
 /// The pairs nearer than `reach` (<= 2 h) at q0 (N, 3) in w.pairs' first rows; returns
 /// their count (rows beyond those nearer may follow: begin() filters). The stage's list
-/// when it is valid at q0 (the particles drifted by at most half the margin since it was
+/// when it is valid at q0 (the particles drifted by at most half its skin since it was
 /// built: it then holds every pair nearer than 2 h). Otherwise, when the step's forecast
 /// motion (v0 (N, 3) over dt) is within half the margin, so that the stage will keep a
 /// list, the list is built at q0 as the stage builds it, and the stage then uses it; when
@@ -120,7 +120,8 @@ inline double forecast_motion(const Model& m, const double* v0, double dt) {
 inline index near_pairs(const Model& m, double* q0, const double* v0, double dt,
                         const ContactBuffers& w, double reach) {
     const double h = m.soft_contacts.thickness, g = m.soft_contacts.margin;
-    if (*w.list >= 0 && thick::drift(m, q0, w.q_build) <= 0.5 * g) return *w.list;
+    if (*w.list >= 0 && thick::motion(m, q0, q0, w.q_build, true).sigma <= 0.5 * w.list_skin[0])
+        return *w.list;
     thick::Stage st{m, q0, q0, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
                     g, m.soft_contacts.self_contact != 0};
     st.swept = false;
@@ -131,14 +132,7 @@ inline index near_pairs(const Model& m, double* q0, const double* v0, double dt,
         st.keep = reach;
         return std::max<index>(thick::gather(st), 0);
     }
-    st.g = 2.0 * h + g;
-    st.keep = st.g;
-    const index pairs = thick::gather(st);
-    if (pairs < 0) return 0;
-    const index n3 = 3 * m.particles.count;
-    for (index k = 0; k < n3; ++k) w.q_build[k] = q0[k];
-    *w.list = pairs;
-    return pairs;
+    return std::max<index>(thick::build_list(st, g), 0);
 }
 
 /// The active pairs at the step's start q0, v0 (N, 3) for a step dt [s] whose system has
@@ -305,20 +299,14 @@ inline bool collider_crossing(const Model& m, double* q, const double* before,
     for (index i = 0; i < n && !any; ++i) any = moved(q, before, i);
     if (!any) return false;
     if (*w.list < 0) {
-        thick::Stage list{m, q, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
-                          2.0 * m.soft_contacts.thickness + m.soft_contacts.margin,
-                          m.soft_contacts.self_contact != 0};
-        list.swept = false;
-        list.keep = list.g;
-        const index pairs = thick::gather(list);
+        const thick::Stage at{m, q, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
+                              m.soft_contacts.margin, m.soft_contacts.self_contact != 0};
+        const index pairs = thick::build_list(at, m.soft_contacts.margin);
         if (pairs == -1) {
             w.crossing[1] = -1 - w.crossing[1];
             return true;
         }
-        if (pairs < -1) return false;  // no room: the next step's stage says so
-        for (index k = 0; k < 3 * n; ++k) w.q_build[k] = q[k];
-        *w.list = pairs;
-        return false;
+        return false;  // built; or no room: the next step's stage says so
     }
     if (m.slots.ring_start == nullptr) return false;
     for (index p = 0; p < *w.list; ++p) {

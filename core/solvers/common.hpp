@@ -104,6 +104,62 @@ inline void begin_run(const Model& m, const Control& c, const RunParams& p, cons
     }
 }
 
+/// The thickness contacts with rigid colliders (contacts() below, the colliders at their
+/// step's-end poses). The stage first, on the solver's positions (its bound keeps every
+/// pair from crossing along the step), without its common translation T: its bound then
+/// holds particles back toward their start, outside the colliders, where q0 + T may lie
+/// inside one (a sheet resting on the ground would follow a falling one's T into it).
+/// Then the colliders; where they caught a particle, the stage again, from the same start,
+/// holding the caught particles where the colliders left them (pinned for it: inverse
+/// mass 0, their motion counted in full by its bound, so that no pair crosses along the
+/// straight paths to those positions; its response moves the other side); then
+/// the colliders again for the particles that second pass moved (only they: the others'
+/// contacts were resolved, and a second response would apply their friction twice); and a
+/// check that no edge now passes through a triangle near a particle that moved in the
+/// contacts (thick_system::collider_crossing): the stage cannot hold back a caught
+/// particle that a collider carried farther than its pairs' distances allow, nor see the
+/// last push. The colliders acting last alone let a particle resting on one follow the
+/// stage's T into it and be pushed back, unbounded, through a sheet falling onto it.
+/// The impulse the stage's response gives a caught particle's other side is not passed on
+/// to the collider holding it (s.collider_impulse has the caught particles' own contacts).
+/// Returns contacts()'s codes.
+inline index thick_with_colliders(const Model& m, const RunParams& p, const StateView& s,
+                                  const double* q_start, const ContactBuffers& w,
+                                  colliders::Seen* seen) {
+    const index n = m.particles.count, n3 = 3 * m.particles.count;
+    copy(s.q, w.q_solved, n3);
+    index needed = thick::contacts(m, q_start, s.q, s.qd, w, false);
+    if (needed != 0) return needed;
+    copy(s.q, w.q_collided, n3);
+    colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
+                        s.q, s.qd, s.collider_impulse, seen, p.dt);
+    auto moved = [](const double* a, const double* b, index i) {
+        return a[3 * i] != b[3 * i] || a[3 * i + 1] != b[3 * i + 1] || a[3 * i + 2] != b[3 * i + 2];
+    };
+    bool caught = false;
+    for (index i = 0; i < n; ++i) {
+        const bool mine = moved(s.q, w.q_collided, i);
+        w.held_inv_mass[i] = mine ? 0.0 : m.particles.inv_mass[i];
+        caught |= mine;
+    }
+    if (!caught) return 0;
+    Model held = m;
+    held.particles.inv_mass = w.held_inv_mass;
+    copy(s.q, w.q_collided, n3);
+    needed = thick::contacts(held, q_start, s.q, s.qd, w, false);
+    if (needed != 0) return needed;
+    bool any = false;  // the colliders again, for the particles the second pass moved
+    for (index i = 0; i < n; ++i) {
+        const bool mine = moved(s.q, w.q_collided, i);
+        w.held_inv_mass[i] = mine ? m.particles.inv_mass[i] : 0.0;
+        any |= mine;
+    }
+    if (any)
+        colliders::contacts(held, s.collider_q, s.collider_rot, w.collider_v, w.collider_w,
+                            q_start, s.q, s.qd, s.collider_impulse, seen, p.dt);
+    return thick_system::collider_crossing(m, s.q, w.q_solved, w) ? -1 : 0;
+}
+
 /// Contacts at the end of step `step` (of p.steps, ending at time t [s]); q_start (N, 3) is
 /// the step's start positions (continuous collider detection, the thickness contacts' bound).
 /// Returns 0, or the spatial-hash entries surface soft contacts need when their buffer could
@@ -123,19 +179,16 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
     if (m.soft_contacts.mode == SoftContactMode::BOUNDING) {
         soft::contacts_bounding(m, s.q, s.qd, w);
     } else if (m.soft_contacts.mode == SoftContactMode::SURFACE && m.soft_contacts.thickness > 0.0) {
+        if (m.colliders.count > 0) return thick_with_colliders(m, p, s, q_start, w, seen);
         const index needed = thick::contacts(m, q_start, s.q, s.qd, w);
         if (needed != 0) return needed;
     } else if (m.soft_contacts.mode == SoftContactMode::SURFACE) {
         const index needed = soft::contacts_surface(m, s.q, s.qd, w);
         if (needed > 0) return needed;
     }
-    // a collider that pushed one sheet through another stops the run here (thick_system)
-    const bool crossing_check = m.colliders.count > 0 && thick_system::enabled(m);
-    if (crossing_check) copy(s.q, w.q_pre, 3 * m.particles.count);
     if (m.colliders.count > 0)
         colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
                             s.q, s.qd, s.collider_impulse, seen, p.dt);
-    if (crossing_check && thick_system::collider_crossing(m, s.q, w.q_pre, w)) return -1;
     return 0;
 }
 
