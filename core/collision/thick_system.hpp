@@ -35,11 +35,13 @@
 //    sum_k c_k x0_k x n (...) = d n x n (...) = 0 at x0, so within a body they need no turn
 //    (implicit_solver::keep_own_torque takes them as forces from outside a body, where
 //    between bodies they are).
-// 2. Crossings caused by colliders: the rigid colliders act after the thickness stage and
-//    may push one sheet through another. collider_crossing() looks, for the listed
-//    vertex-triangle pairs touching a particle the colliders moved, whether an edge of the
-//    pair's vertex (its ring of face neighbours) now passes through the pair's triangle; a
-//    step without a list builds one at its end, with the list's full crossing check.
+// 2. Crossings caused by colliders: the stage cannot hold back a particle a rigid collider
+//    caught and carried farther than its pairs' distances allow, nor see the colliders'
+//    last push (loop::thick_with_colliders runs the stage around them). collider_crossing()
+//    looks, for the listed vertex-triangle pairs touching a particle that moved in the
+//    contacts, whether an edge of the pair's vertex (its ring of face neighbours) now
+//    passes through the pair's triangle; a step without a list builds one at its end, with
+//    the list's full crossing check.
 #pragma once
 
 #include <vector>
@@ -283,9 +285,10 @@ inline index find_triangle(const Model& m, const index* corners) {
     return -1;
 }
 
-/// After the colliders moved particles from before (N, 3) to q (N, 3): whether an edge now
-/// passes through a triangle. With the stage's list kept, for the listed vertex-triangle
-/// pairs with a particle the colliders moved (the vertex i, a neighbour j, a corner):
+/// After the contacts moved particles from before (N, 3) (the solver's positions) to q
+/// (N, 3): whether an edge now passes through a triangle. With the stage's list kept, for
+/// the listed vertex-triangle pairs with a particle that moved (the vertex i, a neighbour
+/// j, a corner):
 /// whether an edge (i, j) of the pair's vertex passes through the pair's triangle (a pass
 /// over the list). Without it (the step took its pairs from swept boxes: its own motion
 /// was over half the margin) the list is built at q as the stage builds it, with its check
