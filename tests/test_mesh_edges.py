@@ -190,6 +190,19 @@ def corner_up() -> np.ndarray:
     return sb.collision.rotation_about(axis / np.linalg.norm(axis), np.arccos(a[1]))
 
 
+def cloth_over_corner(**kw) -> tuple[sb.Model, sb.ColliderMesh]:
+    """A 0.8 x 0.8 m cloth (16 x 16 squares) held flat 0.52 m up over the corner of a 0.5
+    m cube standing on that corner's opposite (``kw``: the collider's keywords, such as
+    sharp_angle): the model and the collider."""
+    collider = sb.ColliderMesh(sb.box((0.5, 0.5, 0.5)), restitution=0.0, friction=0.5,
+                               rotation=corner_up(), **kw)  # fmt: skip
+    sheet = sb.rectangle((0.8, 0.8), (16, 16))
+    flat = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0] + [0.013, 0.52, 0.021]
+    builder = sb.ModelBuilder()
+    builder.add_cloth(sb.TriMesh(flat, sheet.faces), mass=0.1, stiffness=300.0, damping=0.05)
+    builder.add_collider(collider)
+    return builder.finalize(), collider
+
 @pytest.mark.parametrize("angle", [30.0, None])
 def test_cloth_draped_over_a_box_corner_is_not_pierced(angle):
     """A 0.8 x 0.8 m cloth (16 x 16 squares, 5 cm edges) dropped onto the corner of a
@@ -198,14 +211,7 @@ def test_cloth_draped_over_a_box_corner_is_not_pierced(angle):
     triangle test) and the cloth lies over the tip (its highest point above the tip's
     height, 0.433 m); without (sharp_angle None), the tip pokes through the cloth between
     its vertices and the check finds it."""
-    collider = sb.ColliderMesh(sb.box((0.5, 0.5, 0.5)), restitution=0.0, friction=0.5,
-                               rotation=corner_up(), sharp_angle=angle)  # fmt: skip
-    sheet = sb.rectangle((0.8, 0.8), (16, 16))
-    flat = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0] + [0.013, 0.52, 0.021]
-    builder = sb.ModelBuilder()
-    builder.add_cloth(sb.TriMesh(flat, sheet.faces), mass=0.1, stiffness=300.0, damping=0.05)
-    builder.add_collider(collider)
-    model = builder.finalize()
+    model, collider = cloth_over_corner(sharp_angle=angle)
     sim = sb.Simulator(model, integrator="midpoint", dt=5e-4)
     state = model.state()
     worst = 0
@@ -226,14 +232,7 @@ def test_cloth_resting_on_a_corner_presses_with_its_weight():
     (static equilibrium) within 0.1 % (measured 6e-6), with the cloth lying on the tip
     (its highest point above the tip, held by the corner contacts) and no cube edge
     through it."""
-    collider = sb.ColliderMesh(sb.box((0.5, 0.5, 0.5)), restitution=0.0, friction=0.5,
-                               rotation=corner_up())  # fmt: skip
-    sheet = sb.rectangle((0.8, 0.8), (16, 16))
-    flat = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0] + [0.013, 0.52, 0.021]
-    builder = sb.ModelBuilder()
-    builder.add_cloth(sb.TriMesh(flat, sheet.faces), mass=0.1, stiffness=300.0, damping=0.05)
-    builder.add_collider(collider)
-    model = builder.finalize()
+    model, collider = cloth_over_corner()
     sim = sb.Simulator(model, integrator="implicit_euler", dt=2e-3)
     state = model.state()
     sim.run(state, 1500)
