@@ -35,6 +35,9 @@
 //    sum_k c_k x0_k x n (...) = d n x n (...) = 0 at x0, so within a body they need no turn
 //    (implicit_solver::keep_own_torque takes them as forces from outside a body, where
 //    between bodies they are).
+//    Projective dynamics cannot put the penalty into its prefactored matrix: each_near()
+//    hands it the same pairs (nearer than 2 h there), which its iterations take
+//    explicitly, with multipliers (solvers/projective.hpp).
 // 2. Crossings caused by colliders: the stage cannot hold back a particle a rigid collider
 //    caught and carried farther than its pairs' distances allow, nor see the colliders'
 //    last push (loop::thick_with_colliders runs the stage around them). collider_crossing()
@@ -190,6 +193,27 @@ inline void begin(const Model& m, double* q0, const double* v0, double dt, const
             }
     for (index i = n; i > 0; --i) sys.ptr[at(i)] = sys.ptr[at(i - 1)];  // back to the starts
     sys.ptr[0] = 0;
+}
+
+/// Calls pair(kind, v, c, g, d) for each pair nearer than reach (<= 2 h) at q0 (N, 3), for
+/// a step dt [s] from the velocities v0 (N, 3): its kind (thick::kVertexTriangle or
+/// kEdgeEdge), its four particles v, the gap's coefficients c (four, sum 0), the gap g at
+/// q0 and its length d > 0. The pairs as begin() takes them (near_pairs), for projective
+/// dynamics' iterations (solvers/projective.hpp).
+template <class Pair>
+inline void each_near(const Model& m, double* q0, const double* v0, double dt,
+                      const ContactBuffers& w, double reach, Pair pair) {
+    if (!enabled(m)) return;
+    const double h = m.soft_contacts.thickness;
+    const index listed = near_pairs(m, q0, v0, dt, w, reach);
+    for (index p = 0; p < listed; ++p) {
+        const index* row = w.pairs->data + thick::kSlots * p;
+        double c[4];
+        const V3 g = thick::gap(q0, row[0], row + 1, c);
+        const double d = std::sqrt(dot(g, g));
+        if (!(d < reach) || !(d > 1e-9 * h)) continue;  // inactive, or no direction
+        pair(row[0], row + 1, c, g, d);
+    }
 }
 
 inline V3 normal(const System& sys, index p) {

@@ -16,6 +16,11 @@
 // factor and caches one per step size.
 #pragma once
 
+#include <algorithm>
+#include <limits>
+#include <vector>
+
+#include "collision/thick_system.hpp"
 #include "model.hpp"
 #include "solvers/common.hpp"
 #include "solvers/forms.hpp"
@@ -107,6 +112,127 @@ inline void solve(const Factor& a, const double* b, double* x, double* out) {
     for (index r = 0; r < n; ++r) store(out, a.perm[r], load(x, r));
 }
 
+/// The thickness contacts in the iterations (the header above; the pairs from
+/// collision/thick_system.hpp): each pair's force lambda_p >= 0 along its direction n_p at
+/// the step's start, on its particles with the gap's coefficients c_p (J^T lambda, J the
+/// pairs' rows d_p(x) = n_p . sum_k c_pk x_k), in f at every iterate; after each global
+/// solve one dual step brings the multipliers toward d_p = r where they push.
+namespace contacts {
+
+/// The active pairs of a step (P of them), kept between steps (the vectors keep their room).
+struct Pairs {
+    std::vector<index> v;        // (P, 4) particles
+    std::vector<double> c;       // (P, 4) the gap's coefficients (sum 0)
+    std::vector<double> n;       // (P, 3) the gap's direction at the step's start
+    std::vector<double> k;       // (P,) the dual step's scale 1 / (dt^2 R_p) [N/m]
+    std::vector<double> lambda;  // (P,) the pair's force [N]
+    std::vector<double> delta;   // (P,) scratch: the dual step's direction [N]
+    std::vector<double> load;    // (N,) scratch: sum of |c| over each particle's pairs
+    std::vector<double> b, dx;   // (N, 3) scratch: J^T delta [N] and A^-1 J^T delta [m]
+    index count = 0;
+};
+
+inline V3 normal(const Pairs& pc, size_t p) {
+    return {pc.n[3 * p], pc.n[3 * p + 1], pc.n[3 * p + 2]};
+}
+
+/// d_p(x) [m]: pair p's gap at x (N, 3) along its direction at the step's start.
+inline double distance(const Pairs& pc, size_t p, const double* x) {
+    const V3 n = normal(pc, p);
+    double d = 0.0;
+    for (size_t l = 0; l < 4; ++l) d += pc.c[4 * p + l] * dot(n, load(x, pc.v[4 * p + l]));
+    return d;
+}
+
+/// The step's pairs: those nearer than 2 h at the step's start q0 (N, 3), for a step dt [s]
+/// from the velocities v0 (N, 3) (thick_system::each_near), with a free particle; their
+/// forces 0, their scales k_p = 1 / (dt^2 R_p), R_p = sum_i |c_pi| S_i / m_i over the pair's
+/// free particles i, S_i the sum of |c| over i's pairs.
+inline void begin(const Model& m, double* q0, const double* v0, double dt,
+                  const ContactBuffers& w, Pairs& pc) {
+    pc.v.clear();
+    pc.c.clear();
+    pc.n.clear();
+    pc.count = 0;
+    const double* inv_mass = m.particles.inv_mass;
+    thick_system::each_near(m, q0, v0, dt, w, 2.0 * m.soft_contacts.thickness,
+                            [&](index, const index* v, const double* c, V3 g, double d) {
+                                bool free = false;
+                                for (int l = 0; l < 4; ++l)
+                                    free = free || (inv_mass[v[l]] > 0.0 && c[l] != 0.0);
+                                if (!free) return;  // all pinned
+                                pc.v.insert(pc.v.end(), v, v + 4);
+                                pc.c.insert(pc.c.end(), c, c + 4);
+                                pc.n.push_back(g.x / d);
+                                pc.n.push_back(g.y / d);
+                                pc.n.push_back(g.z / d);
+                                ++pc.count;
+                            });
+    if (pc.count == 0) return;
+    const size_t count = static_cast<size_t>(pc.count);
+    pc.load.assign(static_cast<size_t>(m.particles.count), 0.0);
+    for (size_t e = 0; e < 4 * count; ++e) pc.load[static_cast<size_t>(pc.v[e])] += std::abs(pc.c[e]);
+    pc.k.resize(count);
+    pc.lambda.assign(count, 0.0);
+    for (size_t p = 0; p < count; ++p) {
+        double r = 0.0;
+        for (size_t l = 0; l < 4; ++l) {
+            const index i = pc.v[4 * p + l];
+            r += std::abs(pc.c[4 * p + l]) * pc.load[static_cast<size_t>(i)] * inv_mass[i];
+        }
+        pc.k[p] = 1.0 / (dt * dt * r);
+    }
+}
+
+/// f (N, 3) += J^T lambda, the pairs' forces [N].
+inline void add_forces(const Pairs& pc, double* f) {
+    for (size_t p = 0; p < static_cast<size_t>(pc.count); ++p) {
+        if (pc.lambda[p] == 0.0) continue;
+        const V3 n = normal(pc, p);
+        for (size_t l = 0; l < 4; ++l) add_to(f, pc.v[4 * p + l], (pc.lambda[p] * pc.c[4 * p + l]) * n);
+    }
+}
+
+/// One dual step after a global solve reached x (N, 3) with the forces lambda in f: each
+/// pair's violation e_p = r - d_p(x) [m], the direction delta_p = max(k_p e_p, -lambda_p),
+/// its motion dx = A^-1 J^T delta (free rows; one solve with the factor a, scratch (N, 3)
+/// its vector), and the step alpha = delta . e / delta . J dx that minimises the dual's
+/// quadratic along delta (exact line search), capped where a multiplier would reach 0
+/// (the cap is >= 1); then lambda += alpha delta and x += alpha dx, the global step's
+/// solution with those forces.
+inline void dual_step(const Model& m, const Factor& a, double r, Pairs& pc, double* x,
+                      double* scratch) {
+    const size_t count = static_cast<size_t>(pc.count), n3 = static_cast<size_t>(3 * m.particles.count);
+    pc.delta.resize(count);
+    pc.b.assign(n3, 0.0);
+    pc.dx.resize(n3);
+    double de = 0.0, cap = std::numeric_limits<double>::infinity();
+    for (size_t p = 0; p < count; ++p) {
+        const double e = r - distance(pc, p, x);
+        const double delta = std::max(pc.k[p] * e, -pc.lambda[p]);
+        pc.delta[p] = delta;
+        if (delta == 0.0) continue;
+        de += delta * e;
+        if (delta < 0.0) cap = std::min(cap, pc.lambda[p] / -delta);
+        const V3 n = normal(pc, p);
+        for (size_t l = 0; l < 4; ++l) {
+            const index i = pc.v[4 * p + l];
+            if (m.particles.inv_mass[i] > 0.0) add_to(pc.b.data(), i, (delta * pc.c[4 * p + l]) * n);
+        }
+    }
+    if (!(de > 0.0)) return;  // nothing to move (every pair apart and not pushing)
+    solve(a, pc.b.data(), scratch, pc.dx.data());
+    double curvature = 0.0;  // delta . J dx = delta^T J A^-1 J^T delta
+    for (size_t p = 0; p < count; ++p)
+        if (pc.delta[p] != 0.0) curvature += pc.delta[p] * distance(pc, p, pc.dx.data());
+    if (!(curvature > 0.0)) return;
+    const double alpha = std::min(de / curvature, cap);
+    for (size_t p = 0; p < count; ++p) pc.lambda[p] = std::max(0.0, pc.lambda[p] + alpha * pc.delta[p]);
+    for (size_t k = 0; k < n3; ++k) x[k] += alpha * pc.dx[k];
+}
+
+}  // namespace contacts
+
 /// The forces projective dynamics keeps explicit, at time t [s] for the iterate q, qd
 /// (N, 3), into f (N, 3) [N] (refreshing the volumes, dV/dx and pressures in gas): every
 /// term's but the projected ones' (forms::eval_forces<kUnprojected>).
@@ -135,7 +261,10 @@ inline void right_hand_side(const Model& m, const Control& c, double h, const do
 /// v1 = (x1 - x0) / dt in qd; pinned particles keep their velocity. The other forces are
 /// taken at t + dt, the end of the step.
 inline void step(const Model& m, const Control& c, double t, double dt, index iterations,
-                 const Factor& a, double* q, double* qd, const ProjectiveBuffers& w) {
+                 const Factor& a, double* q, double* qd, const ProjectiveBuffers& w,
+                 contacts::Pairs& pairs) {
+    const bool touching = pairs.count > 0;
+    const double reach = (1.0 + thick_system::kBand) * m.soft_contacts.thickness;
     const index n = m.particles.count;
     for (index i = 0; i < n; ++i) {
         const V3 y = load(w.q0, i) + dt * load(w.v0, i);
@@ -146,8 +275,10 @@ inline void step(const Model& m, const Control& c, double t, double dt, index it
     for (index it = 0; it < iterations; ++it) {
         for (index i = 0; i < n; ++i) store(qd, i, inv_dt * (load(q, i) - load(w.q0, i)));
         forces(m, c, t + dt, q, qd, w.gas, w.lanes, w.f);
+        if (touching) contacts::add_forces(pairs, w.f);
         right_hand_side(m, c, dt, q, w.q0, w.y, w.f, w.rhs);
         solve(a, w.rhs, w.x, q);
+        if (touching) contacts::dual_step(m, a, reach, pairs, q, w.x);
     }
     for (index i = 0; i < n; ++i) {
         if (m.particles.inv_mass[i] > 0.0) {
@@ -167,6 +298,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     BodyGas volumes_only = w.gas;  // the checks need the volumes, not dV/dx (half the time)
     volumes_only.volume_gradient = nullptr;
     const bool flowing = gas_state::flowing(m, c);
+    contacts::Pairs pairs;  // the thickness contacts in each step's iterations
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
         const double t = p.t0 + static_cast<double>(step_index) * p.dt;
@@ -182,7 +314,8 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
             gas::pressures(m, c, t, volumes_only);
             gas_state::forward_euler(m, c, t, p.dt, s.q, s.qd, s, volumes_only);
         }
-        step(m, c, t, p.dt, p.iterations, a, s.q, s.qd, w);
+        contacts::begin(m, w.q0, w.v0, p.dt, w.contact, pairs);
+        step(m, c, t, p.dt, p.iterations, a, s.q, s.qd, w, pairs);
         // contacts and particle checks; a failure (or a hash too small) undoes the step
         r = loop::end_step(m, c, p, step_index, t, s, w.q0, w.v0, w.contact);
         if (flowing) r = gas_state::end_step(m, s, w.gas, r, step_index, w.q0, w.v0);
