@@ -29,6 +29,12 @@ class ProjectiveSolver(Solver):
 
     Option: ``projective_iterations`` (>= 1, default 2), local-global iterations per
     step; more converge to backward Euler.
+
+    Thickness contacts (``set_soft_contact("surface", thickness=h)``): the pairs nearer
+    than 2 h at a step's start are held at 1.5 h or more inside the iterations, by forces
+    that one dual step with the factor updates after each global solve (one more
+    triangular solve per iteration while a pair is near); the contact stage still runs
+    after the step (core/solvers/projective.hpp).
     """
 
     integrators = (Integrator.PROJECTIVE,)
