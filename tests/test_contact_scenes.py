@@ -142,28 +142,16 @@ def test_contact_scene_surfaces_never_cross_and_stay_outside_the_mesh(name):
     assert np.all(np.isfinite(run.q[-1]))
 
 
-SMOOTH_EDGES = (
-    "the mesh collider's edges meet soft edges where they are sharper than sharp_angle "
-    "(30 degrees): across the block's rounded edges and the ring's tube, flatter than "
-    "that, a soft edge still cuts a shallow chord (docs/guide/collisions.md)"
-)
-
-
-@pytest.mark.parametrize(
-    "name",
-    [pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=SMOOTH_EDGES))
-     for name in SCENES[:2]] + ["cloth-stair"],
-)  # fmt: skip
+@pytest.mark.parametrize("name", SCENES)
 def test_contact_scene_soft_edges_do_not_cut_the_mesh_collider(name):
     """Each contact scene, sampled every 0.05 s. Reference: edge_crossings over the soft
     surfaces and the mesh collider together: no soft edge passes through a collider
-    triangle and no collider edge through a soft triangle. Expected to fail until mesh
-    colliders get edge-edge contact: with vertex contact alone every soft vertex stays
-    outside (the test above) while an edge between two of them lying across the
-    collider's convex edge passes through it. The stair's step noses are sharp (90
-    degrees), so its edges meet the cloth's; the block's rounded edges and the ring's tube
-    are smoother than the edge contacts' sharp_angle, so a chord still cuts them (expected
-    to fail, strict, so that it reports when that is fixed)."""
+    triangle and no collider edge through a soft triangle. With vertex contacts alone every
+    soft vertex stays outside (the test above) while an edge between two of them cuts a
+    chord through the collider; the edge contacts push such a chord out (the stair's sharp
+    step noses and the block's and ring's smooth curves alike: before the chords took
+    every edge and face, the block's rounded edges and the ring's tube, flatter than
+    sharp_angle, were cut at every sampled frame of the squeeze)."""
     assert max(_run(name).collider_crossings) == 0
 
 

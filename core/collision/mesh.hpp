@@ -18,22 +18,39 @@
 // that its next path starts strictly outside) and responds as against the analytic
 // colliders (colliders::respond): restitution, friction, the opposite impulse to the
 // collider.
-// Then the mesh's sharp edges (convex, flagged once in Python: collider_mesh_sharp_edges)
-// against the soft bodies' edges and triangles, so that a ridge or a corner of the mesh
-// cannot pass between soft vertices that all stay outside (edge_contacts below): a
-// closest-distance push at the step's end positions, in the collider's frame, after the
-// vertex contacts. Per soft triangle, the sharp edges near its box are found through the
-// tree; its edges (each soft edge once) against them: a soft edge that passes through one
-// of the sharp edge's two faces with its closest point to the edge inside the edge's wedge
-// (behind both faces) is pushed out along the two edges' common perpendicular to `margin`
-// beyond the edge; one resting on the edge within the margin (in the cone of its two face
-// normals) and approaching it is held there. Then a corner: a sharp edge through the soft
-// triangle whose end projects into the triangle and lies beyond it (along the end's
-// pseudo-normal) pushes the triangle past that end by the margin. The soft side moves with
-// barycentric weights w_k, mass-weighted (particle k by w_k / m_k / sum_l w_l^2 / m_l times
-// the contact point's move), and the contact point's velocity relative to the collider takes
+// Then edge contacts, so that no soft edge passes through the mesh and no mesh edge through a
+// soft triangle while every soft vertex stays outside (edge_contacts below), at the step's
+// end positions, in the collider's frame, after the vertex contacts. The mesh's edges are
+// flagged once in Python (collider_mesh_sharp_edges): sharp (convex, faces more than
+// sharp_angle apart: a box's edges), bent (any other edge not flat), or neither (a flat
+// face's tessellation; or the edge contacts off). Three tests:
+//   1. ridges: per soft triangle, the sharp edges near its box are found through the tree;
+//      its edges (each soft edge once) against them: a soft edge that passes through one of
+//      the sharp edge's two faces with its closest point to the edge inside the edge's wedge
+//      (behind both faces) and along the edge's length (not past its ends, where the common
+//      perpendicular runs along the edge's line, far from the surface) is pushed out along
+//      the two edges' common perpendicular to `margin` beyond the edge; one resting on the
+//      edge within the margin (in the cone of its two face normals) and approaching it is
+//      held there.
+//   2. corners and caps: a sharp or bent edge through the soft triangle whose end projects
+//      into the triangle and lies beyond it (along the end's pseudo-normal) pushes the
+//      triangle past that end by the margin; repeated (up to kRounds) while one did, since a
+//      smooth surface's cap through a large soft triangle may hold vertices that no crossing
+//      edge ends at.
+//   3. chords: every soft edge near the mesh against its faces (segment-triangle, through
+//      the tree): a soft edge whose ends are outside but which passes through the surface
+//      cuts a chord, across a smooth patch as across a ridge, whatever the edges' angles.
+//      Between successive crossings the points at 1/4, 1/2, 3/4 are tested with the inside
+//      test above; the deepest goes to its closest surface point plus the margin (along the
+//      direction to it), and the edge is tested again (up to kRounds). A flat face cannot be
+//      cut between two outside vertices, and a chord under a concave edge alone cannot exist
+//      (a straight segment entering a valley leaves it on the inside), so 2 with the bent
+//      edges and 3 with the faces test for every crossing the two surfaces can have.
+// The soft side moves with barycentric weights w_k, mass-weighted (particle k by w_k / m_k /
+// sum_l w_l^2 / m_l times the contact point's move, cut where pinned particles carry most of
+// the weight: push()), and the contact point's velocity relative to the collider takes
 // restitution and friction as a vertex's does; the collider receives the opposite impulse.
-// Flat tessellation edges and concave edges take no part.
+// Concave edges take part only in 2.
 #pragma once
 
 #include <limits>
@@ -138,10 +155,12 @@ struct View {
     index begin(index node) const { return m.collider_meshes.node_tris[2 * node]; }
     index end(index node) const { return m.collider_meshes.node_tris[2 * node + 1]; }
     index child(index node, int k) const { return m.collider_meshes.node_children[2 * node + k]; }
-    /// The triangle across edge k of triangle t when that edge takes part in edge contacts
-    /// (sharp, convex, owned by t); -1 otherwise.
+    /// The triangle across edge k of triangle t when that edge is sharp (convex, owned by
+    /// t); -2 when it is bent but not sharp (owned by t); -1 otherwise.
     index sharp_twin(index t, int k) const { return m.collider_meshes.sharp_edges[3 * t + k]; }
-    /// Whether a tree node's triangles hold a sharp edge.
+    /// Whether edge k of triangle t takes part in edge contacts (sharp or bent, owned by t).
+    bool takes_part(index t, int k) const { return sharp_twin(t, k) != -1; }
+    /// Whether a tree node's triangles hold an edge that takes part in edge contacts.
     bool has_sharp(index node) const { return m.collider_meshes.node_sharp[node] != 0; }
     V3 face_normal(index t) const {
         return unit(cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0)));
@@ -354,9 +373,10 @@ inline bool boxes_meet(const double* lo, const double* hi, const double* b) {
     return true;
 }
 
-/// Each sharp edge (triangle t, edge k: corner k to k + 1) below `root` whose box meets the
-/// box [lo, hi] (local frame): calls visit(t, k). Each sharp edge has one owner, so it is
-/// visited once; subtrees without one are not entered (flat tessellation costs nothing).
+/// Each edge that takes part in edge contacts (sharp or bent; triangle t, edge k: corner k
+/// to k + 1) below `root` whose box meets the box [lo, hi] (local frame): calls visit(t, k).
+/// Each such edge has one owner, so it is visited once; subtrees without one are not
+/// entered (flat tessellation costs nothing).
 template <class Visit>
 inline void each_sharp_edge(const View& v, index root, const double* lo, const double* hi,
                             Visit visit) {
@@ -370,7 +390,7 @@ inline void each_sharp_edge(const View& v, index root, const double* lo, const d
         if (te > tb) {
             for (index t = tb; t < te; ++t)
                 for (int k = 0; k < 3; ++k) {
-                    if (v.sharp_twin(t, k) < 0) continue;
+                    if (!v.takes_part(t, k)) continue;
                     const V3 a = v.corner(t, k), b = v.corner(t, (k + 1) % 3);
                     double box[6];
                     for (int d = 0; d < 3; ++d) {
@@ -403,6 +423,75 @@ inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
     return u >= -kTol && w >= -kTol && u + w <= 1.0 + kTol && s >= 0.0 && s <= 1.0;
 }
 
+constexpr double kFreeWeight = 0.25;  // push(): below it, the free particles' share is cut
+constexpr int kCrossings = 16;  // most crossings of one soft edge through the mesh kept
+constexpr int kRounds = 4;      // most pushes of one soft edge (chords) or triangle (caps)
+
+/// The fractions s along segment a-b (local frame) where it passes through a triangle of
+/// the mesh below `root` (edges included, as segment_meets_triangle), ascending, at most
+/// kCrossings of them (the first found; a segment through an edge is listed once per
+/// triangle); returns how many.
+inline int segment_crossings(const View& v, index root, V3 a, V3 b, double* s_out) {
+    const V3 d = b - a;
+    int count = 0;
+    index stack[kStack];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0 && count < kCrossings) {
+        const index node = stack[--top];
+        if (!segment_meets_box(v.bounds(node), a, b, 1.0)) continue;
+        const index tb = v.begin(node), te = v.end(node);
+        if (te > tb) {
+            for (index t = tb; t < te && count < kCrossings; ++t) {
+                const V3 p0 = v.corner(t, 0), e1 = v.corner(t, 1) - p0, e2 = v.corner(t, 2) - p0;
+                const V3 h = cross(d, e2);
+                const double det = dot(e1, h);
+                if (!(std::fabs(det) > 1e-300)) continue;
+                const double inv = 1.0 / det;
+                const V3 sv = a - p0;
+                const double u = inv * dot(sv, h);
+                const V3 qv = cross(sv, e1);
+                const double w = inv * dot(d, qv), s = inv * dot(e2, qv);
+                constexpr double kTol = 1e-9;
+                if (u < -kTol || w < -kTol || u + w > 1.0 + kTol || s < 0.0 || s > 1.0) continue;
+                int at = count++;  // insertion: the list stays ascending
+                while (at > 0 && s_out[at - 1] > s) {
+                    s_out[at] = s_out[at - 1];
+                    --at;
+                }
+                s_out[at] = s;
+            }
+            continue;
+        }
+        if (top + 2 > kStack) continue;
+        stack[top++] = v.child(node, 0);
+        stack[top++] = v.child(node, 1);
+    }
+    return count;
+}
+
+/// The deepest point inside the mesh of the segment a-b (local frame) whose crossings of the
+/// surface are s (count of them, ascending): between each two successive crossings, the
+/// points at 1/4, 1/2 and 3/4 of the way, the one farthest inside (by the nearest feature's
+/// pseudo-normal, as the vertex contacts' inside test). Returns its fraction along a-b (-1
+/// when no sample is inside: a graze) and its nearest surface point `near`.
+inline double deepest_inside(const View& v, index root, V3 a, V3 b, const double* s, int count,
+                             Nearest& near) {
+    double best_s = -1.0, best_d2 = 0.0;
+    for (int k = 0; k + 1 < count; ++k) {
+        for (int q = 1; q <= 3; ++q) {
+            const double f = s[k] + 0.25 * q * (s[k + 1] - s[k]);
+            const V3 x = a + f * (b - a);
+            const Nearest at = nearest(v, root, x);
+            if (!(dot(x - at.x, at.n) < 0.0) || !(at.d2 > best_d2)) continue;  // outside
+            best_s = f;
+            best_d2 = at.d2;
+            near = at;
+        }
+    }
+    return best_s;
+}
+
 /// A mesh collider's pose, velocities and coefficients at the step's end.
 struct Frame {
     const Model& m;
@@ -417,7 +506,11 @@ struct Frame {
 /// point moves by `move` (local frame), and its velocity relative to the collider, when
 /// approaching along the unit normal (local), takes restitution and friction. Returns false
 /// (nothing changed) when every particle is pinned, or when `resting` and the contact point
-/// is not approaching (within the margin but leaving).
+/// is not approaching (within the margin but leaving). Where the free particles' weights sum
+/// to less than kFreeWeight (the contact point lies by pinned ones, such as those the
+/// thickness stage holds in its second pass), the move and the velocity change are scaled by
+/// that sum over kFreeWeight: a free particle then moves at most about 1 / kFreeWeight times
+/// the move, not move / w, which folds the soft surface through itself as w goes to 0.
 inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l, V3 x_local,
                  V3 move, V3 normal, bool resting, double* q, double* qd, V3& j,
                  colliders::Seen* seen) {
@@ -436,11 +529,13 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
     const V3 rel = vel - (f.vc + cross(f.wc, xw - f.c));
     const double vn = dot(rel, nw);
     if (resting && vn >= 0.0) return false;  // within the margin but leaving: free
+    const double gain = free_weight < kFreeWeight ? free_weight / kFreeWeight : 1.0;
+    move = gain * move;
     const V3 dx = to_world(f.r, move);
     V3 dv{0.0, 0.0, 0.0};
     if (vn < 0.0) {
         const V3 tangent = rel - vn * nw;
-        dv = (-(1.0 + f.e) * vn) * nw + (f.keep - 1.0) * tangent;
+        dv = gain * ((-(1.0 + f.e) * vn) * nw + (f.keep - 1.0) * tangent);
         j = j - (free_weight / sum) * dv;
     }
     for (int k = 0; k < n; ++k) {
@@ -455,16 +550,16 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
     return true;
 }
 
-/// Mesh collider k's sharp edges against the soft bodies' edges and triangles (the header's
-/// edge contacts), at the positions q (N, 3) the vertex contacts left; q, qd change in place,
-/// j gathers the impulse the collider receives [N s]. c, r, vc, wc: the collider's pose and
-/// velocities at the step's end.
+/// Mesh collider k's edges and faces against the soft bodies' edges and triangles (the
+/// header's edge contacts), at the positions q (N, 3) the vertex contacts left; q, qd change
+/// in place, j gathers the impulse the collider receives [N s]. c, r, vc, wc: the collider's
+/// pose and velocities at the step's end.
 inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc,
                           double e, double keep, double* q, double* qd, V3& j,
                           colliders::Seen* seen) {
     const index root = m.colliders.mesh_root[k];
     const View v{m};
-    if (root < 0 || !v.has_sharp(root)) return;  // no sharp edge
+    if (root < 0 || !v.has_sharp(root)) return;  // edge contacts off
     const Frame f{m, c, r, vc, wc, e, keep};
     const double margin = m.colliders.mesh_margin[k];
     const double* rb = v.bounds(root);
@@ -477,26 +572,30 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         const index* tri = m.triangles.indices + 3 * t;
         V3 l[3];
         double lo[3], hi[3];
-        for (int d = 0; d < 3; ++d) {
-            lo[d] = std::numeric_limits<double>::infinity();
-            hi[d] = -std::numeric_limits<double>::infinity();
-        }
-        for (int a = 0; a < 3; ++a) {
-            l[a] = to_local(r, load(q, tri[a]) - c);
+        auto place = [&] {  // the soft triangle's local corners and its box plus the margin
             for (int d = 0; d < 3; ++d) {
-                lo[d] = std::min(lo[d], (&l[a].x)[d] - margin);
-                hi[d] = std::max(hi[d], (&l[a].x)[d] + margin);
+                lo[d] = std::numeric_limits<double>::infinity();
+                hi[d] = -std::numeric_limits<double>::infinity();
             }
-        }
+            for (int a = 0; a < 3; ++a) {
+                l[a] = to_local(r, load(q, tri[a]) - c);
+                for (int d = 0; d < 3; ++d) {
+                    lo[d] = std::min(lo[d], (&l[a].x)[d] - margin);
+                    hi[d] = std::max(hi[d], (&l[a].x)[d] + margin);
+                }
+            }
+        };
+        place();
         if (!boxes_meet(lo, hi, root_box)) continue;
-        each_sharp_edge(v, root, lo, hi, [&](index mt, int mk) {
+        bool capped = false;  // a collider edge through the triangle pushed it this round
+        auto visit = [&](index mt, int mk) {
             const V3 p = v.corner(mt, mk), pq = v.corner(mt, (mk + 1) % 3);
             const index twin = v.sharp_twin(mt, mk);
-            const V3 n1 = v.face_normal(mt), n2 = v.face_normal(twin);
-            const V3 ne = v.pseudo_normal(mt, 3 + mk);
-            // the soft triangle's edges (each soft edge by its owner) against the sharp edge
-            for (int a = 0; a < 3; ++a) {
+            // the soft triangle's edges (each soft edge by its owner) against a sharp edge
+            for (int a = 0; a < 3 && twin >= 0; ++a) {
                 if (m.triangles.edge_owner[3 * t + a] == 0) continue;
+                const V3 n1 = v.face_normal(mt), n2 = v.face_normal(twin);
+                const V3 ne = v.pseudo_normal(mt, 3 + mk);
                 const int b = (a + 1) % 3;
                 double s = 0.0, u = 0.0;
                 thick::closest_segments(l[a], l[b], p, pq, s, u);
@@ -506,7 +605,11 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 const double d1 = dot(d, n1), d2 = dot(d, n2);
                 bool inside = false;
                 if ((d1 < 0.0 && d2 < 0.0) || dist == 0.0) {
-                    // behind both faces: inside when the soft edge passes through one of them
+                    // behind both faces: inside when the soft edge passes through one of them.
+                    // Only across the edge's length: past its ends the common perpendicular
+                    // runs along the edge's line, far from the surface a chord there cuts
+                    // (the chords below push it out to its nearest surface)
+                    if (!(u > 0.0 && u < 1.0)) continue;
                     const index* t1 = m.collider_meshes.triangles + 3 * mt;
                     const index* t2 = m.collider_meshes.triangles + 3 * twin;
                     inside = segment_meets_triangle(
@@ -527,7 +630,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                     l[b] = ls[1];
                 }
             }
-            // a corner through the soft triangle: the sharp edge's end beyond it
+            // a corner or a cap through the soft triangle: the edge's end beyond it
             if (!segment_meets_triangle(p, pq, l[0], l[1], l[2])) return;
             const V3 tn = unit(cross(l[1] - l[0], l[2] - l[0]));
             double best = std::numeric_limits<double>::infinity();
@@ -550,8 +653,47 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             }
             if (!std::isfinite(best)) return;
             const double w[3] = {at.wa, at.wb, at.wc};
-            push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false, q, qd, j, seen);
-        });
+            capped |= push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false, q, qd, j,
+                           seen);
+        };
+        // a cap of a smooth surface may hold vertices beyond the triangle that no crossing
+        // edge ends at: once pushed past the crossing edges' ends, their edges cross next
+        for (int round = 0; round < kRounds; ++round) {
+            capped = false;
+            each_sharp_edge(v, root, lo, hi, visit);
+            if (!capped) break;
+            place();
+        }
+    }
+    // every soft edge (once, by its owner) against the faces: a chord through the mesh
+    for (index t = 0; t < m.triangles.count; ++t) {
+        const index* tri = m.triangles.indices + 3 * t;
+        for (int a = 0; a < 3; ++a) {
+            if (m.triangles.edge_owner[3 * t + a] == 0) continue;
+            const index idx[2] = {tri[a], tri[(a + 1) % 3]};
+            V3 ls[2] = {to_local(r, load(q, idx[0]) - c), to_local(r, load(q, idx[1]) - c)};
+            double box[6];
+            for (int d = 0; d < 3; ++d) {
+                box[d] = std::min((&ls[0].x)[d], (&ls[1].x)[d]);
+                box[3 + d] = std::max((&ls[0].x)[d], (&ls[1].x)[d]);
+            }
+            if (!boxes_meet(box, box + 3, root_box)) continue;
+            for (int round = 0; round < kRounds; ++round) {
+                double s[kCrossings];
+                const int count = segment_crossings(v, root, ls[0], ls[1], s);
+                if (count == 0) break;
+                Nearest near;
+                const double at = deepest_inside(v, root, ls[0], ls[1], s, count, near);
+                if (at < 0.0) break;  // grazing the surface
+                const V3 x = ls[0] + at * (ls[1] - ls[0]);
+                const double dist = std::sqrt(near.d2);
+                const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
+                const double w[2] = {1.0 - at, at};
+                if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd,
+                          j, seen))
+                    break;  // both ends pinned
+            }
+        }
     }
 }
 
