@@ -23,9 +23,12 @@
 // end positions, in the collider's frame, after the vertex contacts. The mesh's edges are
 // flagged once in Python (collider_mesh_sharp_edges): sharp (convex, faces more than
 // sharp_angle apart: a box's edges), bent (any other edge not flat), or neither (a flat
-// face's tessellation; or the edge contacts off). Three tests:
-//   1. ridges: per soft triangle, the sharp edges near its box are found through the tree;
-//      its edges (each soft edge once) against them: a soft edge that passes through one of
+// face's tessellation; or the edge contacts off). Per soft triangle, one walk of the tree
+// finds the mesh triangles near its box and within the margin of its plane; those wholly on
+// one side of its plane can be neither cut by its edges nor reach through it (a flagged
+// sharp edge still meets its resting contacts). Three tests:
+//   1. ridges: the triangle's edges (each soft edge once) against the sharp edges found
+//      (those whose box meets the triangle's box): a soft edge that passes through one of
 //      the sharp edge's two faces with its closest point to the edge inside the edge's wedge
 //      (behind both faces) and along the edge's length (not past its ends, where the common
 //      perpendicular runs along the edge's line, far from the surface) is pushed out along
@@ -37,12 +40,13 @@
 //      triangle past that end by the margin; repeated (up to kRounds) while one did, since a
 //      smooth surface's cap through a large soft triangle may hold vertices that no crossing
 //      edge ends at.
-//   3. chords: every soft edge near the mesh against its faces (segment-triangle, through
-//      the tree): a soft edge whose ends are outside but which passes through the surface
-//      cuts a chord, across a smooth patch as across a ridge, whatever the edges' angles.
-//      Between successive crossings the points at 1/4, 1/2, 3/4 are tested with the inside
-//      test above; the deepest goes to its closest surface point plus the margin (along the
-//      direction to it), and the edge is tested again (up to kRounds). A flat face cannot be
+//   3. chords: the triangle's edges against the faces found (segment-triangle; again
+//      through the tree once something moved them): a soft edge whose ends are outside but
+//      which passes through the surface cuts a chord, across a smooth patch as across a
+//      ridge, whatever the edges' angles. Between successive crossings the points at 1/4,
+//      1/2 and 3/4 are tested with the inside test above; the deepest goes to its closest
+//      surface point plus the margin (along the direction to it), and the edge is tested
+//      again (up to kRounds). A flat face cannot be
 //      cut between two outside vertices, and a chord under a concave edge alone cannot exist
 //      (a straight segment entering a valley leaves it on the inside), so 2 with the bent
 //      edges and 3 with the faces test for every crossing the two surfaces can have.
@@ -373,32 +377,33 @@ inline bool boxes_meet(const double* lo, const double* hi, const double* b) {
     return true;
 }
 
-/// Each edge that takes part in edge contacts (sharp or bent; triangle t, edge k: corner k
-/// to k + 1) below `root` whose box meets the box [lo, hi] (local frame): calls visit(t, k).
-/// Each such edge has one owner, so it is visited once; subtrees without one are not
-/// entered (flat tessellation costs nothing).
+/// Whether the box b (lo, hi) lies wholly farther than `reach` from the plane through x
+/// with normal n (not unit: reach is in units of |n| m).
+inline bool box_beside_plane(const double* b, V3 x, V3 n, double reach) {
+    const V3 centre{0.5 * (b[0] + b[3]), 0.5 * (b[1] + b[4]), 0.5 * (b[2] + b[5])};
+    const double spread = 0.5 * ((b[3] - b[0]) * std::fabs(n.x) + (b[4] - b[1]) * std::fabs(n.y) +
+                                 (b[5] - b[2]) * std::fabs(n.z));
+    return std::fabs(dot(centre - x, n)) > spread + reach;
+}
+
+/// Each leaf of the tree below `root` whose box meets the box [lo, hi] (local frame) and
+/// comes within `reach` of the plane through x with normal n (reach in units of |n| m):
+/// calls visit(begin, end) with its triangle rows. `all` false: only the subtrees holding an
+/// edge that takes part in edge contacts (flat tessellation costs nothing).
 template <class Visit>
-inline void each_sharp_edge(const View& v, index root, const double* lo, const double* hi,
-                            Visit visit) {
+inline void each_leaf(const View& v, index root, const double* lo, const double* hi, V3 x, V3 n,
+                      double reach, bool all, Visit visit) {
     index stack[kStack];
     int top = 0;
     stack[top++] = root;
     while (top > 0) {
         const index node = stack[--top];
-        if (!v.has_sharp(node) || !boxes_meet(lo, hi, v.bounds(node))) continue;
+        if ((!all && !v.has_sharp(node)) || !boxes_meet(lo, hi, v.bounds(node)) ||
+            box_beside_plane(v.bounds(node), x, n, reach))
+            continue;
         const index tb = v.begin(node), te = v.end(node);
         if (te > tb) {
-            for (index t = tb; t < te; ++t)
-                for (int k = 0; k < 3; ++k) {
-                    if (!v.takes_part(t, k)) continue;
-                    const V3 a = v.corner(t, k), b = v.corner(t, (k + 1) % 3);
-                    double box[6];
-                    for (int d = 0; d < 3; ++d) {
-                        box[d] = std::min((&a.x)[d], (&b.x)[d]);
-                        box[3 + d] = std::max((&a.x)[d], (&b.x)[d]);
-                    }
-                    if (boxes_meet(lo, hi, box)) visit(t, k);
-                }
+            visit(tb, te);
             continue;
         }
         if (top + 2 > kStack) continue;
@@ -407,9 +412,18 @@ inline void each_sharp_edge(const View& v, index root, const double* lo, const d
     }
 }
 
+/// Whether the box of the segment a-b meets the box [lo, hi].
+inline bool segment_box_meets(V3 a, V3 b, const double* lo, const double* hi) {
+    for (int d = 0; d < 3; ++d)
+        if (std::max((&a.x)[d], (&b.x)[d]) < lo[d] || hi[d] < std::min((&a.x)[d], (&b.x)[d]))
+            return false;
+    return true;
+}
+
 /// Whether segment a-b meets triangle (p0, p1, p2), its edges included (Moller-Trumbore
-/// with a tolerance: a soft edge through the sharp edge itself meets both its faces).
-inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
+/// with a tolerance: a soft edge through the sharp edge itself meets both its faces); s: the
+/// fraction along a-b where it does.
+inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2, double& s) {
     const V3 d = b - a, e1 = p1 - p0, e2 = p2 - p0;
     const V3 h = cross(d, e2);
     const double det = dot(e1, h);
@@ -418,49 +432,57 @@ inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
     const V3 sv = a - p0;
     const double u = inv * dot(sv, h);
     const V3 qv = cross(sv, e1);
-    const double w = inv * dot(d, qv), s = inv * dot(e2, qv);
+    const double w = inv * dot(d, qv);
+    s = inv * dot(e2, qv);
     constexpr double kTol = 1e-9;
     return u >= -kTol && w >= -kTol && u + w <= 1.0 + kTol && s >= 0.0 && s <= 1.0;
+}
+
+inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
+    double s = 0.0;
+    return segment_meets_triangle(a, b, p0, p1, p2, s);
 }
 
 constexpr double kFreeWeight = 0.25;  // push(): below it, the free particles' share is cut
 constexpr int kCrossings = 16;  // most crossings of one soft edge through the mesh kept
 constexpr int kRounds = 4;      // most pushes of one soft edge (chords) or triangle (caps)
 
+/// Adds s to the ascending list s_out of count entries (at most kCrossings: then dropped).
+inline void add_crossing(double* s_out, int& count, double s) {
+    if (count >= kCrossings) return;
+    int at = count++;
+    while (at > 0 && s_out[at - 1] > s) {
+        s_out[at] = s_out[at - 1];
+        --at;
+    }
+    s_out[at] = s;
+}
+
+/// Adds to the ascending list s_out (count entries) the fractions along segment a-b (local
+/// frame) where it passes through triangles tb..te of the mesh (segment_meets_triangle: a
+/// segment through an edge is listed once per triangle).
+inline void leaf_crossings(const View& v, index tb, index te, V3 a, V3 b, double* s_out,
+                           int& count) {
+    for (index t = tb; t < te; ++t) {
+        double s = 0.0;
+        if (segment_meets_triangle(a, b, v.corner(t, 0), v.corner(t, 1), v.corner(t, 2), s))
+            add_crossing(s_out, count, s);
+    }
+}
+
 /// The fractions s along segment a-b (local frame) where it passes through a triangle of
-/// the mesh below `root` (edges included, as segment_meets_triangle), ascending, at most
-/// kCrossings of them (the first found; a segment through an edge is listed once per
-/// triangle); returns how many.
+/// the mesh below `root`, ascending, at most kCrossings of them; returns how many.
 inline int segment_crossings(const View& v, index root, V3 a, V3 b, double* s_out) {
-    const V3 d = b - a;
     int count = 0;
     index stack[kStack];
     int top = 0;
     stack[top++] = root;
-    while (top > 0 && count < kCrossings) {
+    while (top > 0) {
         const index node = stack[--top];
         if (!segment_meets_box(v.bounds(node), a, b, 1.0)) continue;
         const index tb = v.begin(node), te = v.end(node);
         if (te > tb) {
-            for (index t = tb; t < te && count < kCrossings; ++t) {
-                const V3 p0 = v.corner(t, 0), e1 = v.corner(t, 1) - p0, e2 = v.corner(t, 2) - p0;
-                const V3 h = cross(d, e2);
-                const double det = dot(e1, h);
-                if (!(std::fabs(det) > 1e-300)) continue;
-                const double inv = 1.0 / det;
-                const V3 sv = a - p0;
-                const double u = inv * dot(sv, h);
-                const V3 qv = cross(sv, e1);
-                const double w = inv * dot(d, qv), s = inv * dot(e2, qv);
-                constexpr double kTol = 1e-9;
-                if (u < -kTol || w < -kTol || u + w > 1.0 + kTol || s < 0.0 || s > 1.0) continue;
-                int at = count++;  // insertion: the list stays ascending
-                while (at > 0 && s_out[at - 1] > s) {
-                    s_out[at] = s_out[at - 1];
-                    --at;
-                }
-                s_out[at] = s;
-            }
+            leaf_crossings(v, tb, te, a, b, s_out, count);
             continue;
         }
         if (top + 2 > kStack) continue;
@@ -588,6 +610,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         place();
         if (!boxes_meet(lo, hi, root_box)) continue;
         bool capped = false;  // a collider edge through the triangle pushed it this round
+        bool pushed = false;  // anything moved the triangle's corners
         auto visit = [&](index mt, int mk) {
             const V3 p = v.corner(mt, mk), pq = v.corner(mt, (mk + 1) % 3);
             const index twin = v.sharp_twin(mt, mk);
@@ -628,6 +651,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                          seen)) {
                     l[a] = ls[0];
                     l[b] = ls[1];
+                    pushed = true;
                 }
             }
             // a corner or a cap through the soft triangle: the edge's end beyond it
@@ -655,35 +679,59 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             const double w[3] = {at.wa, at.wb, at.wc};
             capped |= push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false, q, qd, j,
                            seen);
+            pushed |= capped;
         };
-        // a cap of a smooth surface may hold vertices beyond the triangle that no crossing
-        // edge ends at: once pushed past the crossing edges' ends, their edges cross next
+        // One walk over the leaves near the triangle: its own edges' crossings of the faces
+        // (the chords below; every leaf, flat ones too) and the flagged edges near it (ridges,
+        // corners, caps). A cap of a smooth surface may hold vertices beyond the triangle
+        // that no crossing edge ends at: once pushed past the crossing edges' ends, their
+        // edges cross next, so the flagged edges are walked again while a cap was pushed.
+        double cuts[3][kCrossings];
+        int cut_count[3] = {0, 0, 0};
         for (int round = 0; round < kRounds; ++round) {
             capped = false;
-            each_sharp_edge(v, root, lo, hi, visit);
+            // a mesh triangle wholly on one side of the soft triangle's plane can neither be
+            // crossed by a soft edge nor have an edge through the soft triangle: most near a
+            // soft surface lying on the mesh are, and are passed over, whole subtrees farther
+            // than the margin from the plane first (a sharp edge within the margin is still
+            // visited: its resting contacts cross nothing)
+            const V3 tn = cross(l[1] - l[0], l[2] - l[0]);
+            const double reach = margin * std::sqrt(dot(tn, tn));
+            each_leaf(v, root, lo, hi, l[0], tn, reach, round == 0, [&](index tb, index te) {
+                for (index mt = tb; mt < te; ++mt) {
+                    const V3 p0 = v.corner(mt, 0), p1 = v.corner(mt, 1), p2 = v.corner(mt, 2);
+                    const double h0 = dot(p0 - l[0], tn), h1 = dot(p1 - l[0], tn),
+                                 h2 = dot(p2 - l[0], tn);
+                    const bool straddles = !((h0 > 0.0 && h1 > 0.0 && h2 > 0.0) ||
+                                             (h0 < 0.0 && h1 < 0.0 && h2 < 0.0));
+                    for (int a = 0; a < 3 && straddles && round == 0 && !pushed; ++a) {
+                        double cut = 0.0;
+                        if (m.triangles.edge_owner[3 * t + a] != 0 &&
+                            segment_meets_triangle(l[a], l[(a + 1) % 3], p0, p1, p2, cut))
+                            add_crossing(cuts[a], cut_count[a], cut);
+                    }
+                    for (int mk = 0; mk < 3; ++mk)
+                        if (v.takes_part(mt, mk) && (straddles || v.sharp_twin(mt, mk) >= 0) &&
+                            segment_box_meets(v.corner(mt, mk), v.corner(mt, (mk + 1) % 3), lo, hi))
+                            visit(mt, mk);
+                }
+            });
             if (!capped) break;
             place();
         }
-    }
-    // every soft edge (once, by its owner) against the faces: a chord through the mesh
-    for (index t = 0; t < m.triangles.count; ++t) {
-        const index* tri = m.triangles.indices + 3 * t;
+        // chords: the triangle's own edges (each soft edge once, by its owner) through the
+        // faces, found in the walk above unless something moved since (then again)
         for (int a = 0; a < 3; ++a) {
             if (m.triangles.edge_owner[3 * t + a] == 0) continue;
             const index idx[2] = {tri[a], tri[(a + 1) % 3]};
-            V3 ls[2] = {to_local(r, load(q, idx[0]) - c), to_local(r, load(q, idx[1]) - c)};
-            double box[6];
-            for (int d = 0; d < 3; ++d) {
-                box[d] = std::min((&ls[0].x)[d], (&ls[1].x)[d]);
-                box[3 + d] = std::max((&ls[0].x)[d], (&ls[1].x)[d]);
-            }
-            if (!boxes_meet(box, box + 3, root_box)) continue;
+            V3 ls[2] = {l[a], l[(a + 1) % 3]};
             for (int round = 0; round < kRounds; ++round) {
-                double s[kCrossings];
-                const int count = segment_crossings(v, root, ls[0], ls[1], s);
+                const int count = round == 0 && !pushed
+                                      ? cut_count[a]
+                                      : segment_crossings(v, root, ls[0], ls[1], cuts[a]);
                 if (count == 0) break;
                 Nearest near;
-                const double at = deepest_inside(v, root, ls[0], ls[1], s, count, near);
+                const double at = deepest_inside(v, root, ls[0], ls[1], cuts[a], count, near);
                 if (at < 0.0) break;  // grazing the surface
                 const V3 x = ls[0] + at * (ls[1] - ls[0]);
                 const double dist = std::sqrt(near.d2);
@@ -692,7 +740,10 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd,
                           j, seen))
                     break;  // both ends pinned
+                pushed = true;
             }
+            l[a] = ls[0];
+            l[(a + 1) % 3] = ls[1];
         }
     }
 }
