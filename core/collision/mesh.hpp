@@ -30,11 +30,12 @@
 //   1. ridges: the triangle's edges (each soft edge once) against the sharp edges found
 //      (those whose box meets the triangle's box): a soft edge that passes through one of
 //      the sharp edge's two faces with its closest point to the edge inside the edge's wedge
-//      (behind both faces) and along the edge's length (not past its ends, where the common
-//      perpendicular runs along the edge's line, far from the surface) is pushed out along
-//      the two edges' common perpendicular to `margin` beyond the edge; one resting on the
-//      edge within the margin (in the cone of its two face normals) and approaching it is
-//      held there.
+//      (behind both faces), along the edge's length (not past its ends, where the common
+//      perpendicular runs along the edge's line, far from the surface) and below the edge
+//      (the common perpendicular in the cone of the two face normals: on a nearly flat edge
+//      it may run along the surface) is pushed out along the two edges' common
+//      perpendicular to `margin` beyond the edge; one resting on the edge within the margin
+//      (in the cone of its two face normals) and approaching it is held there.
 //   2. corners and caps: a sharp or bent edge through the soft triangle whose end projects
 //      into the triangle and lies beyond it (along the end's pseudo-normal) pushes the
 //      triangle past that end by the margin; repeated (up to kRounds) while one did, since a
@@ -633,6 +634,13 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                     // runs along the edge's line, far from the surface a chord there cuts
                     // (the chords below push it out to its nearest surface)
                     if (!(u > 0.0 && u < 1.0)) continue;
+                    // and only along a direction in the cone of the faces' normals: on a
+                    // nearly flat edge (a low sharp_angle) the wedge is nearly a half-space
+                    // and the common perpendicular of two nearly parallel edges may run
+                    // along the surface, far from the chord's depth
+                    const V3 along = cross(n1, n2), out = -1.0 * d;
+                    if (dot(cross(n1, out), along) < 0.0 || dot(cross(out, n2), along) < 0.0)
+                        continue;
                     const index* t1 = m.collider_meshes.triangles + 3 * mt;
                     const index* t2 = m.collider_meshes.triangles + 3 * twin;
                     inside = segment_meets_triangle(
