@@ -8,10 +8,10 @@ case for the mesh: the ball seated in the hole of a ring (a torus mesh of 5,120 
 major radius 0.45 m, tube 0.2 m), so that every vertex of the ball lies inside the mesh's
 bounding box and goes through the tree's path and inside tests each step. The sphere mesh
 three more ways for the edge contacts (its faces are about 4 degrees apart, so that at the
-default ``sharp_angle`` of 30 no edge is sharp and the edge stage only scans the flags):
+default ``sharp_angle`` of 30 no edge is sharp, every edge bent: the chords and caps only):
 ``mesh-vertices`` with the edge contacts off (``sharp_angle=None``), ``mesh-edges`` with
-every one of its 7,680 edges sharp (``sharp_angle=0``: the worst case, each soft triangle
-near the mesh looks up its edges in the tree), and ``ring-edges`` the ring so. And a sharp
+every one of its 7,680 edges sharp (``sharp_angle=0``: the edge-edge push too), and
+``ring-edges`` the ring so. And a sharp
 ridge: ``ridge`` the ball touching the top edge of a 1 m box of 12,288 triangles (32 x 32
 squares a side) turned 45 degrees about z, whose 384 edge pieces along the box's edges are
 sharp, ``ridge-vertices`` the same without edge contacts. Midpoint at

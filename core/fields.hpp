@@ -199,16 +199,18 @@
     F(collider_meshes, edge_normals, collider_mesh_edge_normals, f64, (CT, 3, 3), finite, "",     \
       "pseudo-normal (unit mean of its two faces' normals) of each triangle's edges (corner k "  \
       "to corner k + 1)")                                                                         \
-    F(collider_meshes, sharp_edges, collider_mesh_sharp_edges, i64, (CT, 3), index(-1, CT), "",   \
+    F(collider_meshes, sharp_edges, collider_mesh_sharp_edges, i64, (CT, 3), index(-2, CT), "",   \
       "the triangle across edge k of each triangle where that edge is sharp and convex and this " \
-      "triangle owns it (its first vertex row below its second): the edge contacts; else -1")    \
+      "triangle owns it (its first vertex row below its second): the edge contacts; -2 where it " \
+      "is bent but not sharp (and owned); else -1")                                              \
     F(collider_meshes, node_children, collider_mesh_node_children, i64, (CN, 2), index(0, CN),    \
       "",                                                                                         \
       "the two child rows of each inner tree node (after its own row); 0 0 for a leaf")          \
     F(collider_meshes, node_tris, collider_mesh_node_tris, i64, (CN, 2), range(CT), "",           \
       "[begin, end) triangle rows of each leaf; empty for an inner node")                         \
     F(collider_meshes, node_sharp, collider_mesh_node_sharp, i64, (CN), index(0, 2), "",          \
-      "1 where a tree node's triangles hold a sharp edge (collider_mesh_sharp_edges), else 0")   \
+      "1 where a tree node's triangles hold a sharp or bent edge (collider_mesh_sharp_edges "     \
+      "!= -1), else 0")                                                                           \
     F(collider_meshes, node_bounds, collider_mesh_node_bounds, f64, (CN, 2, 3), finite, "m",      \
       "lower and upper corner of each tree node's box, in the local frame")
 

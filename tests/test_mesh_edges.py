@@ -203,6 +203,7 @@ def cloth_over_corner(**kw) -> tuple[sb.Model, sb.ColliderMesh]:
     builder.add_collider(collider)
     return builder.finalize(), collider
 
+
 @pytest.mark.parametrize("angle", [30.0, None])
 def test_cloth_draped_over_a_box_corner_is_not_pierced(angle):
     """A 0.8 x 0.8 m cloth (16 x 16 squares, 5 cm edges) dropped onto the corner of a
@@ -383,3 +384,98 @@ def test_scene_mesh_colliders_take_sharp_angle(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err
     assert "colliders.0.sharp_angle" in err, err
+
+
+# -- smooth colliders: chords and caps ------------------------------------------------------
+def soft_mesh_crossings(model, state, collider: sb.ColliderMesh) -> int:
+    """(edge, triangle) crossings between the soft surfaces and the collider's mesh in its
+    pose in ``state``, both ways: soft edges through collider triangles and collider edges
+    through soft triangles (edge_crossings, the independent NumPy check of the contact
+    scenes, over the two surfaces together)."""
+    from softbody.collision.crossings import edge_crossings
+    from softbody.mesh.topology import unique_edges
+
+    q, n = state.particle_q, len(state.particle_q)
+    world = state.collider_q[0] + collider.data.vertices @ state.collider_rotation[0].T
+    tri, soft_tri = collider.data.triangles, model.tri_indices
+    soft_edges = unique_edges(soft_tri)
+    found = edge_crossings(np.vstack([q, world]), np.vstack([soft_tri, tri + n]),
+                           np.vstack([soft_edges, unique_edges(tri) + n]))  # fmt: skip
+    soft_edge = found[:, 0] < len(soft_edges)
+    soft_triangle = found[:, 1] < len(soft_tri)
+    return int(np.count_nonzero(soft_edge != soft_triangle))
+
+
+def smooth_ball_collider(**kw) -> sb.ColliderMesh:
+    """A 0.2 m sphere mesh (1,280 triangles, neighbouring faces about 10 degrees apart: no
+    edge sharper than the default sharp_angle) with its top at y = 0.2."""
+    return sb.ColliderMesh(sb.icosphere(3, radius=0.2), restitution=0.0, friction=0.5, **kw)
+
+
+def smooth_capsule_collider(**kw) -> sb.ColliderMesh:
+    """A capsule of radius 0.1 m lying along x (0.6 m between its caps' centres; 8 rings a
+    cap, 32 segments around: faces about 11 degrees apart), its top at y = 0.1."""
+    rot = sb.collision.rotation_about((0, 0, 1), np.pi / 2)
+    return sb.ColliderMesh(sb.capsule(0.1, 0.6, rings=8, segments=32), rotation=rot,
+                           restitution=0.0, friction=0.5, **kw)  # fmt: skip
+
+
+@pytest.mark.parametrize("angle", [30.0, None])
+def test_coarse_cloth_on_a_smooth_sphere_is_not_cut(angle):
+    """A 0.8 m cloth of 8 x 8 squares (0.1 m edges: chords across a 0.2 m sphere sag up
+    to 6 mm) dropped over a finely tessellated sphere mesh with no sharp edge. Reference:
+    at every 5th step of 0.6 s no cloth edge passes through a sphere triangle and no sphere
+    edge through a cloth triangle (edge_crossings both ways), and the cloth lies on the top
+    (its highest point above the sphere's). The sphere's edges are all flatter than
+    sharp_angle: before the edge contacts took every bent edge and face, the default run
+    was the vertex-only run (sharp_angle None), whose chords the same check finds."""
+    collider = smooth_ball_collider(sharp_angle=angle)
+    assert not np.any(collider.data.sharp_edges >= 0)
+    sheet = sb.rectangle((0.8, 0.8), (8, 8))
+    flat = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0] + [0.011, 0.25, 0.017]
+    builder = sb.ModelBuilder()
+    builder.add_cloth(sb.TriMesh(flat, sheet.faces), mass=0.1, stiffness=300.0, damping=0.05)
+    builder.add_collider(collider)
+    model = builder.finalize()
+    sim = sb.Simulator(model, integrator="midpoint", dt=5e-4)
+    state = model.state()
+    worst = 0
+    for _ in range(240):
+        sim.run(state, 5)
+        worst = max(worst, soft_mesh_crossings(model, state, collider))
+    if angle is None:
+        assert worst > 0
+    else:
+        assert worst == 0
+        assert state.particle_q[:, 1].max() > 0.2
+
+
+@pytest.mark.parametrize(
+    ("integrator", "dt", "angle"),
+    [("midpoint", 5e-4, 30.0), ("implicit_euler", 2e-3, 30.0), ("midpoint", 5e-4, None)],
+)
+def test_coarse_ball_on_a_smooth_capsule_is_not_cut(integrator, dt, angle):
+    """A 42-vertex ball (radius 0.25 m, edges about 0.16 m: longer than the capsule's 0.1 m
+    radius) dropped across a smooth capsule mesh lying along x. Reference: at every 5th step
+    of 0.8 s no ball edge passes through a capsule triangle and no capsule edge through a
+    ball triangle (edge_crossings both ways: a chord under the tube and the tube through a
+    ball face), and the ball rests on it (its lowest point not below the capsule's axis).
+    Vertex contacts alone (sharp_angle None) leave the ball cut."""
+    collider = smooth_capsule_collider(sharp_angle=angle)
+    assert not np.any(collider.data.sharp_edges >= 0)
+    builder = sb.ModelBuilder(gravity=(0.0, -9.81, 0.0))
+    builder.add_soft_body(sb.icosphere(1, radius=0.25, center=(0.013, 0.4, 0.021)), mass=1.0,
+                          stiffness=800.0, damping=2.0, gas=100.0)  # fmt: skip
+    builder.add_collider(collider)
+    model = builder.finalize()
+    sim = sb.Simulator(model, integrator=integrator, dt=dt)
+    state = model.state()
+    worst = 0
+    for _ in range(round(0.8 / (5 * dt))):
+        sim.run(state, 5)
+        worst = max(worst, soft_mesh_crossings(model, state, collider))
+    if angle is None:
+        assert worst > 0
+    else:
+        assert worst == 0
+        assert state.particle_q[:, 1].min() > 0.0

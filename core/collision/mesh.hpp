@@ -18,22 +18,44 @@
 // that its next path starts strictly outside) and responds as against the analytic
 // colliders (colliders::respond): restitution, friction, the opposite impulse to the
 // collider.
-// Then the mesh's sharp edges (convex, flagged once in Python: collider_mesh_sharp_edges)
-// against the soft bodies' edges and triangles, so that a ridge or a corner of the mesh
-// cannot pass between soft vertices that all stay outside (edge_contacts below): a
-// closest-distance push at the step's end positions, in the collider's frame, after the
-// vertex contacts. Per soft triangle, the sharp edges near its box are found through the
-// tree; its edges (each soft edge once) against them: a soft edge that passes through one
-// of the sharp edge's two faces with its closest point to the edge inside the edge's wedge
-// (behind both faces) is pushed out along the two edges' common perpendicular to `margin`
-// beyond the edge; one resting on the edge within the margin (in the cone of its two face
-// normals) and approaching it is held there. Then a corner: a sharp edge through the soft
-// triangle whose end projects into the triangle and lies beyond it (along the end's
-// pseudo-normal) pushes the triangle past that end by the margin. The soft side moves with
-// barycentric weights w_k, mass-weighted (particle k by w_k / m_k / sum_l w_l^2 / m_l times
-// the contact point's move), and the contact point's velocity relative to the collider takes
+// Then edge contacts, so that no soft edge passes through the mesh and no mesh edge through a
+// soft triangle while every soft vertex stays outside (edge_contacts below), at the step's
+// end positions, in the collider's frame, after the vertex contacts. The mesh's edges are
+// flagged once in Python (collider_mesh_sharp_edges): sharp (convex, faces more than
+// sharp_angle apart: a box's edges), bent (any other edge not flat), or neither (a flat
+// face's tessellation; or the edge contacts off). Per soft triangle, one walk of the tree
+// finds the mesh triangles near its box and within the margin of its plane; those wholly on
+// one side of its plane can be neither cut by its edges nor reach through it (a flagged
+// sharp edge still meets its resting contacts). Three tests:
+//   1. ridges: the triangle's edges (each soft edge once) against the sharp edges found
+//      (those whose box meets the triangle's box): a soft edge that passes through one of
+//      the sharp edge's two faces with its closest point to the edge inside the edge's wedge
+//      (behind both faces), along the edge's length (not past its ends, where the common
+//      perpendicular runs along the edge's line, far from the surface) and below the edge
+//      (the common perpendicular in the cone of the two face normals: on a nearly flat edge
+//      it may run along the surface) is pushed out along the two edges' common
+//      perpendicular to `margin` beyond the edge; one resting on the edge within the margin
+//      (in the cone of its two face normals) and approaching it is held there.
+//   2. corners and caps: a sharp or bent edge through the soft triangle whose end projects
+//      into the triangle and lies beyond it (along the end's pseudo-normal) pushes the
+//      triangle past that end by the margin; repeated (up to kRounds) while one did, since a
+//      smooth surface's cap through a large soft triangle may hold vertices that no crossing
+//      edge ends at.
+//   3. chords: the triangle's edges against the faces found (segment-triangle; again
+//      through the tree once something moved them): a soft edge whose ends are outside but
+//      which passes through the surface cuts a chord, across a smooth patch as across a
+//      ridge, whatever the edges' angles. Between successive crossings the points at 1/4,
+//      1/2 and 3/4 are tested with the inside test above; the deepest goes to its closest
+//      surface point plus the margin (along the direction to it), and the edge is tested
+//      again (up to kRounds). A flat face cannot be
+//      cut between two outside vertices, and a chord under a concave edge alone cannot exist
+//      (a straight segment entering a valley leaves it on the inside), so 2 with the bent
+//      edges and 3 with the faces test for every crossing the two surfaces can have.
+// The soft side moves with barycentric weights w_k, mass-weighted (particle k by w_k / m_k /
+// sum_l w_l^2 / m_l times the contact point's move, cut where pinned particles carry most of
+// the weight: push()), and the contact point's velocity relative to the collider takes
 // restitution and friction as a vertex's does; the collider receives the opposite impulse.
-// Flat tessellation edges and concave edges take no part.
+// Concave edges take part only in 2.
 #pragma once
 
 #include <limits>
@@ -138,10 +160,12 @@ struct View {
     index begin(index node) const { return m.collider_meshes.node_tris[2 * node]; }
     index end(index node) const { return m.collider_meshes.node_tris[2 * node + 1]; }
     index child(index node, int k) const { return m.collider_meshes.node_children[2 * node + k]; }
-    /// The triangle across edge k of triangle t when that edge takes part in edge contacts
-    /// (sharp, convex, owned by t); -1 otherwise.
+    /// The triangle across edge k of triangle t when that edge is sharp (convex, owned by
+    /// t); -2 when it is bent but not sharp (owned by t); -1 otherwise.
     index sharp_twin(index t, int k) const { return m.collider_meshes.sharp_edges[3 * t + k]; }
-    /// Whether a tree node's triangles hold a sharp edge.
+    /// Whether edge k of triangle t takes part in edge contacts (sharp or bent, owned by t).
+    bool takes_part(index t, int k) const { return sharp_twin(t, k) != -1; }
+    /// Whether a tree node's triangles hold an edge that takes part in edge contacts.
     bool has_sharp(index node) const { return m.collider_meshes.node_sharp[node] != 0; }
     V3 face_normal(index t) const {
         return unit(cross(corner(t, 1) - corner(t, 0), corner(t, 2) - corner(t, 0)));
@@ -354,31 +378,33 @@ inline bool boxes_meet(const double* lo, const double* hi, const double* b) {
     return true;
 }
 
-/// Each sharp edge (triangle t, edge k: corner k to k + 1) below `root` whose box meets the
-/// box [lo, hi] (local frame): calls visit(t, k). Each sharp edge has one owner, so it is
-/// visited once; subtrees without one are not entered (flat tessellation costs nothing).
+/// Whether the box b (lo, hi) lies wholly farther than `reach` from the plane through x
+/// with normal n (not unit: reach is in units of |n| m).
+inline bool box_beside_plane(const double* b, V3 x, V3 n, double reach) {
+    const V3 centre{0.5 * (b[0] + b[3]), 0.5 * (b[1] + b[4]), 0.5 * (b[2] + b[5])};
+    const double spread = 0.5 * ((b[3] - b[0]) * std::fabs(n.x) + (b[4] - b[1]) * std::fabs(n.y) +
+                                 (b[5] - b[2]) * std::fabs(n.z));
+    return std::fabs(dot(centre - x, n)) > spread + reach;
+}
+
+/// Each leaf of the tree below `root` whose box meets the box [lo, hi] (local frame) and
+/// comes within `reach` of the plane through x with normal n (reach in units of |n| m):
+/// calls visit(begin, end) with its triangle rows. `all` false: only the subtrees holding an
+/// edge that takes part in edge contacts (flat tessellation costs nothing).
 template <class Visit>
-inline void each_sharp_edge(const View& v, index root, const double* lo, const double* hi,
-                            Visit visit) {
+inline void each_leaf(const View& v, index root, const double* lo, const double* hi, V3 x, V3 n,
+                      double reach, bool all, Visit visit) {
     index stack[kStack];
     int top = 0;
     stack[top++] = root;
     while (top > 0) {
         const index node = stack[--top];
-        if (!v.has_sharp(node) || !boxes_meet(lo, hi, v.bounds(node))) continue;
+        if ((!all && !v.has_sharp(node)) || !boxes_meet(lo, hi, v.bounds(node)) ||
+            box_beside_plane(v.bounds(node), x, n, reach))
+            continue;
         const index tb = v.begin(node), te = v.end(node);
         if (te > tb) {
-            for (index t = tb; t < te; ++t)
-                for (int k = 0; k < 3; ++k) {
-                    if (v.sharp_twin(t, k) < 0) continue;
-                    const V3 a = v.corner(t, k), b = v.corner(t, (k + 1) % 3);
-                    double box[6];
-                    for (int d = 0; d < 3; ++d) {
-                        box[d] = std::min((&a.x)[d], (&b.x)[d]);
-                        box[3 + d] = std::max((&a.x)[d], (&b.x)[d]);
-                    }
-                    if (boxes_meet(lo, hi, box)) visit(t, k);
-                }
+            visit(tb, te);
             continue;
         }
         if (top + 2 > kStack) continue;
@@ -387,9 +413,18 @@ inline void each_sharp_edge(const View& v, index root, const double* lo, const d
     }
 }
 
+/// Whether the box of the segment a-b meets the box [lo, hi].
+inline bool segment_box_meets(V3 a, V3 b, const double* lo, const double* hi) {
+    for (int d = 0; d < 3; ++d)
+        if (std::max((&a.x)[d], (&b.x)[d]) < lo[d] || hi[d] < std::min((&a.x)[d], (&b.x)[d]))
+            return false;
+    return true;
+}
+
 /// Whether segment a-b meets triangle (p0, p1, p2), its edges included (Moller-Trumbore
-/// with a tolerance: a soft edge through the sharp edge itself meets both its faces).
-inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
+/// with a tolerance: a soft edge through the sharp edge itself meets both its faces); s: the
+/// fraction along a-b where it does.
+inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2, double& s) {
     const V3 d = b - a, e1 = p1 - p0, e2 = p2 - p0;
     const V3 h = cross(d, e2);
     const double det = dot(e1, h);
@@ -398,9 +433,86 @@ inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
     const V3 sv = a - p0;
     const double u = inv * dot(sv, h);
     const V3 qv = cross(sv, e1);
-    const double w = inv * dot(d, qv), s = inv * dot(e2, qv);
+    const double w = inv * dot(d, qv);
+    s = inv * dot(e2, qv);
     constexpr double kTol = 1e-9;
     return u >= -kTol && w >= -kTol && u + w <= 1.0 + kTol && s >= 0.0 && s <= 1.0;
+}
+
+inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
+    double s = 0.0;
+    return segment_meets_triangle(a, b, p0, p1, p2, s);
+}
+
+constexpr double kFreeWeight = 0.25;  // push(): below it, the free particles' share is cut
+constexpr int kCrossings = 16;  // most crossings of one soft edge through the mesh kept
+constexpr int kRounds = 4;      // most pushes of one soft edge (chords) or triangle (caps)
+
+/// Adds s to the ascending list s_out of count entries (at most kCrossings: then dropped).
+inline void add_crossing(double* s_out, int& count, double s) {
+    if (count >= kCrossings) return;
+    int at = count++;
+    while (at > 0 && s_out[at - 1] > s) {
+        s_out[at] = s_out[at - 1];
+        --at;
+    }
+    s_out[at] = s;
+}
+
+/// Adds to the ascending list s_out (count entries) the fractions along segment a-b (local
+/// frame) where it passes through triangles tb..te of the mesh (segment_meets_triangle: a
+/// segment through an edge is listed once per triangle).
+inline void leaf_crossings(const View& v, index tb, index te, V3 a, V3 b, double* s_out,
+                           int& count) {
+    for (index t = tb; t < te; ++t) {
+        double s = 0.0;
+        if (segment_meets_triangle(a, b, v.corner(t, 0), v.corner(t, 1), v.corner(t, 2), s))
+            add_crossing(s_out, count, s);
+    }
+}
+
+/// The fractions s along segment a-b (local frame) where it passes through a triangle of
+/// the mesh below `root`, ascending, at most kCrossings of them; returns how many.
+inline int segment_crossings(const View& v, index root, V3 a, V3 b, double* s_out) {
+    int count = 0;
+    index stack[kStack];
+    int top = 0;
+    stack[top++] = root;
+    while (top > 0) {
+        const index node = stack[--top];
+        if (!segment_meets_box(v.bounds(node), a, b, 1.0)) continue;
+        const index tb = v.begin(node), te = v.end(node);
+        if (te > tb) {
+            leaf_crossings(v, tb, te, a, b, s_out, count);
+            continue;
+        }
+        if (top + 2 > kStack) continue;
+        stack[top++] = v.child(node, 0);
+        stack[top++] = v.child(node, 1);
+    }
+    return count;
+}
+
+/// The deepest point inside the mesh of the segment a-b (local frame) whose crossings of the
+/// surface are s (count of them, ascending): between each two successive crossings, the
+/// points at 1/4, 1/2 and 3/4 of the way, the one farthest inside (by the nearest feature's
+/// pseudo-normal, as the vertex contacts' inside test). Returns its fraction along a-b (-1
+/// when no sample is inside: a graze) and its nearest surface point `near`.
+inline double deepest_inside(const View& v, index root, V3 a, V3 b, const double* s, int count,
+                             Nearest& near) {
+    double best_s = -1.0, best_d2 = 0.0;
+    for (int k = 0; k + 1 < count; ++k) {
+        for (int q = 1; q <= 3; ++q) {
+            const double f = s[k] + 0.25 * q * (s[k + 1] - s[k]);
+            const V3 x = a + f * (b - a);
+            const Nearest at = nearest(v, root, x);
+            if (!(dot(x - at.x, at.n) < 0.0) || !(at.d2 > best_d2)) continue;  // outside
+            best_s = f;
+            best_d2 = at.d2;
+            near = at;
+        }
+    }
+    return best_s;
 }
 
 /// A mesh collider's pose, velocities and coefficients at the step's end.
@@ -417,7 +529,11 @@ struct Frame {
 /// point moves by `move` (local frame), and its velocity relative to the collider, when
 /// approaching along the unit normal (local), takes restitution and friction. Returns false
 /// (nothing changed) when every particle is pinned, or when `resting` and the contact point
-/// is not approaching (within the margin but leaving).
+/// is not approaching (within the margin but leaving). Where the free particles' weights sum
+/// to less than kFreeWeight (the contact point lies by pinned ones, such as those the
+/// thickness stage holds in its second pass), the move and the velocity change are scaled by
+/// that sum over kFreeWeight: a free particle then moves at most about 1 / kFreeWeight times
+/// the move, not move / w, which folds the soft surface through itself as w goes to 0.
 inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l, V3 x_local,
                  V3 move, V3 normal, bool resting, double* q, double* qd, V3& j,
                  colliders::Seen* seen) {
@@ -436,11 +552,13 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
     const V3 rel = vel - (f.vc + cross(f.wc, xw - f.c));
     const double vn = dot(rel, nw);
     if (resting && vn >= 0.0) return false;  // within the margin but leaving: free
+    const double gain = free_weight < kFreeWeight ? free_weight / kFreeWeight : 1.0;
+    move = gain * move;
     const V3 dx = to_world(f.r, move);
     V3 dv{0.0, 0.0, 0.0};
     if (vn < 0.0) {
         const V3 tangent = rel - vn * nw;
-        dv = (-(1.0 + f.e) * vn) * nw + (f.keep - 1.0) * tangent;
+        dv = gain * ((-(1.0 + f.e) * vn) * nw + (f.keep - 1.0) * tangent);
         j = j - (free_weight / sum) * dv;
     }
     for (int k = 0; k < n; ++k) {
@@ -455,16 +573,16 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
     return true;
 }
 
-/// Mesh collider k's sharp edges against the soft bodies' edges and triangles (the header's
-/// edge contacts), at the positions q (N, 3) the vertex contacts left; q, qd change in place,
-/// j gathers the impulse the collider receives [N s]. c, r, vc, wc: the collider's pose and
-/// velocities at the step's end.
+/// Mesh collider k's edges and faces against the soft bodies' edges and triangles (the
+/// header's edge contacts), at the positions q (N, 3) the vertex contacts left; q, qd change
+/// in place, j gathers the impulse the collider receives [N s]. c, r, vc, wc: the collider's
+/// pose and velocities at the step's end.
 inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc,
                           double e, double keep, double* q, double* qd, V3& j,
                           colliders::Seen* seen) {
     const index root = m.colliders.mesh_root[k];
     const View v{m};
-    if (root < 0 || !v.has_sharp(root)) return;  // no sharp edge
+    if (root < 0 || !v.has_sharp(root)) return;  // edge contacts off
     const Frame f{m, c, r, vc, wc, e, keep};
     const double margin = m.colliders.mesh_margin[k];
     const double* rb = v.bounds(root);
@@ -477,26 +595,31 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         const index* tri = m.triangles.indices + 3 * t;
         V3 l[3];
         double lo[3], hi[3];
-        for (int d = 0; d < 3; ++d) {
-            lo[d] = std::numeric_limits<double>::infinity();
-            hi[d] = -std::numeric_limits<double>::infinity();
-        }
-        for (int a = 0; a < 3; ++a) {
-            l[a] = to_local(r, load(q, tri[a]) - c);
+        auto place = [&] {  // the soft triangle's local corners and its box plus the margin
             for (int d = 0; d < 3; ++d) {
-                lo[d] = std::min(lo[d], (&l[a].x)[d] - margin);
-                hi[d] = std::max(hi[d], (&l[a].x)[d] + margin);
+                lo[d] = std::numeric_limits<double>::infinity();
+                hi[d] = -std::numeric_limits<double>::infinity();
             }
-        }
+            for (int a = 0; a < 3; ++a) {
+                l[a] = to_local(r, load(q, tri[a]) - c);
+                for (int d = 0; d < 3; ++d) {
+                    lo[d] = std::min(lo[d], (&l[a].x)[d] - margin);
+                    hi[d] = std::max(hi[d], (&l[a].x)[d] + margin);
+                }
+            }
+        };
+        place();
         if (!boxes_meet(lo, hi, root_box)) continue;
-        each_sharp_edge(v, root, lo, hi, [&](index mt, int mk) {
+        bool capped = false;  // a collider edge through the triangle pushed it this round
+        bool pushed = false;  // anything moved the triangle's corners
+        auto visit = [&](index mt, int mk) {
             const V3 p = v.corner(mt, mk), pq = v.corner(mt, (mk + 1) % 3);
             const index twin = v.sharp_twin(mt, mk);
-            const V3 n1 = v.face_normal(mt), n2 = v.face_normal(twin);
-            const V3 ne = v.pseudo_normal(mt, 3 + mk);
-            // the soft triangle's edges (each soft edge by its owner) against the sharp edge
-            for (int a = 0; a < 3; ++a) {
+            // the soft triangle's edges (each soft edge by its owner) against a sharp edge
+            for (int a = 0; a < 3 && twin >= 0; ++a) {
                 if (m.triangles.edge_owner[3 * t + a] == 0) continue;
+                const V3 n1 = v.face_normal(mt), n2 = v.face_normal(twin);
+                const V3 ne = v.pseudo_normal(mt, 3 + mk);
                 const int b = (a + 1) % 3;
                 double s = 0.0, u = 0.0;
                 thick::closest_segments(l[a], l[b], p, pq, s, u);
@@ -506,7 +629,18 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 const double d1 = dot(d, n1), d2 = dot(d, n2);
                 bool inside = false;
                 if ((d1 < 0.0 && d2 < 0.0) || dist == 0.0) {
-                    // behind both faces: inside when the soft edge passes through one of them
+                    // behind both faces: inside when the soft edge passes through one of them.
+                    // Only across the edge's length: past its ends the common perpendicular
+                    // runs along the edge's line, far from the surface a chord there cuts
+                    // (the chords below push it out to its nearest surface)
+                    if (!(u > 0.0 && u < 1.0)) continue;
+                    // and only along a direction in the cone of the faces' normals: on a
+                    // nearly flat edge (a low sharp_angle) the wedge is nearly a half-space
+                    // and the common perpendicular of two nearly parallel edges may run
+                    // along the surface, far from the chord's depth
+                    const V3 along = cross(n1, n2), out = -1.0 * d;
+                    if (dot(cross(n1, out), along) < 0.0 || dot(cross(out, n2), along) < 0.0)
+                        continue;
                     const index* t1 = m.collider_meshes.triangles + 3 * mt;
                     const index* t2 = m.collider_meshes.triangles + 3 * twin;
                     inside = segment_meets_triangle(
@@ -525,9 +659,10 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                          seen)) {
                     l[a] = ls[0];
                     l[b] = ls[1];
+                    pushed = true;
                 }
             }
-            // a corner through the soft triangle: the sharp edge's end beyond it
+            // a corner or a cap through the soft triangle: the edge's end beyond it
             if (!segment_meets_triangle(p, pq, l[0], l[1], l[2])) return;
             const V3 tn = unit(cross(l[1] - l[0], l[2] - l[0]));
             double best = std::numeric_limits<double>::infinity();
@@ -550,8 +685,74 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             }
             if (!std::isfinite(best)) return;
             const double w[3] = {at.wa, at.wb, at.wc};
-            push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false, q, qd, j, seen);
-        });
+            capped |= push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false, q, qd, j,
+                           seen);
+            pushed |= capped;
+        };
+        // One walk over the leaves near the triangle: its own edges' crossings of the faces
+        // (the chords below; every leaf, flat ones too) and the flagged edges near it (ridges,
+        // corners, caps). A cap of a smooth surface may hold vertices beyond the triangle
+        // that no crossing edge ends at: once pushed past the crossing edges' ends, their
+        // edges cross next, so the flagged edges are walked again while a cap was pushed.
+        double cuts[3][kCrossings];
+        int cut_count[3] = {0, 0, 0};
+        for (int round = 0; round < kRounds; ++round) {
+            capped = false;
+            // a mesh triangle wholly on one side of the soft triangle's plane can neither be
+            // crossed by a soft edge nor have an edge through the soft triangle: most near a
+            // soft surface lying on the mesh are, and are passed over, whole subtrees farther
+            // than the margin from the plane first (a sharp edge within the margin is still
+            // visited: its resting contacts cross nothing)
+            const V3 tn = cross(l[1] - l[0], l[2] - l[0]);
+            const double reach = margin * std::sqrt(dot(tn, tn));
+            each_leaf(v, root, lo, hi, l[0], tn, reach, round == 0, [&](index tb, index te) {
+                for (index mt = tb; mt < te; ++mt) {
+                    const V3 p0 = v.corner(mt, 0), p1 = v.corner(mt, 1), p2 = v.corner(mt, 2);
+                    const double h0 = dot(p0 - l[0], tn), h1 = dot(p1 - l[0], tn),
+                                 h2 = dot(p2 - l[0], tn);
+                    const bool straddles = !((h0 > 0.0 && h1 > 0.0 && h2 > 0.0) ||
+                                             (h0 < 0.0 && h1 < 0.0 && h2 < 0.0));
+                    for (int a = 0; a < 3 && straddles && round == 0 && !pushed; ++a) {
+                        double cut = 0.0;
+                        if (m.triangles.edge_owner[3 * t + a] != 0 &&
+                            segment_meets_triangle(l[a], l[(a + 1) % 3], p0, p1, p2, cut))
+                            add_crossing(cuts[a], cut_count[a], cut);
+                    }
+                    for (int mk = 0; mk < 3; ++mk)
+                        if (v.takes_part(mt, mk) && (straddles || v.sharp_twin(mt, mk) >= 0) &&
+                            segment_box_meets(v.corner(mt, mk), v.corner(mt, (mk + 1) % 3), lo, hi))
+                            visit(mt, mk);
+                }
+            });
+            if (!capped) break;
+            place();
+        }
+        // chords: the triangle's own edges (each soft edge once, by its owner) through the
+        // faces, found in the walk above unless something moved since (then again)
+        for (int a = 0; a < 3; ++a) {
+            if (m.triangles.edge_owner[3 * t + a] == 0) continue;
+            const index idx[2] = {tri[a], tri[(a + 1) % 3]};
+            V3 ls[2] = {l[a], l[(a + 1) % 3]};
+            for (int round = 0; round < kRounds; ++round) {
+                const int count = round == 0 && !pushed
+                                      ? cut_count[a]
+                                      : segment_crossings(v, root, ls[0], ls[1], cuts[a]);
+                if (count == 0) break;
+                Nearest near;
+                const double at = deepest_inside(v, root, ls[0], ls[1], cuts[a], count, near);
+                if (at < 0.0) break;  // grazing the surface
+                const V3 x = ls[0] + at * (ls[1] - ls[0]);
+                const double dist = std::sqrt(near.d2);
+                const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
+                const double w[2] = {1.0 - at, at};
+                if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd,
+                          j, seen))
+                    break;  // both ends pinned
+                pushed = true;
+            }
+            l[a] = ls[0];
+            l[(a + 1) % 3] = ls[1];
+        }
     }
 }
 

@@ -165,11 +165,13 @@ class ColliderMesh(_ColliderBase):
     it, is put back where its path entered, ``margin`` [m] outside the surface (default
     ``1e-4`` of the mesh's bounding-box diagonal).
 
-    The mesh's sharp edges (convex, their two faces' normals more than ``sharp_angle``
-    [deg] apart; default 30: a box's edges, not a smooth surface's tessellation) also meet
-    the soft bodies' edges and triangles, so that a ridge or a corner cannot pass between
-    soft vertices: a soft edge across a sharp edge is pushed out to ``margin`` beyond it, a
-    soft triangle a corner pokes through past the corner (``core/collision/mesh.hpp``).
+    The mesh's edges and faces also meet the soft bodies' edges and triangles, so that
+    neither surface passes through the other between soft vertices that all stay outside
+    (``core/collision/mesh.hpp``): a soft edge across a sharp edge (convex, its two faces'
+    normals more than ``sharp_angle`` [deg] apart; default 30: a box's edges) is pushed out
+    to ``margin`` beyond it; a soft triangle a corner or a smooth surface's cap pokes
+    through, past it; and a soft edge cutting a chord through the mesh anywhere (a rounded
+    edge's or a tube's tessellation as well), out to ``margin`` from the surface.
     ``sharp_angle=None`` (or 180): soft vertices against the mesh only.
 
     After construction, ``mesh`` is the checked (welded, outward-wound) TriMesh, ``name``
@@ -340,7 +342,8 @@ def collider_arrays(colliders: list[Collider]) -> ColliderArrays:
         parts["triangles"].append(data.triangles + nv)
         parts["vertex_normals"].append(data.vertex_normals)
         parts["edge_normals"].append(data.edge_normals)
-        parts["sharp_edges"].append(np.where(data.sharp_edges >= 0, data.sharp_edges + nt, -1))
+        parts["sharp_edges"].append(np.where(data.sharp_edges >= 0, data.sharp_edges + nt,
+                                              data.sharp_edges))  # fmt: skip
         parts["node_children"].append(np.where(inner[:, None], data.node_children + nn, 0))
         parts["node_tris"].append(np.where(inner[:, None], 0, data.node_tris + nt))
         parts["node_bounds"].append(data.node_bounds)

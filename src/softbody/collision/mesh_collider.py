@@ -28,6 +28,14 @@ LEAF_SIZE = 4
 #: triangle sphere's: about 4).
 SHARP_ANGLE = 30.0
 
+#: ``sharp_edges``' mark of an edge that is bent but not sharp: it takes part in the edge
+#: contacts' test of collider edges through soft triangles, not in the edge-edge push.
+BENT = -2
+
+#: Smallest angle [rad] between an edge's two faces' normals for which it is bent: flatter
+#: edges (a flat face's tessellation, to round-off) cannot reach through a soft triangle.
+BENT_ANGLE = 1e-6
+
 #: Default margin [m] as a fraction of the mesh's bounding-box diagonal: how far outside
 #: the surface a caught particle is put, so that its next path starts strictly outside.
 MARGIN_FRACTION = 1e-4
@@ -52,9 +60,10 @@ class MeshColliderData:
     edge_normals: np.ndarray
     """Unit pseudo-normal of edge k (corner k to k + 1) of each triangle, (T, 3, 3)."""
     sharp_edges: np.ndarray
-    """The triangle across edge k of each triangle where that edge takes part in edge
-    contacts (sharp and convex, see :func:`sharp_edges`, and owned by this triangle: its first
-    vertex index below its second), else -1; (T, 3) int64."""
+    """How edge k of each triangle takes part in edge contacts, listed by the triangle that
+    owns it (its first vertex index below its second; see :func:`sharp_edges`): the triangle
+    across it where the edge is sharp (convex, its faces' normals more than ``sharp_angle``
+    apart), BENT (-2) where it is bent (not flat) but not sharp, else -1; (T, 3) int64."""
     node_children: np.ndarray
     """Child nodes of each inner node, (K, 2) int64; (0, 0) for a leaf."""
     node_tris: np.ndarray
@@ -62,8 +71,9 @@ class MeshColliderData:
     node_bounds: np.ndarray
     """Lower and upper corner of each node's box [m], (K, 2, 3)."""
     node_sharp: np.ndarray
-    """1 where a node's triangles hold a sharp edge (``sharp_edges``), else 0; (K,) int64:
-    the edge contacts do not enter a subtree without one."""
+    """1 where a node's triangles hold an edge that takes part in edge contacts (sharp or
+    bent: ``sharp_edges`` != -1), else 0; (K,) int64: the edge contacts do not enter a
+    subtree without one, and do nothing on a mesh whose root is 0 (edge contacts off)."""
 
 
 def _source_name(mesh: Any) -> str:
@@ -136,13 +146,16 @@ def pseudo_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
 
 
 def sharp_edges(vertices: np.ndarray, faces: np.ndarray, angle: float | None) -> np.ndarray:
-    """The edges of a closed, outward-wound mesh that take part in edge contacts: (T, 3)
-    int64, the triangle across edge k (corner k to k + 1) of triangle t where that edge is
-    convex, its two faces' normals differ by more than ``angle`` [deg], and t owns it (its
-    first vertex index is below its second, so that each edge is listed once); else -1.
-    ``angle`` None: none (-1 everywhere)."""
+    """How the edges of a closed, outward-wound mesh take part in edge contacts: (T, 3)
+    int64, for edge k (corner k to k + 1) of triangle t where t owns it (its first vertex
+    index is below its second, so that each edge is listed once): the triangle across it
+    where the edge is sharp (convex and its two faces' normals differ by more than ``angle``
+    [deg]: the edge-edge push), :data:`BENT` where it is otherwise bent (its normals differ
+    by more than :data:`BENT_ANGLE`: only the test of collider edges through soft
+    triangles), else -1. ``angle`` None or 180 and above: the edge contacts off (-1
+    everywhere)."""
     out = np.full((len(faces), 3), -1, np.int64)
-    if angle is None or len(faces) == 0:
+    if angle is None or float(angle) >= 180.0 or len(faces) == 0:
         return out
     p = vertices[faces]
     face_n = _unit(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
@@ -159,16 +172,20 @@ def sharp_edges(vertices: np.ndarray, faces: np.ndarray, angle: float | None) ->
     # behind this face
     direction = vertices[he[:, 1]] - vertices[he[:, 0]]
     convex = np.einsum("ij,ij->i", np.cross(n1, n2), direction) > 0.0
-    sharp = (cos < np.cos(np.radians(float(angle)))) & convex & (he[:, 0] < he[:, 1])
-    out.reshape(-1)[sharp] = twin[sharp]
+    owned = he[:, 0] < he[:, 1]
+    bent = (cos < np.cos(BENT_ANGLE)) & owned
+    sharp = (cos < np.cos(np.radians(float(angle)))) & convex & owned
+    flat = out.reshape(-1)
+    flat[bent] = BENT
+    flat[sharp] = twin[sharp]
     return out
 
 
 def sharp_nodes(children: np.ndarray, tris: np.ndarray, sharp: np.ndarray) -> np.ndarray:
     """(K,) int64: 1 where the triangles below tree node k (``build_tree``'s children and
-    tris) hold an edge with ``sharp`` (T, 3) >= 0."""
+    tris) hold an edge that takes part in edge contacts (``sharp`` (T, 3) != -1)."""
     has = np.zeros(len(children), np.int64)
-    any_sharp = np.any(sharp >= 0, axis=1)
+    any_sharp = np.any(sharp != -1, axis=1)
     for node in range(len(children) - 1, -1, -1):  # children come after their parent
         b, e = tris[node]
         if e > b:
@@ -220,8 +237,9 @@ def build_tree(vertices: np.ndarray, faces: np.ndarray):
 
 def mesh_collider_data(mesh: TriMesh, sharp_angle: float | None = SHARP_ANGLE) -> MeshColliderData:
     """The arrays of a checked closed ``mesh`` (see :func:`checked_mesh`), in the local
-    frame centred on its bounding box; edges sharper than ``sharp_angle`` [deg] (None:
-    none) take part in edge contacts (:func:`sharp_edges`)."""
+    frame centred on its bounding box; edges sharper than ``sharp_angle`` [deg] take part in
+    the edge-edge push of edge contacts, every bent edge in their test of collider edges
+    through soft triangles (:func:`sharp_edges`; None: the edge contacts off)."""
     lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
     center = 0.5 * (lo + hi)
     vertices = np.ascontiguousarray(mesh.vertices - center)

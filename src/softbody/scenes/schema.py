@@ -910,7 +910,8 @@ class MeshCollider(_ColliderBase):
         ge=0,
         le=180,
         description="convex edges whose faces' normals are more than this apart [deg] meet "
-        "the soft edges and triangles too (180: none, vertices only)",
+        "the soft edges edge to edge; every bent edge and face keeps soft edges and "
+        "triangles out too (180: the edge contacts off, vertices only)",
     )
 
     @model_validator(mode="after")
