@@ -758,21 +758,20 @@ inline double least_stretch(const double* A) {
     return low > 0.0 && std::isfinite(low) ? std::sqrt(low) : 0.0;
 }
 
-/// Motion in one pass over the particles: the means, mu and the list's drift bounded by
-/// the boxes of the displacements (a translation's drift: stretch 1), and the sums of the
-/// drift's affine fit. exact: true (or the boxes' bound over half the skin, with a list)
-/// takes a second pass for the largest offsets themselves and the affine fit's residual,
-/// and keeps whichever of the translation and the affine map gives the smaller sigma for a
-/// list of radius `radius` [m]. With translate false, T = 0.
+/// Motion in one pass over the particles: the means, and mu and the list's drift bounded by
+/// the boxes of the displacements (a translation's drift: stretch 1). exact: true (or,
+/// with a list, the boxes' bound over half its skin) takes a second pass for the largest
+/// offsets themselves, and the sums of the drift's affine fit; where the translation's
+/// drift still fails the list of radius `radius` [m], a third pass measures the fit's
+/// residual, and the affine bound is kept where its sigma is smaller (a list the
+/// translation's bound would build again; the passes cost a small fraction of a build).
+/// With translate false, T = 0.
 inline Motion motion(const Model& m, const double* q0, const double* q, const double* qb,
                      bool exact, bool translate = true, double radius = 0.0) {
     const double inf = std::numeric_limits<double>::infinity();
     double mass = 0.0, lo_u[3] = {inf, inf, inf}, hi_u[3] = {-inf, -inf, -inf};
     double lo_d[3] = {inf, inf, inf}, hi_d[3] = {-inf, -inf, -inf};
-    V3 sum_u{0.0, 0.0, 0.0}, sum_d{0.0, 0.0, 0.0}, sum_r{0.0, 0.0, 0.0};
-    double rr[9] = {}, dr[9] = {};  // sum m r r^T, sum m d r^T (r = qb - ref)
-    V3 ref{0.0, 0.0, 0.0};          // an origin near the bodies (the sums' round-off)
-    bool first = true;
+    V3 sum_u{0.0, 0.0, 0.0}, sum_d{0.0, 0.0, 0.0};
     for (index b = 0; b < m.bodies.count; ++b)
         for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
              ++i) {
@@ -789,16 +788,6 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
             mass += mi;
             sum_u = sum_u + mi * du;
             sum_d = sum_d + mi * dd;
-            if (qb == nullptr) continue;
-            if (first) ref = load(qb, i);
-            first = false;
-            const V3 r = load(qb, i) - ref;
-            sum_r = sum_r + mi * r;
-            for (int a = 0; a < 3; ++a)
-                for (int c = 0; c < 3; ++c) {
-                    rr[3 * a + c] += mi * (&r.x)[a] * (&r.x)[c];
-                    dr[3 * a + c] += mi * (&dd.x)[a] * (&r.x)[c];
-                }
         }
     Motion out;
     if (mass > 0.0 && translate) out.T = (1.0 / mass) * sum_u;
@@ -811,21 +800,12 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
     if (qb != nullptr) out.sigma = out.residual = farthest(lo_d, hi_d, C);
     const double skin = radius - 2.0 * m.soft_contacts.thickness;  // the list's S
     if (!exact && !(qb != nullptr && out.sigma + out.mu > 0.5 * skin)) return out;
-    // the affine fit about the centre c of the build positions: rr, dr centred
-    double A[9] = {};
-    bool fitted = false;
-    V3 c = ref;
-    if (qb != nullptr && mass > 0.0) {
-        const V3 rc = (1.0 / mass) * sum_r;
-        c = ref + rc;
-        for (int a = 0; a < 3; ++a)
-            for (int k = 0; k < 3; ++k) {
-                rr[3 * a + k] -= mass * (&rc.x)[a] * (&rc.x)[k];
-                dr[3 * a + k] -= mass * (&C.x)[a] * (&rc.x)[k];
-            }
-        fitted = affine_fit(rr, dr, A);
-    }
-    double mu = 0.0, sigma = 0.0, resid = 0.0;
+    // the largest offsets, and the affine fit's sums about an origin near the bodies (their
+    // round-off): rr = sum m r r^T, dr = sum m (d - C) r^T, r = qb - ref
+    double rr[9] = {}, dr[9] = {};
+    V3 ref{0.0, 0.0, 0.0}, sum_r{0.0, 0.0, 0.0};
+    bool first = true;
+    double mu = 0.0, sigma = 0.0;
     for (index b = 0; b < m.bodies.count; ++b)
         for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
              ++i) {
@@ -834,26 +814,50 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
             if (qb == nullptr) continue;
             const V3 d = load(q0, i) - load(qb, i) - C;
             sigma = std::max(sigma, dot(d, d));
-            if (!fitted) continue;
+            if (m.particles.inv_mass[i] == 0.0) continue;
+            if (first) ref = load(qb, i);
+            first = false;
+            const double mi = m.particles.mass[i];
+            const V3 r = load(qb, i) - ref;
+            sum_r = sum_r + mi * r;
+            for (int a = 0; a < 3; ++a)
+                for (int c = 0; c < 3; ++c) {
+                    rr[3 * a + c] += mi * (&r.x)[a] * (&r.x)[c];
+                    dr[3 * a + c] += mi * (&d.x)[a] * (&r.x)[c];
+                }
+        }
+    out.mu = std::sqrt(mu);
+    if (qb == nullptr) return out;
+    out.residual = out.sigma = std::sqrt(sigma);
+    out.stretch = 1.0;
+    if (out.sigma + out.mu <= 0.5 * skin || !(mass > 0.0)) return out;
+    // the affine fit about the centre c of the build positions (the sums centred there;
+    // sum m (d - C) = 0, so dr needs no centring), and its residual
+    const V3 rc = (1.0 / mass) * sum_r;
+    const V3 c = ref + rc;
+    for (int a = 0; a < 3; ++a)
+        for (int k = 0; k < 3; ++k) rr[3 * a + k] -= mass * (&rc.x)[a] * (&rc.x)[k];
+    double A[9];
+    if (!affine_fit(rr, dr, A)) return out;
+    const double stretch = least_stretch(A);
+    if (!(stretch > 0.0) || 0.5 * (1.0 - stretch) * radius >= out.sigma) return out;
+    double resid = 0.0;
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            const V3 d = load(q0, i) - load(qb, i) - C;
             const V3 r = load(qb, i) - c;
             const V3 e{d.x - (A[0] * r.x + A[1] * r.y + A[2] * r.z),
                        d.y - (A[3] * r.x + A[4] * r.y + A[5] * r.z),
                        d.z - (A[6] * r.x + A[7] * r.y + A[8] * r.z)};
             resid = std::max(resid, dot(e, e));
         }
-    out.mu = std::sqrt(mu);
-    if (qb == nullptr) return out;
-    out.residual = out.sigma = std::sqrt(sigma);
-    out.stretch = 1.0;
-    if (fitted) {
-        const double stretch = least_stretch(A);
-        const double residual = std::sqrt(resid) * (1.0 + 1e-12);
-        const double affine = residual + 0.5 * (1.0 - stretch) * radius;
-        if (stretch > 0.0 && affine < out.sigma) {
-            out.sigma = affine;
-            out.stretch = stretch;
-            out.residual = residual;
-        }
+    const double residual = std::sqrt(resid) * (1.0 + 1e-12);
+    const double affine = residual + 0.5 * (1.0 - stretch) * radius;
+    if (affine < out.sigma) {
+        out.sigma = affine;
+        out.stretch = stretch;
+        out.residual = residual;
     }
     return out;
 }
