@@ -6,10 +6,11 @@
 //   1. T, the mass-weighted mean displacement of the bodies' free particles: a translation
 //      common to all changes no distance, so the broad phase and the bound below look at
 //      u_i = q_i - q0_i - T only (a body in free fall finds no pair from its fall). One pass
-//      finds T and bounds mu >= max |u_i| (and the list's drift) by the displacements' box,
-//      and sums the drift's affine fit (see contacts(): a body that spins, breathes or
-//      shears keeps its list); a second pass, only where the boxes say the list may no
-//      longer hold, measures the largest offsets and the fit's residual.
+//      finds T and bounds mu >= max |u_i| (and the list's drift) by the displacements' box;
+//      a second pass, only where the boxes say the list may no longer hold, measures the
+//      largest offsets and sums the drift's affine fit, and a third, only where the
+//      translation's bound would build the list again, the fit's residual (see contacts():
+//      a body that spins, breathes or shears keeps its list).
 //   2. Broad phase: a spatial hash of the triangles' boxes over their corners' q0 and
 //      q0 + u (each particle's box computed once a gather), grown by the margin g >= h
 //      (soft_contacts.margin); each vertex's box, and each triangle's (for the edge pairs of
@@ -909,10 +910,11 @@ inline index build_list(const Stage& st, double s) {
 /// stretch D_b - 2 residual, with stretch <= sigma_min(I + A) (Gershgorin's lower bound on
 /// the smallest eigenvalue of (I + A)^T (I + A), square-rooted: least_stretch) and
 /// residual >= max |e_i|. A translation alone is the case A = 0, stretch 1, residual the
-/// largest offset after C; motion() keeps whichever of the two bounds is larger at R (a
-/// spinning, breathing or sheared body's drift is nearly affine: its residual stays small
-/// where its offsets after C do not; two bodies that breathe differently leave a larger
-/// residual, and the translation's bound then serves). Written as a drift
+/// largest offset after C; where the translation's bound would build the list again,
+/// motion() takes the affine one if it is larger at R (a spinning, breathing or sheared
+/// body's drift is nearly affine: its residual stays small where its offsets after C do
+/// not; two bodies that breathe differently leave a larger residual, and the translation's
+/// bound then serves). Written as a drift
 /// sigma = residual + (1 - stretch) R / 2, a pair off the list (D_b >= R) starts the step
 /// at least stretch R - 2 residual = R - 2 sigma apart. While the bodies' particles move by
 /// mu in the step (after T), with sigma + mu <= S / 2, such a pair stays (bound, and
