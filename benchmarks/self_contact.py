@@ -16,8 +16,10 @@
    (the same ball and settings, contacts off), best of 2: the contact stage's share of a
    step is 1 - off / on, beside the CG iterations per step of each.
 
-Writes results/self_contact.json. Usage:
+Writes results/self_contact.json (a whole run; ``--only drop|vacuum`` runs and prints one
+part). Usage:
 python benchmarks/self_contact.py [--subdivisions 5] [--vacuum-subdivisions 5] [--rounds 2]
+[--only drop|vacuum]
 """
 
 from __future__ import annotations
@@ -131,7 +133,13 @@ def main() -> None:
     parser.add_argument("--subdivisions", type=int, default=5)
     parser.add_argument("--vacuum-subdivisions", type=int, default=5)
     parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--only", choices=("drop", "vacuum"), default=None,
+                        help="run one part and print it (results/self_contact.json is "
+                        "written only by a whole run)")  # fmt: skip
     args = parser.parse_args()
+    if args.only == "vacuum":
+        print(vacuum(args.vacuum_subdivisions), flush=True)
+        return
     rows = []
     for integrator in ("symplectic_euler", "implicit_euler"):
         for phase, (t0, t1) in (("fall", (0.0, 0.1)), ("impact", (0.4, 0.6))):
@@ -147,6 +155,8 @@ def main() -> None:
                    "steps_per_s_on": on, "ratio": on / off}  # fmt: skip
             print(row, flush=True)
             rows.append(row)
+    if args.only == "drop":
+        return
     vac = vacuum(args.vacuum_subdivisions)
     print(vac, flush=True)
     model = ball_drop(args.subdivisions)

@@ -201,6 +201,7 @@ struct ContactBuffers {
     double* q_collided = nullptr;
     double* held_inv_mass = nullptr;
     double* q_solved = nullptr;  // (N, 3) the solver's positions, before any contact
+    double* held = nullptr;      // (N, 8) thick::hold's moves, groups and their sums
 };
 
 /// Scratch of the vertex-major force pass.

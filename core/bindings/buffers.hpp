@@ -73,7 +73,7 @@ public:
             contact.hash_count = hash_count_.data();
             if (m.soft_contacts.thickness > 0.0) {  // collision/thick.hpp
                 const size_t tris = static_cast<size_t>(m.triangles.count);
-                thick_.assign(6 * n3 + 2 * (n3 / 3) + 6 * tris + 2, 0.0);
+                thick_.assign(6 * n3 + 10 * (n3 / 3) + 6 * tris + 2, 0.0);
                 contact.q_pre = thick_.data();
                 contact.scale = contact.q_pre + n3;
                 contact.tri_box = contact.scale + n3 / 3;
@@ -83,6 +83,7 @@ public:
                 contact.q_collided = contact.list_skin + 2;
                 contact.held_inv_mass = contact.q_collided + n3;
                 contact.q_solved = contact.held_inv_mass + n3 / 3;
+                contact.held = contact.q_solved + n3;
                 pair_entries_.assign(static_cast<size_t>(softbody::ContactBuffers::kPairSlots) *
                                          (16 * tris + 16),
                                      0);

@@ -6,7 +6,11 @@
 //   1. T, the mass-weighted mean displacement of the bodies' free particles: a translation
 //      common to all changes no distance, so the broad phase and the bound below look at
 //      u_i = q_i - q0_i - T only (a body in free fall finds no pair from its fall). One pass
-//      finds T and bounds mu >= max |u_i| (and the list's drift) by the displacements' box.
+//      finds T and bounds mu >= max |u_i| (and the list's drift) by the displacements' box;
+//      a second pass, only where the boxes say the list may no longer hold, measures the
+//      largest offsets and sums the drift's affine fit, and a third, only where the
+//      translation's bound would build the list again, the fit's residual (see contacts():
+//      a body that spins, breathes or shears keeps its list).
 //   2. Broad phase: a spatial hash of the triangles' boxes over their corners' q0 and
 //      q0 + u (each particle's box computed once a gather), grown by the margin g >= h
 //      (soft_contacts.margin); each vertex's box, and each triangle's (for the edge pairs of
@@ -34,8 +38,12 @@
 //      h / 2 (it stays in its grown box), then step 4 runs again on the whole displacement.
 //      Steps 4 and 5 read and write only the particles of the pairs they are given (w.scale
 //      is 1 between calls), so a step with no near pair costs one pass over the particles.
-// Velocities are not changed by the bound (a particle it holds back keeps its velocity,
-// and the response turns it once it is within h).
+//   6. Where the bound held particles back, their velocities follow (hold()): each held
+//      particle's velocity changes by its bound's move over dt (the velocity of its bounded
+//      step), less the mass-weighted mean change of its group of held pairs (momentum is
+//      conserved: the limit of equal and opposite impulses on the pairs). Left as they
+//      were, they would propose the same long step again, every step (the vacuum-packed
+//      ball: moves of centimetres proposed, held back to millimetres, step after step).
 #pragma once
 
 #include <cstring>
@@ -357,13 +365,18 @@ inline index collect(const Stage& st) {
 /// Step 4: the scales s (w.scale) of u = q - q0 - T that keep the relative displacement of
 /// each of the first `pairs` rows within kGamma of its start distance, applied to q. Only
 /// the rows' particles are read and written: w.scale is 1 for every particle before and
-/// after (a scaled particle is stored, then its scale set back to 1).
-inline void bound(const Stage& st, index pairs) {
+/// after (a scaled particle is stored, then its scale set back to 1; with mark, to -1:
+/// held back, its move in w.held, for hold(), which sets it back to 1).
+inline void bound(const Stage& st, index pairs, bool mark = false) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
     double* s = w.scale;
     for (index p = 0; p < pairs; ++p)
-        for (int k = 0; k < 4; ++k) s[w.pairs->data[kSlots * p + 1 + k]] = 1.0;
+        for (int k = 0; k < 4; ++k) {
+            const index i = w.pairs->data[kSlots * p + 1 + k];
+            s[i] = 1.0;
+            if (mark) w.held[8 * i] = w.held[8 * i + 1] = w.held[8 * i + 2] = 0.0;
+        }
     auto u = [&](index i) { return load(st.q, i) - load(st.q0, i) - st.T; };
     for (index pass = 0; pass <= pairs; ++pass) {
         bool changed = false;
@@ -410,10 +423,107 @@ inline void bound(const Stage& st, index pairs) {
     for (index p = 0; p < pairs; ++p)
         for (int k = 0; k < 4; ++k) {
             const index i = w.pairs->data[kSlots * p + 1 + k];
-            if (s[i] >= 1.0) continue;
+            if (s[i] >= 1.0 || s[i] < 0.0) continue;  // not held, or stored already
+            const V3 was = load(st.q, i);
             store(st.q, i, load(st.q0, i) + st.T + s[i] * u(i));
-            s[i] = 1.0;
+            if (mark) {
+                const V3 dq = load(st.q, i) - was;
+                w.held[8 * i] = dq.x;
+                w.held[8 * i + 1] = dq.y;
+                w.held[8 * i + 2] = dq.z;
+            }
+            s[i] = mark ? -1.0 : 1.0;
         }
+}
+
+/// After bound(..., true): the velocities qd (N, 3) of the particles the bound held back
+/// (w.scale -1) and of their pairs', for a step dt [s] (0: none changed). The bound
+/// shortened their step but left their velocities, which would propose the same long step
+/// again (and the next, each held back again). Each held particle's velocity changes by its
+/// bound's move over the step, dq_i / dt (backward and symplectic Euler's q = q0 + dt qd:
+/// the velocity its bounded step implies); then, for momentum, every particle of a group
+/// of held pairs (pairs with a held particle, joined where they share a particle) takes
+/// away the group's mass-weighted mean change (none where the group holds a pinned
+/// particle: infinite mass). That is the limit of equal and opposite impulses on the held
+/// pairs (particle k's velocity changing by c_k / m_k j, sum_k c_k = 0, barycentric
+/// weights as respond's) that bring each pair's relative velocity sum_k c_k qd_k to its
+/// relative displacement over the step, sum_k c_k (q_k - q0_k) / dt: a change common to a
+/// group leaves every relative velocity in it as it is, and the mean's removal conserves
+/// its momentum exactly. It is found directly (the groups by union-find): the impulses
+/// pair by pair (Gauss-Seidel) give the first pairs' particles all the change, and a flat
+/// sheet held back wrinkles; Jacobi's converge slowly at a sheet's border. No restitution
+/// (the pairs have not met) and no friction: within h respond's rule acts next. w.scale
+/// is back at 1 after; w.held (N, 8): the move, the group's root, and at a root the
+/// group's sum of m dq and its mass.
+inline void hold(const Stage& st, index pairs, double* qd, double dt) {
+    const Model& m = st.m;
+    const ContactBuffers& w = st.w;
+    double* s = w.scale;
+    double* x = w.held;
+    const index* rows = w.pairs->data;
+    auto particle = [&](index p, int k) { return rows[kSlots * p + 1 + k]; };
+    auto reset = [&] {
+        for (index p = 0; p < pairs; ++p)
+            for (int k = 0; k < 4; ++k) s[particle(p, k)] = 1.0;
+    };
+    bool any = false;
+    for (index p = 0; p < pairs && !any; ++p)
+        for (int k = 0; k < 4; ++k) any |= s[particle(p, k)] < 0.0;
+    if (!any || !(dt > 0.0)) return reset();
+    auto root = [&](index i) {
+        while (static_cast<index>(x[8 * i + 3]) != i) {
+            const index up = static_cast<index>(x[8 * i + 3]);
+            x[8 * i + 3] = x[8 * up + 3];  // path halving
+            i = static_cast<index>(x[8 * up + 3]);
+        }
+        return i;
+    };
+    for (index p = 0; p < pairs; ++p)
+        for (int k = 0; k < 4; ++k) {
+            double* e = x + 8 * particle(p, k);
+            e[3] = -1.0;  // in no held pair
+            e[4] = e[5] = e[6] = e[7] = 0.0;
+        }
+    for (index p = 0; p < pairs; ++p) {
+        const index v[4] = {particle(p, 0), particle(p, 1), particle(p, 2), particle(p, 3)};
+        if (!(s[v[0]] < 0.0 || s[v[1]] < 0.0 || s[v[2]] < 0.0 || s[v[3]] < 0.0)) continue;
+        for (int k = 0; k < 4; ++k)
+            if (x[8 * v[k] + 3] < 0.0) x[8 * v[k] + 3] = static_cast<double>(v[k]);
+        const index r0 = root(v[0]);
+        for (int k = 1; k < 4; ++k) {
+            const index r = root(v[k]);
+            if (r != r0) x[8 * r + 3] = static_cast<double>(r0);
+        }
+    }
+    // each grouped particle once (w.scale 2 once counted, 3 once moved): the groups' sums
+    const double inf = std::numeric_limits<double>::infinity();
+    for (index p = 0; p < pairs; ++p)
+        for (int k = 0; k < 4; ++k) {
+            const index i = particle(p, k);
+            if (x[8 * i + 3] < 0.0 || s[i] == 2.0) continue;
+            s[i] = 2.0;
+            double* r = x + 8 * root(i);
+            if (m.particles.inv_mass[i] == 0.0) {
+                r[7] = inf;
+                continue;
+            }
+            const double mi = m.particles.mass[i];
+            for (int d = 0; d < 3; ++d) r[4 + d] += mi * x[8 * i + d];
+            r[7] += mi;
+        }
+    const double inv_dt = 1.0 / dt;
+    for (index p = 0; p < pairs; ++p)
+        for (int k = 0; k < 4; ++k) {
+            const index i = particle(p, k);
+            if (s[i] != 2.0) continue;
+            s[i] = 3.0;
+            if (m.particles.inv_mass[i] == 0.0) continue;
+            const double* r = x + 8 * root(i);
+            const double share = r[7] < inf ? 1.0 / r[7] : 0.0;
+            add_to(qd, i, inv_dt * V3{x[8 * i] - share * r[4], x[8 * i + 1] - share * r[5],
+                                      x[8 * i + 2] - share * r[6]});
+        }
+    reset();
 }
 
 /// Step 5: pairs closer than h pushed apart to h, approaching ones' velocities turned.
@@ -565,11 +675,23 @@ inline void refresh(const double* q0, index* rows, index from, index to) {
 
 /// The bodies' motion: T, the mass-weighted mean displacement q - q0 of their free
 /// particles; mu >= max_i |q_i - q0_i - T| over their particles; and, with a list (qb, its
-/// build positions), sigma >= max_i |q0_i - qb_i - C| with C the same mean of q0 - qb.
+/// build positions), the list's drift q0 - qb as a map that takes every gap vector of
+/// length D_b at qb to one of length at least stretch D_b - 2 residual at q0 (see
+/// contacts()), and sigma = residual + (1 - stretch) R / 2 for a list of radius R: the
+/// drift of a translation alone (stretch 1) would have to be that large to bring a pair
+/// from R as near. sigma may be negative (a list whose bodies grew).
 struct Motion {
     V3 T{0.0, 0.0, 0.0};
     double mu = 0.0;
     double sigma = std::numeric_limits<double>::infinity();
+    double stretch = 1.0;  // a lower bound on sigma_min(I + A), the affine part's
+    double residual = std::numeric_limits<double>::infinity();  // max_i |e_i| [m]
+    /// The smallest build distance a pair may have and still come within x at q0 (x >= 0):
+    /// (x + 2 residual) / stretch.
+    double reach(double x) const {
+        return stretch > 0.0 ? (x + 2.0 * residual) / stretch
+                             : std::numeric_limits<double>::infinity();
+    }
 };
 
 /// The largest distance from c to a point of the box [lo, hi] (an upper bound on the
@@ -583,10 +705,70 @@ inline double farthest(const double* lo, const double* hi, V3 c) {
     return std::sqrt(sum);
 }
 
-/// Motion in one pass over the particles: the means, and mu, sigma bounded by the boxes of
-/// the displacements (exact: true takes a second pass for the largest offsets themselves).
+/// The least-squares affine part of a drift: A (3x3, row major) with d_i - C ~ A r_i, from
+/// the mass-weighted sums rr = sum m r r^T, dr = sum m (d - C) r^T over the particles'
+/// offsets r from their centre (both centred): A = dr (rr + eps tr(rr) I)^-1 (the small
+/// ridge keeps a flat sheet's fit finite; any A is valid, the residual measured with it).
+/// False when rr is degenerate (A = 0 then).
+inline bool affine_fit(const double* rr, const double* dr, double* A) {
+    for (int k = 0; k < 9; ++k) A[k] = 0.0;
+    const double trace = rr[0] + rr[4] + rr[8];
+    if (!(trace > 0.0) || !std::isfinite(trace)) return false;
+    double s[9];
+    for (int k = 0; k < 9; ++k) s[k] = rr[k];
+    for (int k = 0; k < 3; ++k) s[4 * k] += 1e-9 * trace;
+    const double inv_cof[9] = {s[4] * s[8] - s[5] * s[7], s[2] * s[7] - s[1] * s[8],
+                               s[1] * s[5] - s[2] * s[4], s[5] * s[6] - s[3] * s[8],
+                               s[0] * s[8] - s[2] * s[6], s[2] * s[3] - s[0] * s[5],
+                               s[3] * s[7] - s[4] * s[6], s[1] * s[6] - s[0] * s[7],
+                               s[0] * s[4] - s[1] * s[3]};  // the adjugate
+    const double det = s[0] * inv_cof[0] + s[1] * inv_cof[3] + s[2] * inv_cof[6];
+    if (!(det > 0.0) || !std::isfinite(det)) return false;
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) {
+            double sum = 0.0;
+            for (int k = 0; k < 3; ++k) sum += dr[3 * r + k] * inv_cof[3 * k + c];
+            A[3 * r + c] = sum / det;
+        }
+    for (int k = 0; k < 9; ++k)
+        if (!std::isfinite(A[k])) {
+            for (int l = 0; l < 9; ++l) A[l] = 0.0;
+            return false;
+        }
+    return true;
+}
+
+/// A lower bound on the smallest singular value of F = I + A (A 3x3, row major): the square
+/// root of Gershgorin's lower bound on the smallest eigenvalue of F^T F (symmetric, PSD),
+/// less a relative 1e-12 for its round-off; 0 when that bound is not positive.
+inline double least_stretch(const double* A) {
+    double F[9];
+    for (int k = 0; k < 9; ++k) F[k] = A[k] + (k % 4 == 0 ? 1.0 : 0.0);
+    double B[9];
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            B[3 * r + c] = F[r] * F[c] + F[3 + r] * F[3 + c] + F[6 + r] * F[6 + c];
+    double low = std::numeric_limits<double>::infinity();
+    for (int r = 0; r < 3; ++r) {
+        double off = 0.0;
+        for (int c = 0; c < 3; ++c)
+            if (c != r) off += std::fabs(B[3 * r + c]);
+        low = std::min(low, B[4 * r] - off);
+    }
+    low -= 1e-12 * (B[0] + B[4] + B[8]);
+    return low > 0.0 && std::isfinite(low) ? std::sqrt(low) : 0.0;
+}
+
+/// Motion in one pass over the particles: the means, and mu and the list's drift bounded by
+/// the boxes of the displacements (a translation's drift: stretch 1). exact: true (or,
+/// with a list, the boxes' bound over half its skin) takes a second pass for the largest
+/// offsets themselves, and the sums of the drift's affine fit; where the translation's
+/// drift still fails the list of radius `radius` [m], a third pass measures the fit's
+/// residual, and the affine bound is kept where its sigma is smaller (a list the
+/// translation's bound would build again; the passes cost a small fraction of a build).
+/// With translate false, T = 0.
 inline Motion motion(const Model& m, const double* q0, const double* q, const double* qb,
-                     bool exact, bool translate = true) {
+                     bool exact, bool translate = true, double radius = 0.0) {
     const double inf = std::numeric_limits<double>::infinity();
     double mass = 0.0, lo_u[3] = {inf, inf, inf}, hi_u[3] = {-inf, -inf, -inf};
     double lo_d[3] = {inf, inf, inf}, hi_d[3] = {-inf, -inf, -inf};
@@ -610,13 +792,20 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
         }
     Motion out;
     if (mass > 0.0 && translate) out.T = (1.0 / mass) * sum_u;
-    const V3 c = mass > 0.0 ? (1.0 / mass) * sum_d : V3{0.0, 0.0, 0.0};
-    if (!(hi_u[0] >= lo_u[0])) return {out.T, 0.0, 0.0};  // no particle in a body
-    if (!exact) {
-        out.mu = farthest(lo_u, hi_u, out.T);
-        if (qb != nullptr) out.sigma = farthest(lo_d, hi_d, c);
+    const V3 C = mass > 0.0 ? (1.0 / mass) * sum_d : V3{0.0, 0.0, 0.0};
+    if (!(hi_u[0] >= lo_u[0])) {  // no particle in a body
+        out.sigma = out.residual = 0.0;
         return out;
     }
+    out.mu = farthest(lo_u, hi_u, out.T);
+    if (qb != nullptr) out.sigma = out.residual = farthest(lo_d, hi_d, C);
+    const double skin = radius - 2.0 * m.soft_contacts.thickness;  // the list's S
+    if (!exact && !(qb != nullptr && out.sigma + out.mu > 0.5 * skin)) return out;
+    // the largest offsets, and the affine fit's sums about an origin near the bodies (their
+    // round-off): rr = sum m r r^T, dr = sum m (d - C) r^T, r = qb - ref
+    double rr[9] = {}, dr[9] = {};
+    V3 ref{0.0, 0.0, 0.0}, sum_r{0.0, 0.0, 0.0};
+    bool first = true;
     double mu = 0.0, sigma = 0.0;
     for (index b = 0; b < m.bodies.count; ++b)
         for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
@@ -624,11 +813,53 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
             const V3 u = load(q, i) - load(q0, i) - out.T;
             mu = std::max(mu, dot(u, u));
             if (qb == nullptr) continue;
-            const V3 d = load(q0, i) - load(qb, i) - c;
+            const V3 d = load(q0, i) - load(qb, i) - C;
             sigma = std::max(sigma, dot(d, d));
+            if (m.particles.inv_mass[i] == 0.0) continue;
+            if (first) ref = load(qb, i);
+            first = false;
+            const double mi = m.particles.mass[i];
+            const V3 r = load(qb, i) - ref;
+            sum_r = sum_r + mi * r;
+            for (int a = 0; a < 3; ++a)
+                for (int c = 0; c < 3; ++c) {
+                    rr[3 * a + c] += mi * (&r.x)[a] * (&r.x)[c];
+                    dr[3 * a + c] += mi * (&d.x)[a] * (&r.x)[c];
+                }
         }
     out.mu = std::sqrt(mu);
-    if (qb != nullptr) out.sigma = std::sqrt(sigma);
+    if (qb == nullptr) return out;
+    out.residual = out.sigma = std::sqrt(sigma);
+    out.stretch = 1.0;
+    if (out.sigma + out.mu <= 0.5 * skin || !(mass > 0.0)) return out;
+    // the affine fit about the centre c of the build positions (the sums centred there;
+    // sum m (d - C) = 0, so dr needs no centring), and its residual
+    const V3 rc = (1.0 / mass) * sum_r;
+    const V3 c = ref + rc;
+    for (int a = 0; a < 3; ++a)
+        for (int k = 0; k < 3; ++k) rr[3 * a + k] -= mass * (&rc.x)[a] * (&rc.x)[k];
+    double A[9];
+    if (!affine_fit(rr, dr, A)) return out;
+    const double stretch = least_stretch(A);
+    if (!(stretch > 0.0) || 0.5 * (1.0 - stretch) * radius >= out.sigma) return out;
+    double resid = 0.0;
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            const V3 d = load(q0, i) - load(qb, i) - C;
+            const V3 r = load(qb, i) - c;
+            const V3 e{d.x - (A[0] * r.x + A[1] * r.y + A[2] * r.z),
+                       d.y - (A[3] * r.x + A[4] * r.y + A[5] * r.z),
+                       d.z - (A[6] * r.x + A[7] * r.y + A[8] * r.z)};
+            resid = std::max(resid, dot(e, e));
+        }
+    const double residual = std::sqrt(resid) * (1.0 + 1e-12);
+    const double affine = residual + 0.5 * (1.0 - stretch) * radius;
+    if (affine < out.sigma) {
+        out.sigma = affine;
+        out.stretch = stretch;
+        out.residual = residual;
+    }
     return out;
 }
 
@@ -667,41 +898,66 @@ inline index build_list(const Stage& st, double s) {
 /// crossing at q0 (w.crossing: particle, triangle; nothing changed).
 ///
 /// The pairs come from a list kept between steps (a Verlet list): the pairs nearer than
-/// R = 2 h + S at the positions q_b where it was built, S its skin. While the bodies'
-/// particles have drifted by sigma (after a common translation) from q_b and move by mu in
-/// the step (after T), with sigma + mu <= S / 2, a pair off the list starts the step at
-/// least R - 2 sigma apart and stays (bound, and response moves of h / 2 a side) at least
-/// R - 2 (sigma + mu) - h >= h apart along the whole step: it can neither cross nor need a
-/// response, so neither the bound nor the response needs it. The same holds for a listed
-/// pair whose build distance is at least 2 sigma + 2 (mu + r) + h, r the largest response
-/// move (0 before the response, at most h / 2): the list's rows are ordered by band of build
-/// distance, and a step reads only the rows below that (a prefix: w.list[1] rows, their
-/// distance at q0 in slot 5). The skin S is chosen at each build from the motion the last
-/// list saw (sigma + mu over the steps it served), so that a list serves about kServe steps,
-/// between the margin g and kMostSkin g. The list is built again (at q0, with the crossing
-/// check) when sigma + mu > S / 2; a step whose own motion is over kMostSkin g / 2 takes its
-/// pairs from the swept boxes instead (and the list is dropped).
+/// R = 2 h + S at the positions q_b where it was built, S its skin. The list's drift
+/// q0 - q_b is written as an affine map and a residual, q0_i = q_b,i + C + A (q_b,i - c)
+/// + e_i (C, A the mass-weighted least-squares fit over the bodies' free particles, all
+/// bodies together, c their centre at the build; any C, A would do, the residual is
+/// measured with them). A pair's gap at any positions x is sum_k c_k x_k with fixed
+/// barycentric coefficients summing to 0 (those of its closest points: 1 and -1 on each
+/// side), so C drops out and A acts on the gap itself: at q0 the same coefficients give
+/// (I + A) g_b + sum_k c_k e_k, of length at least sigma_min(I + A) |g_b| - 2 max |e|, and
+/// the pair's distance at q0 (the least over coefficients) is at least
+/// stretch D_b - 2 residual, with stretch <= sigma_min(I + A) (Gershgorin's lower bound on
+/// the smallest eigenvalue of (I + A)^T (I + A), square-rooted: least_stretch) and
+/// residual >= max |e_i|. A translation alone is the case A = 0, stretch 1, residual the
+/// largest offset after C; where the translation's bound would build the list again,
+/// motion() takes the affine one if it is larger at R (a spinning, breathing or sheared
+/// body's drift is nearly affine: its residual stays small where its offsets after C do
+/// not; two bodies that breathe differently leave a larger residual, and the translation's
+/// bound then serves). Written as a drift
+/// sigma = residual + (1 - stretch) R / 2, a pair off the list (D_b >= R) starts the step
+/// at least stretch R - 2 residual = R - 2 sigma apart. While the bodies' particles move by
+/// mu in the step (after T), with sigma + mu <= S / 2, such a pair stays (bound, and
+/// response moves of h / 2 a side) at least R - 2 (sigma + mu) - h >= h apart along the
+/// whole step: it can neither cross nor need a response, so neither the bound nor the
+/// response needs it. The same holds for a listed pair whose build distance is at least
+/// (2 (mu + r) + h + 2 residual) / stretch, r the largest response move (0 before the
+/// response, at most h / 2): it starts at least 2 (mu + r) + h apart. The list's rows are
+/// ordered by band of build distance, and a step reads only the rows below that (a
+/// prefix: w.list[1] rows, their distance at q0 in slot 5). The skin S is chosen at each
+/// build from the motion the last list saw (sigma + mu over the steps it served), so that a
+/// list serves about kServe steps, between the margin g and kMostSkin g. The list is built
+/// again (at q0, with the crossing check) when sigma + mu > S / 2; a step whose own motion
+/// is over kMostSkin g / 2 takes its pairs from the swept boxes instead (and the list is
+/// dropped). The step's own motion is bounded after T alone (not fitted by an affine map
+/// too: on the implicit ball drop the step's affine residual stays 1-6 cm, over
+/// kMostSkin g / 2, so it would not spare those steps their sweep; and with rigid
+/// colliders the stage runs with T = 0, its bound holding particles toward q0).
+/// dt [s]: the step, for the velocities of the particles the bound held back (hold; 0: a
+/// pass from rest, none changed).
 inline index contacts(const Model& m, const double* q0, double* q, double* qd,
-                      const ContactBuffers& w, bool translate = true) {
+                      const ContactBuffers& w, bool translate = true, double dt = 0.0) {
     Stage st{m, q0, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
              m.soft_contacts.margin, m.soft_contacts.self_contact != 0};
-    // 1. the common translation, the step's largest motion after it, the list's drift
+    // 1. the common translation, the step's largest motion after it, the list's drift (its
+    // affine fit and residual when the displacements' boxes do not show it small enough)
     const bool listed = w.list[0] >= 0;
-    Motion mo = motion(m, q0, q, listed ? w.q_build : nullptr, false, translate);
+    const double h = m.soft_contacts.thickness;
+    double* skin = w.list_skin;  // the list's skin S, and the steps it has served
+    const Motion mo = motion(m, q0, q, listed ? w.q_build : nullptr, false, translate,
+                             listed ? 2.0 * h + skin[0] : 0.0);
     st.T = mo.T;
     if (!st.self && !any_bodies_near(st)) return 0;
-    double* skin = w.list_skin;  // the list's skin S, and the steps it has served
-    if (listed && mo.sigma + mo.mu > 0.5 * skin[0])  // the boxes' bounds fail: the exact ones
-        mo = motion(m, q0, q, w.q_build, true, translate);
     // 2-3. the pairs: the list (built again when it no longer covers the step), or the
     // step's swept boxes
-    const double h = m.soft_contacts.thickness;
     const double most_skin = kMostSkin * st.g;
     index* rows = nullptr;
     index pairs = 0, active = 0;
-    double radius = 0.0, sigma = 0.0;
+    double radius = 0.0;
+    Motion drift;  // the list's drift as the rows read see it: none for a new list
+    drift.residual = 0.0;
     if (listed && mo.sigma + mo.mu <= 0.5 * skin[0]) {
-        sigma = mo.sigma;
+        drift = mo;
         skin[1] += 1.0;
     } else if (2.0 * mo.mu <= most_skin) {
         // a new list at q0, its skin from the motion per step the last one saw
@@ -724,13 +980,15 @@ inline index contacts(const Model& m, const double* q0, double* q, double* qd,
         pairs = w.list[0];
         rows = w.pairs->data;
         radius = 2.0 * h + skin[0];
-        active = rows_below(rows, pairs, 2.0 * (sigma + mo.mu) + h, kBands / radius);
+        active = rows_below(rows, pairs, drift.reach(2.0 * mo.mu + h), kBands / radius);
         refresh(q0, rows, 0, active);
         w.list[1] = active;
     }
     // 4. the bound, 5. the response, its moves clipped to h / 2, and the bound again (over
-    // more of the list's rows when the response moved particles)
-    bound(st, active);
+    // more of the list's rows when the response moved particles); after each bound, the
+    // velocities of the pairs it held back (hold)
+    bound(st, active, true);
+    hold(st, active, qd, dt);
     for (index p = 0; p < active; ++p)
         for (int k = 0; k < 4; ++k) {
             const index i = rows[kSlots * p + 1 + k];
@@ -749,12 +1007,13 @@ inline index contacts(const Model& m, const double* q0, double* q, double* qd,
         }
     if (moved > 0.0 && w.list[0] >= 0) {
         const index more =
-            rows_below(rows, pairs, 2.0 * (sigma + mo.mu + moved) + h, kBands / radius);
+            rows_below(rows, pairs, drift.reach(2.0 * (mo.mu + moved) + h), kBands / radius);
         refresh(q0, rows, active, more);
         active = more;
         w.list[1] = active;
     }
-    bound(st, active);
+    bound(st, active, true);
+    hold(st, active, qd, dt);
     return 0;
 }
 

@@ -125,7 +125,8 @@ inline double forecast_motion(const Model& m, const double* v0, double dt) {
 inline index near_pairs(const Model& m, double* q0, const double* v0, double dt,
                         const ContactBuffers& w, double reach) {
     const double h = m.soft_contacts.thickness, g = m.soft_contacts.margin;
-    if (*w.list >= 0 && thick::motion(m, q0, q0, w.q_build, true).sigma <= 0.5 * w.list_skin[0])
+    if (*w.list >= 0 && thick::motion(m, q0, q0, w.q_build, true, true,
+                                      2.0 * h + w.list_skin[0]).sigma <= 0.5 * w.list_skin[0])
         return *w.list;
     thick::Stage st{m, q0, q0, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
                     g, m.soft_contacts.self_contact != 0};

@@ -128,7 +128,7 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
                                   colliders::Seen* seen) {
     const index n = m.particles.count, n3 = 3 * m.particles.count;
     copy(s.q, w.q_solved, n3);
-    index needed = thick::contacts(m, q_start, s.q, s.qd, w, false);
+    index needed = thick::contacts(m, q_start, s.q, s.qd, w, false, p.dt);
     if (needed != 0) return needed;
     copy(s.q, w.q_collided, n3);
     colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
@@ -146,7 +146,7 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
     Model held = m;
     held.particles.inv_mass = w.held_inv_mass;
     copy(s.q, w.q_collided, n3);
-    needed = thick::contacts(held, q_start, s.q, s.qd, w, false);
+    needed = thick::contacts(held, q_start, s.q, s.qd, w, false, p.dt);
     if (needed != 0) return needed;
     bool any = false;  // the colliders again, for the particles the second pass moved
     for (index i = 0; i < n; ++i) {
@@ -180,7 +180,7 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
         soft::contacts_bounding(m, s.q, s.qd, w);
     } else if (m.soft_contacts.mode == SoftContactMode::SURFACE && m.soft_contacts.thickness > 0.0) {
         if (m.colliders.count > 0) return thick_with_colliders(m, p, s, q_start, w, seen);
-        const index needed = thick::contacts(m, q_start, s.q, s.qd, w);
+        const index needed = thick::contacts(m, q_start, s.q, s.qd, w, true, p.dt);
         if (needed != 0) return needed;
     } else if (m.soft_contacts.mode == SoftContactMode::SURFACE) {
         const index needed = soft::contacts_surface(m, s.q, s.qd, w);
