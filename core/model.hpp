@@ -196,6 +196,10 @@ struct ContactBuffers {
     index* list = nullptr;        // (3,)
     double* list_skin = nullptr;  // (2,)
     double* particle_box = nullptr;  // (N, 6)
+    // a gather's scratch: the last look-up that met each triangle (T,), and each particle's
+    // first triangle (N,; -1: none)
+    index* tri_mark = nullptr;      // (T,)
+    index* vertex_owner = nullptr;  // (N,)
     // the positions the colliders left before the thickness contacts (N, 3), and the
     // inverse masses the stage sees (N,): 0 for the particles the colliders caught
     double* q_collided = nullptr;

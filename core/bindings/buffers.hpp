@@ -83,6 +83,9 @@ public:
                 contact.q_collided = contact.list_skin + 2;
                 contact.held_inv_mass = contact.q_collided + n3;
                 contact.q_solved = contact.held_inv_mass + n3 / 3;
+                thick_index_.assign(tris + n3 / 3, 0);
+                contact.tri_mark = thick_index_.data();
+                contact.vertex_owner = contact.tri_mark + tris;
                 pair_entries_.assign(static_cast<size_t>(softbody::ContactBuffers::kPairSlots) *
                                          (16 * tris + 16),
                                      0);
@@ -120,7 +123,7 @@ public:
 private:
     std::vector<std::vector<double>> rows_, per_body_, per_collider_;
     std::vector<double> gradient_, rows_buffer_, lane_pnet_, gas_work_;
-    std::vector<Index> hash_start_, hash_count_, hash_entries_, pair_entries_;
+    std::vector<Index> hash_start_, hash_count_, hash_entries_, pair_entries_, thick_index_;
     std::vector<double> thick_;
     softbody::HashEntries entries_, pairs_;
     Index crossing_[2] = {-1, -1};
