@@ -83,9 +83,10 @@ public:
                 contact.q_collided = contact.list_skin + 2;
                 contact.held_inv_mass = contact.q_collided + n3;
                 contact.q_solved = contact.held_inv_mass + n3 / 3;
-                thick_index_.assign(tris + n3 / 3, 0);
+                thick_index_.assign(2 * tris + n3 / 3, 0);
                 contact.tri_mark = thick_index_.data();
                 contact.vertex_owner = contact.tri_mark + tris;
+                contact.tri_owns = contact.vertex_owner + n3 / 3;
                 pair_entries_.assign(static_cast<size_t>(softbody::ContactBuffers::kPairSlots) *
                                          (16 * tris + 16),
                                      0);

@@ -356,16 +356,16 @@ inline void vertex_bounds(Batch& b) {
         const double nx = aby * (-caz) - abz * (-cay), ny = abz * (-cax) - abx * (-caz),
                      nz = abx * (-cay) - aby * (-cax);
         const double nn = nx * nx + ny * ny + nz * nz;
-        auto area = [&](double ux, double uy, double uz, double wx, double wy, double wz) {
+        auto area = [=](double ux, double uy, double uz, double wx, double wy, double wz) {
             return (uy * wz - uz * wy) * nx + (uz * wx - ux * wz) * ny + (ux * wy - uy * wx) * nz;
         };
         const double slack = -1e-6 * nn;
-        const bool inside = nn > 0.0 && area(abx, aby, abz, apx, apy, apz) >= slack &&
-                            area(bcx, bcy, bcz, bpx, bpy, bpz) >= slack &&
-                            area(cax, cay, caz, cpx, cpy, cpz) >= slack;
+        const bool inside = (nn > 0.0) & (area(abx, aby, abz, apx, apy, apz) >= slack) &
+                            (area(bcx, bcy, bcz, bpx, bpy, bpz) >= slack) &
+                            (area(cax, cay, caz, cpx, cpy, cpz) >= slack);
         const double h = apx * nx + apy * ny + apz * nz;
         const double plane = h * h / (nn > 0.0 ? nn : 1.0);
-        auto edge = [&](double ex, double ey, double ez, double ux, double uy, double uz) {
+        auto edge = [=](double ex, double ey, double ez, double ux, double uy, double uz) {
             const double ee = ex * ex + ey * ey + ez * ez;
             const double t = clamp01((ux * ex + uy * ey + uz * ez) / (ee > 0.0 ? ee : 1.0));
             const double dx = ux - t * ex, dy = uy - t * ey, dz = uz - t * ez;
@@ -436,7 +436,15 @@ inline index collect(const Stage& st) {
     for (index i = 0; i < m.particles.count; ++i) owner[i] = -1;
     for (index t = tris; t-- > 0;)  // the first triangle of each corner is the last written
         for (int k = 0; k < 3; ++k) owner[m.triangles.indices[3 * t + k]] = t;
-    for (index t = 0; t < tris; ++t) w.tri_mark[t] = -1;
+    for (index t = 0; t < tris; ++t) {
+        w.tri_mark[t] = -1;
+        index owns = 0;
+        for (int k = 0; k < 3; ++k) {
+            owns |= index(owner[m.triangles.indices[3 * t + k]] == t) << k;
+            owns |= index(m.triangles.edge_owner[3 * t + k] != 0) << (3 + k);
+        }
+        w.tri_owns[t] = owns;
+    }
     index count = 0;
     bool crossed = false;
     // pairs whose squared distance is at least keep^2 (1 + 1e-6) are far: their bound (at
@@ -485,10 +493,11 @@ inline index collect(const Stage& st) {
         const index body = m.triangles.body[t];
         const double* box = w.tri_box + 6 * t;
         // t's owned edges and their boxes, its owned corners
+        const index owns = w.tri_owns[t];
         index edges = 0, edge[3][2];
         double elo[3][3], ehi[3][3];
         for (int k = 0; k < 3; ++k) {
-            if (m.triangles.edge_owner[3 * t + k] == 0) continue;
+            if (!((owns >> (3 + k)) & 1)) continue;
             edge[edges][0] = tri[k];
             edge[edges][1] = tri[(k + 1) % 3];
             edge_box(st, tri[k], tri[(k + 1) % 3], elo[edges], ehi[edges]);
@@ -496,7 +505,7 @@ inline index collect(const Stage& st) {
         }
         index corners = 0, corner[3];
         for (int k = 0; k < 3; ++k)
-            if (owner[tri[k]] == t) corner[corners++] = tri[k];
+            if ((owns >> k) & 1) corner[corners++] = tri[k];
         each_triangle(st, box, box + 3, t, t, [&](index t2) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
@@ -507,10 +516,11 @@ inline index collect(const Stage& st) {
                 return;
             }
             for (index k = 0; k < corners; ++k) vertex_triangle(corner[k], t2);
+            const index owns2 = w.tri_owns[t2];
             for (int k = 0; k < 3; ++k)
-                if (owner[tri2[k]] == t2) vertex_triangle(tri2[k], t);
+                if ((owns2 >> k) & 1) vertex_triangle(tri2[k], t);
             for (int k2 = 0; k2 < 3; ++k2) {
-                if (m.triangles.edge_owner[3 * t2 + k2] == 0) continue;
+                if (!((owns2 >> (3 + k2)) & 1)) continue;
                 const index c = tri2[k2], d = tri2[(k2 + 1) % 3];
                 double clo[3], chi[3];
                 edge_box(st, c, d, clo, chi);
