@@ -281,9 +281,9 @@ inline double build_distance(const index* row) {
     return d;
 }
 
-/// Candidate pairs of one kind waiting for their distances: their particles, and their
-/// four points at q0 as a structure of arrays (x[3 k + d][p]: point k's coordinate d), so
-/// that the lower bounds below run in vector lanes.
+/// Candidate pairs of one kind waiting for their distances: their particles, and (load())
+/// their four points at q0 as a structure of arrays (x[3 k + d][p]: point k's coordinate
+/// d), so that the lower bounds below run in vector lanes.
 struct Batch {
     static constexpr int kSize = 64;
     int n = 0;
@@ -291,12 +291,15 @@ struct Batch {
     double x[12][kSize];
     double bound[kSize];  // a lower bound on each pair's squared distance
     /// Writes pair u in the next row, and counts it when `keep` (room: n < kSize).
-    void push(const double* q0, const index* u, bool keep) {
-        for (int k = 0; k < 4; ++k) {
-            v[n][k] = u[k];
-            for (int d = 0; d < 3; ++d) x[3 * k + d][n] = q0[3 * u[k] + d];
-        }
+    void push(const index* u, bool keep) {
+        for (int k = 0; k < 4; ++k) v[n][k] = u[k];
         n += keep;
+    }
+    /// The counted pairs' points at q0 into x.
+    void load(const double* q0) {
+        for (int p = 0; p < n; ++p)
+            for (int k = 0; k < 4; ++k)
+                for (int d = 0; d < 3; ++d) x[3 * k + d][p] = q0[3 * v[p][k] + d];
     }
 };
 
@@ -459,6 +462,8 @@ inline index collect(const Stage& st) {
     };
     Batch vt, ee;
     auto flush = [&]() {
+        vt.load(st.q0);
+        ee.load(st.q0);
         vertex_bounds(vt);
         for (int p = 0; p < vt.n; ++p)
             if (vt.bound[p] < far) measure(kVertexTriangle, vt.v[p]);
@@ -476,7 +481,7 @@ inline index collect(const Stage& st) {
         const bool apart = (tri2[0] != i) & (tri2[1] != i) & (tri2[2] != i);  // else adjacent
         if (vt.n == Batch::kSize) flush();
         const index v[4] = {i, tri2[0], tri2[1], tri2[2]};
-        vt.push(st.q0, v, apart & boxes_meet(pb, pb + 3, box2, box2 + 3, st.g));
+        vt.push(v, apart & boxes_meet(pb, pb + 3, box2, box2 + 3, st.g));
     };
     // particles that are no triangle's corner (none in a mesh body): their own look-up
     for (index b = 0; b < m.bodies.count; ++b)
@@ -529,7 +534,7 @@ inline index collect(const Stage& st) {
                     const bool apart = (c != a) & (c != b) & (d != a) & (d != b);  // else adjacent
                     if (ee.n == Batch::kSize) flush();
                     const index v[4] = {a, b, c, d};
-                    ee.push(st.q0, v, apart & boxes_meet(elo[k], ehi[k], clo, chi, st.g));
+                    ee.push(v, apart & boxes_meet(elo[k], ehi[k], clo, chi, st.g));
                 }
             }
         });
