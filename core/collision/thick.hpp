@@ -461,15 +461,18 @@ inline index collect(const Stage& st) {
         if (dist < st.keep) add_pair(w, count, kind, v, dist);
     };
     Batch vt, ee;
+    const bool bounded = far < std::numeric_limits<double>::infinity();  // else all kept
     auto flush = [&]() {
-        vt.load(st.q0);
-        ee.load(st.q0);
-        vertex_bounds(vt);
+        if (bounded) {
+            vt.load(st.q0);
+            ee.load(st.q0);
+            vertex_bounds(vt);
+            edge_bounds(ee);
+        }
         for (int p = 0; p < vt.n; ++p)
-            if (vt.bound[p] < far) measure(kVertexTriangle, vt.v[p]);
-        edge_bounds(ee);
+            if (!bounded || vt.bound[p] < far) measure(kVertexTriangle, vt.v[p]);
         for (int p = 0; p < ee.n; ++p)
-            if (ee.bound[p] < far) measure(kEdgeEdge, ee.v[p]);
+            if (!bounded || ee.bound[p] < far) measure(kEdgeEdge, ee.v[p]);
         vt.n = ee.n = 0;
     };
     // a candidate is written in the batch's next row whether it counts or not, and counted
