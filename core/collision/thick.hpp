@@ -9,9 +9,10 @@
 //      finds T and bounds mu >= max |u_i| (and the list's drift) by the displacements' box.
 //   2. Broad phase: a spatial hash of the triangles' boxes over their corners' q0 and
 //      q0 + u (each particle's box computed once a gather), grown by the margin g >= h
-//      (soft_contacts.margin); each vertex's box, and each triangle's (for the edge pairs of
-//      the two triangles that own the edges), over the same points is looked up in it.
-//      Every pair whose boxes meet is a candidate, with its distance D at the step's start.
+//      (soft_contacts.margin); each triangle's box over the same points is looked up in it
+//      for the triangles after it, and each vertex-triangle and edge-edge pair is found
+//      through the pair of triangles that own its primitives (collect()). Every pair whose
+//      boxes meet is a candidate, with its distance D at the step's start.
 //      Any pair of primitives that could meet below (every path stays in its box grown by
 //      h / 2) is a candidate. Most steps take their candidates from a list kept between
 //      steps instead, and read only its rows that could matter (see contacts()).
