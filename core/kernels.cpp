@@ -88,6 +88,14 @@ index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers&
     return 0;
 }
 
+index contact_pairs(const Model& m, double* q, double radius, const ContactBuffers& w) {
+    thick::Stage st{m, q, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size, radius,
+                    m.soft_contacts.self_contact != 0};
+    st.swept = false;
+    st.keep = radius;
+    return thick::gather(st);
+}
+
 void eval_energies(const Model& m, const Control& c, double t, const double* q,
                    const BodyGas& gas, TermEnergies& out) {
     forms::energies(Eval{m, c, t, q, q, gas}, out.total, out.body);
@@ -176,7 +184,8 @@ const KernelTable& kernel_table() {
                                    apply_jacobians, soft_contacts,
                                    eval_energies, eval_flows, active_terms, prepare,
                                    prepare_spectral, spectral_product,
-                                   linearization_size, check_stencil, stiffness_bounds};
+                                   linearization_size, check_stencil, stiffness_bounds,
+                                   contact_pairs};
     return table;
 }
 

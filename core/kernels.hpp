@@ -118,6 +118,12 @@ struct KernelTable {
     /// (w: scratch, and the gas's state at the estimate, BoundScratch).
     StiffnessBounds (*stiffness_bounds)(const Model&, const Control&, const double* q,
                                         const BoundScratch& w);
+    /// The thickness contacts' candidate pairs at q (N, 3), gathered as the pair list's
+    /// build gathers them (collision/thick.hpp): every vertex-triangle and edge-edge pair
+    /// nearer than `radius` [m] (adjacent ones, and a body's own without self-contact, left
+    /// out) into w.pairs' rows; returns their count, -1 for a crossing at q (w.crossing), or
+    /// below -1 when a buffer could not grow to them.
+    index (*contact_pairs)(const Model&, double* q, double radius, const ContactBuffers& w);
 };
 
 namespace isa_scalar {

@@ -196,6 +196,12 @@ struct ContactBuffers {
     index* list = nullptr;        // (3,)
     double* list_skin = nullptr;  // (2,)
     double* particle_box = nullptr;  // (N, 6)
+    // a gather's scratch: the last look-up that met each triangle (T,), each particle's
+    // first triangle (N,; -1: none), and which of each triangle's corners and edges it owns
+    // (T,; bit k: corner k, bit 3 + k: edge k)
+    index* tri_mark = nullptr;      // (T,)
+    index* vertex_owner = nullptr;  // (N,)
+    index* tri_owns = nullptr;      // (T,)
     // the positions the colliders left before the thickness contacts (N, 3), and the
     // inverse masses the stage sees (N,): 0 for the particles the colliders caught
     double* q_collided = nullptr;

@@ -84,6 +84,10 @@ public:
                 contact.held_inv_mass = contact.q_collided + n3;
                 contact.q_solved = contact.held_inv_mass + n3 / 3;
                 contact.held = contact.q_solved + n3;
+                thick_index_.assign(2 * tris + n3 / 3, 0);
+                contact.tri_mark = thick_index_.data();
+                contact.vertex_owner = contact.tri_mark + tris;
+                contact.tri_owns = contact.vertex_owner + n3 / 3;
                 pair_entries_.assign(static_cast<size_t>(softbody::ContactBuffers::kPairSlots) *
                                          (16 * tris + 16),
                                      0);
@@ -121,7 +125,7 @@ public:
 private:
     std::vector<std::vector<double>> rows_, per_body_, per_collider_;
     std::vector<double> gradient_, rows_buffer_, lane_pnet_, gas_work_;
-    std::vector<Index> hash_start_, hash_count_, hash_entries_, pair_entries_;
+    std::vector<Index> hash_start_, hash_count_, hash_entries_, pair_entries_, thick_index_;
     std::vector<double> thick_;
     softbody::HashEntries entries_, pairs_;
     Index crossing_[2] = {-1, -1};

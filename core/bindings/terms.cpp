@@ -67,6 +67,48 @@ Index soft_contacts(const CoreModel& core, F64 q, F64 qd, std::optional<Index> h
     return softbody::kernels().soft_contacts(m, q.data(), qd.data(), b.contact);
 }
 
+/// The thickness contacts' candidate pairs nearer than `radius` [m] at q (N, 3), gathered
+/// as the pair list's build gathers them (for tests of its broad and narrow phase): (kinds
+/// (P,): 0 vertex-triangle, 1 edge-edge; particles (P, 4); distances (P,) [m]).
+nb::tuple contact_pairs(const CoreModel& core, ConstF64 q, double radius) {
+    const softbody::Model& m = core.model();
+    check_shape(q, "q", {m.particles.count, 3});
+    if (m.soft_contacts.mode != SoftContactMode::SURFACE || !(m.soft_contacts.thickness > 0.0))
+        fail("contact_pairs needs surface soft contacts with a thickness");
+    if (!(radius > 0.0) || !std::isfinite(radius))
+        fail("radius must be finite and > 0, got " + std::to_string(radius));
+    std::vector<double> x(q.data(), q.data() + q.size());
+    Buffers b(m, 0, checked_capacity(m, std::nullopt));
+    b.allow_growth();
+    Index pairs = 0;
+    {
+        nb::gil_scoped_release release;
+        pairs = softbody::kernels().contact_pairs(m, x.data(), radius, b.contact);
+    }
+    if (pairs == -1)
+        fail("an edge at particle " + std::to_string(b.contact.crossing[0]) +
+             " passes through triangle " + std::to_string(b.contact.crossing[1]));
+    if (pairs < 0) fail("the contact pairs do not fit their buffers");
+    const size_t n = static_cast<size_t>(pairs);
+    Index* kinds = new Index[n];
+    Index* particles = new Index[4 * n];
+    double* distances = new double[n];
+    const Index* rows = b.contact.pairs->data;
+    for (size_t p = 0; p < n; ++p) {
+        const Index* row = rows + softbody::ContactBuffers::kPairSlots * p;
+        kinds[p] = row[0];
+        for (size_t k = 0; k < 4; ++k) particles[4 * p + k] = row[1 + k];
+        std::memcpy(distances + p, row + 5, sizeof(double));
+    }
+    nb::capsule own_k(kinds, [](void* p) noexcept { delete[] static_cast<Index*>(p); });
+    nb::capsule own_p(particles, [](void* p) noexcept { delete[] static_cast<Index*>(p); });
+    nb::capsule own_d(distances, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+    const size_t shape_p[2] = {n, 4};
+    return nb::make_tuple(nb::ndarray<nb::numpy, Index>(kinds, {n}, own_k),
+                          nb::ndarray<nb::numpy, Index>(particles, 2, shape_p, own_p),
+                          nb::ndarray<nb::numpy, double>(distances, {n}, own_d));
+}
+
 /// The registry position of the term called `name`.
 int term_position(const std::string& name) {
     const softbody::KernelTable& k = softbody::kernels();
@@ -454,6 +496,12 @@ void bind_terms(nb::module_& mod) {
             nb::arg("qd").noconvert(), nb::arg("hash_capacity") = nb::none(),
             "One pass of the model's soft-soft contacts on q, qd (N, 3) in place; returns "
             "the hash entries the surface contacts needed when they did not fit, else 0.");
+    mod.def("contact_pairs", &contact_pairs, nb::arg("model"), nb::arg("q").noconvert(),
+            nb::arg("radius"),
+            "The thickness contacts' candidate pairs nearer than radius [m] at q (N, 3), "
+            "gathered as the pair list's build gathers them: (kinds (P,): 0 vertex-triangle, "
+            "1 edge-edge; particles (P, 4); distances (P,) [m]). Raises ValueError where an "
+            "edge passes through a triangle at q.");
     mod.def("body_volumes", &body_volumes, nb::arg("q").noconvert(),
             nb::arg("tri_indices").noconvert(), nb::arg("body_particle_range").noconvert(),
             nb::arg("body_tri_range").noconvert(), nb::arg("body_volume_method").noconvert(),

@@ -209,12 +209,14 @@ inline index cell_of(double v) {
 }
 
 /// Bucket in [0, table) of grid cell (ix, iy, iz): the usual three-prime hash with
-/// wrap-around int64 products, then a non-negative modulo (Python's).
+/// wrap-around int64 products, then a non-negative modulo (Python's; for a power-of-two
+/// table, as the buffers make it, the same value as a mask, without a division).
 inline index cell_hash(index ix, index iy, index iz, index table) {
     auto times = [](index a, std::uint64_t prime) {
         return static_cast<index>(static_cast<std::uint64_t>(a) * prime);
     };
     const index h = times(ix, 73856093u) ^ times(iy, 19349663u) ^ times(iz, 83492791u);
+    if ((table & (table - 1)) == 0) return h & (table - 1);
     const index r = h % table;
     return r < 0 ? r + table : r;
 }

@@ -13,9 +13,10 @@
 //      a body that spins, breathes or shears keeps its list).
 //   2. Broad phase: a spatial hash of the triangles' boxes over their corners' q0 and
 //      q0 + u (each particle's box computed once a gather), grown by the margin g >= h
-//      (soft_contacts.margin); each vertex's box, and each triangle's (for the edge pairs of
-//      the two triangles that own the edges), over the same points is looked up in it.
-//      Every pair whose boxes meet is a candidate, with its distance D at the step's start.
+//      (soft_contacts.margin); each triangle's box over the same points is looked up in it
+//      for the triangles after it, and each vertex-triangle and edge-edge pair is found
+//      through the pair of triangles that own its primitives (collect()). Every pair whose
+//      boxes meet is a candidate, with its distance D at the step's start.
 //      Any pair of primitives that could meet below (every path stays in its box grown by
 //      h / 2) is a candidate. Most steps take their candidates from a list kept between
 //      steps instead, and read only its rows that could matter (see contacts()).
@@ -181,11 +182,13 @@ inline void edge_box(const Stage& st, index a, index b, double* lo, double* hi) 
     }
 }
 
+/// Whether boxes [lo, hi] and [lo2, hi2] meet when grown by `grow` (without branches: the
+/// look-ups below test many boxes whose outcome no predictor guesses).
 inline bool boxes_meet(const double* lo, const double* hi, const double* lo2, const double* hi2,
                        double grow) {
-    for (int k = 0; k < 3; ++k)
-        if (hi[k] + grow < lo2[k] || hi2[k] + grow < lo[k]) return false;
-    return true;
+    bool apart = false;
+    for (int k = 0; k < 3; ++k) apart |= (hi[k] + grow < lo2[k]) | (hi2[k] + grow < lo[k]);
+    return !apart;
 }
 
 /// Hash of the triangles' boxes (over their corners' boxes, grown by g) into w.hash_*, the
@@ -214,37 +217,44 @@ inline index build_hash(const Stage& st) {
     });
 }
 
-/// Each triangle from index `from` on whose grown box meets the box [lo, hi], once (in the
-/// first grid cell the two share): calls visit(t); stops when visit returns false.
+/// Each triangle t2 > `after` whose grown box meets the box [lo, hi], once: calls visit(t2).
+/// The buckets' entries are in triangle order (hash_triangles adds them so), so each bucket
+/// is read from its end down to the first entry at or below `after`; w.tri_mark[t2] holds
+/// the last query (`query`, unique to the caller's lookup) that saw t2, so a triangle met
+/// again in another cell of the range (or in a bucket two cells share) is skipped.
 template <class Visit>
-inline bool each_triangle(const Stage& st, const double* lo, const double* hi, index from,
-                          Visit visit) {
+inline void each_triangle(const Stage& st, const double* lo, const double* hi, index after,
+                          index query, Visit visit) {
     const ContactBuffers& w = st.w;
+    const index* entries = w.hash_entries->data;
+    index* mark = w.tri_mark;
     index r[6];
     for (int k = 0; k < 3; ++k) {
         r[k] = soft::cell_of(lo[k] * st.inv);
         r[3 + k] = soft::cell_of(hi[k] * st.inv);
     }
+    constexpr int kFound = 128;
+    index found[kFound];  // the triangles met, gathered without a branch on each
+    int n = 0;
     for (index ix = r[0]; ix <= r[3]; ++ix)
         for (index iy = r[1]; iy <= r[4]; ++iy)
             for (index iz = r[2]; iz <= r[5]; ++iz) {
                 const index h = soft::cell_hash(ix, iy, iz, w.hash_table);
-                for (index e = w.hash_start[h]; e < w.hash_start[h + 1]; ++e) {
-                    const index t = w.hash_entries->data[e];
-                    if (t < from) continue;  // before its box is read
+                for (index e = w.hash_start[h + 1]; e-- > w.hash_start[h];) {
+                    const index t = entries[e];
+                    if (t <= after) break;  // the rest of the bucket is below too
                     const double* box = w.tri_box + 6 * t;
-                    if (!boxes_meet(lo, hi, box, box + 3, st.g)) continue;
-                    // the first cell of the two ranges' overlap: visited there only
-                    const index c[3] = {ix, iy, iz};
-                    bool first = true;
-                    for (int k = 0; k < 3 && first; ++k) {
-                        const index start = std::max(r[k], soft::cell_of((box[k] - st.g) * st.inv));
-                        first = c[k] == start;
+                    const bool fresh = mark[t] != query;
+                    mark[t] = query;
+                    found[n] = t;
+                    n += fresh & boxes_meet(lo, hi, box, box + 3, st.g);
+                    if (n == kFound) {
+                        for (int k = 0; k < n; ++k) visit(found[k]);
+                        n = 0;
                     }
-                    if (first && !visit(t)) return false;
                 }
             }
-    return true;
+    for (int k = 0; k < n; ++k) visit(found[k]);
 }
 
 /// Whether particles of bodies a and b may touch (other bodies always, the same body with
@@ -280,85 +290,269 @@ inline double build_distance(const index* row) {
     return d;
 }
 
+/// Candidate pairs of one kind waiting for their distances: their particles, and (load())
+/// their four points at q0 as a structure of arrays (x[3 k + d][p]: point k's coordinate
+/// d), so that the lower bounds below run in vector lanes.
+struct Batch {
+    static constexpr int kSize = 64;
+    int n = 0;
+    index v[kSize][4];
+    double x[12][kSize];
+    double bound[kSize];  // a lower bound on each pair's squared distance
+    /// Writes pair u in the next row, and counts it when `keep` (room: n < kSize).
+    void push(const index* u, bool keep) {
+        for (int k = 0; k < 4; ++k) v[n][k] = u[k];
+        n += keep;
+    }
+    /// The counted pairs' points at q0 into x.
+    void load(const double* q0) {
+        for (int p = 0; p < n; ++p)
+            for (int k = 0; k < 4; ++k)
+                for (int d = 0; d < 3; ++d) x[3 * k + d][p] = q0[3 * v[p][k] + d];
+    }
+};
+
+/// Each edge-edge pair's squared distance into b.bound: closest_segments' arithmetic
+/// without its branches (selects in their place, the same operations in the same order, so
+/// the same value as gap()'s), 0 for a pair with a degenerate segment (left to gap()).
+inline void edge_bounds(Batch& b) {
+    auto clamp01 = [](double x) { return std::min(1.0, std::max(0.0, x)); };
+    const double tiny = 1e-300;
+    for (int p = 0; p < b.n; ++p) {
+        const double d1x = b.x[3][p] - b.x[0][p], d1y = b.x[4][p] - b.x[1][p],
+                     d1z = b.x[5][p] - b.x[2][p];
+        const double d2x = b.x[9][p] - b.x[6][p], d2y = b.x[10][p] - b.x[7][p],
+                     d2z = b.x[11][p] - b.x[8][p];
+        const double rx = b.x[0][p] - b.x[6][p], ry = b.x[1][p] - b.x[7][p],
+                     rz = b.x[2][p] - b.x[8][p];
+        const double a = d1x * d1x + d1y * d1y + d1z * d1z;
+        const double e = d2x * d2x + d2y * d2y + d2z * d2z;
+        const double f = d2x * rx + d2y * ry + d2z * rz;
+        const double c = d1x * rx + d1y * ry + d1z * rz;
+        const double bb = d1x * d2x + d1y * d2y + d1z * d2z;
+        const bool degenerate = !(a > tiny) || !(e > tiny);
+        const double as = degenerate ? 1.0 : a, es = degenerate ? 1.0 : e;
+        const double denom = a * e - bb * bb;
+        const double ds = denom > 0.0 ? denom : 1.0;
+        double s = denom > 0.0 ? clamp01((bb * f - c * e) / ds) : 0.0;
+        double t = (bb * s + f) / es;
+        const bool low = t < 0.0, high = t > 1.0;
+        s = low ? clamp01(-c / as) : (high ? clamp01((bb - c) / as) : s);
+        t = low ? 0.0 : (high ? 1.0 : t);
+        const double gx = (b.x[0][p] + s * d1x) - (b.x[6][p] + t * d2x);
+        const double gy = (b.x[1][p] + s * d1y) - (b.x[7][p] + t * d2y);
+        const double gz = (b.x[2][p] + s * d1z) - (b.x[8][p] + t * d2z);
+        b.bound[p] = degenerate ? 0.0 : gx * gx + gy * gy + gz * gz;
+    }
+}
+
+/// A lower bound on each vertex-triangle pair's squared distance into b.bound, without
+/// branches: the squared distance to the triangle's plane where the vertex projects inside
+/// the triangle or within 1e-6 of its size outside (never more than the distance), else the
+/// least squared distance to its three edges (the distance then: the closest point is on
+/// the boundary).
+inline void vertex_bounds(Batch& b) {
+    auto clamp01 = [](double x) { return std::min(1.0, std::max(0.0, x)); };
+    for (int p = 0; p < b.n; ++p) {
+        const double px = b.x[0][p], py = b.x[1][p], pz = b.x[2][p];
+        const double ax = b.x[3][p], ay = b.x[4][p], az = b.x[5][p];
+        const double bx = b.x[6][p], by = b.x[7][p], bz = b.x[8][p];
+        const double cx = b.x[9][p], cy = b.x[10][p], cz = b.x[11][p];
+        const double abx = bx - ax, aby = by - ay, abz = bz - az;
+        const double bcx = cx - bx, bcy = cy - by, bcz = cz - bz;
+        const double cax = ax - cx, cay = ay - cy, caz = az - cz;
+        const double apx = px - ax, apy = py - ay, apz = pz - az;
+        const double bpx = px - bx, bpy = py - by, bpz = pz - bz;
+        const double cpx = px - cx, cpy = py - cy, cpz = pz - cz;
+        // the normal (ab x -ca) and the signed sub-areas of the projection
+        const double nx = aby * (-caz) - abz * (-cay), ny = abz * (-cax) - abx * (-caz),
+                     nz = abx * (-cay) - aby * (-cax);
+        const double nn = nx * nx + ny * ny + nz * nz;
+        auto area = [=](double ux, double uy, double uz, double wx, double wy, double wz) {
+            return (uy * wz - uz * wy) * nx + (uz * wx - ux * wz) * ny + (ux * wy - uy * wx) * nz;
+        };
+        const double slack = -1e-6 * nn;
+        const bool inside = (nn > 0.0) & (area(abx, aby, abz, apx, apy, apz) >= slack) &
+                            (area(bcx, bcy, bcz, bpx, bpy, bpz) >= slack) &
+                            (area(cax, cay, caz, cpx, cpy, cpz) >= slack);
+        const double h = apx * nx + apy * ny + apz * nz;
+        const double plane = h * h / (nn > 0.0 ? nn : 1.0);
+        auto edge = [=](double ex, double ey, double ez, double ux, double uy, double uz) {
+            const double ee = ex * ex + ey * ey + ez * ez;
+            const double t = clamp01((ux * ex + uy * ey + uz * ez) / (ee > 0.0 ? ee : 1.0));
+            const double dx = ux - t * ex, dy = uy - t * ey, dz = uz - t * ez;
+            return dx * dx + dy * dy + dz * dz;
+        };
+        const double rim = std::min(std::min(edge(abx, aby, abz, apx, apy, apz),
+                                             edge(bcx, bcy, bcz, bpx, bpy, bpz)),
+                                    edge(cax, cay, caz, cpx, cpy, cpz));
+        b.bound[p] = inside ? plane : rim;
+    }
+}
+
+/// Whether an owned edge of triangle e (its corners' indices ei) passes through triangle f
+/// (corners fi) at q0, an edge sharing a corner with f left out; writes the first such edge's
+/// first particle and f into w.crossing. When all three corners of e lie strictly on one
+/// side of f's plane no edge of e can cross it (segment_crosses' own first test, with the
+/// same arithmetic), so the edges are not tested one by one; the same for the corners of e
+/// that are not f's, when only they make edges that are not left out.
+inline bool edge_through(const Stage& st, index e, const index* ei, index f, const index* fi) {
+    const Model& m = st.m;
+    // the corners of e that are no corner of f: an edge with a shared corner is left out
+    int apart[3], n_apart = 0;
+    for (int k = 0; k < 3; ++k)
+        if (ei[k] != fi[0] && ei[k] != fi[1] && ei[k] != fi[2]) apart[n_apart++] = k;
+    if (n_apart < 2) return false;  // no edge of e without a corner of f
+    const V3 p0 = load(st.q0, fi[0]), p1 = load(st.q0, fi[1]), p2 = load(st.q0, fi[2]);
+    const V3 n = cross(p1 - p0, p2 - p0);
+    int above = 0, below = 0;
+    for (int j = 0; j < n_apart; ++j) {
+        const double side = dot(load(st.q0, ei[apart[j]]) - p0, n);
+        above += side > 0.0;
+        below += side < 0.0;
+    }
+    if (above == n_apart || below == n_apart) return false;
+    for (int k = 0; k < 3; ++k) {
+        if (m.triangles.edge_owner[3 * e + k] == 0) continue;
+        const index a = ei[k], b = ei[(k + 1) % 3];
+        const bool touches =
+            fi[0] == a || fi[1] == a || fi[2] == a || fi[0] == b || fi[1] == b || fi[2] == b;
+        if (touches || !segment_crosses(load(st.q0, a), load(st.q0, b), p0, p1, p2)) continue;
+        st.w.crossing[0] = a;
+        st.w.crossing[1] = f;
+        return true;
+    }
+    return false;
+}
+
 /// The candidate pairs into w.pairs; returns their count, or -1 after writing a crossing
-/// found at q0 into w.crossing (particle, triangle).
+/// found at q0 into w.crossing (particle, triangle). Every pair is found through the pair
+/// of triangles that own its primitives, once: each triangle t looks up the triangles
+/// t2 > t whose grown boxes meet its box (each_triangle), and for each such pair
+///   - the crossing check, when the two boxes meet without growth: the owned edges of each
+///     through the other (an edge crossing a triangle at q0 lies in its owner's box, which
+///     then meets the triangle's);
+///   - vertex-triangle: the corners each owns (w.vertex_owner: the first triangle a
+///     particle is a corner of) against the other triangle, where the vertex's box meets
+///     it grown by g (a vertex's box lies in its owner's);
+///   - edge-edge: the owned edges of each against the other's, where their boxes meet
+///     grown by g (an edge's box lies in its owner's).
+/// A primitive's own triangle holds only pairs that share a vertex, so t2 = t is skipped. A
+/// particle of a body that is no triangle's corner looks up the triangles near it alone.
+/// Each pair's distance at q0 is measured (gap), and the pair kept when it is below keep.
 inline index collect(const Stage& st) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
+    const index tris = m.triangles.count;
+    index* owner = w.vertex_owner;
+    for (index i = 0; i < m.particles.count; ++i) owner[i] = -1;
+    for (index t = tris; t-- > 0;)  // the first triangle of each corner is the last written
+        for (int k = 0; k < 3; ++k) owner[m.triangles.indices[3 * t + k]] = t;
+    for (index t = 0; t < tris; ++t) {
+        w.tri_mark[t] = -1;
+        index owns = 0;
+        for (int k = 0; k < 3; ++k) {
+            owns |= index(owner[m.triangles.indices[3 * t + k]] == t) << k;
+            owns |= index(m.triangles.edge_owner[3 * t + k] != 0) << (3 + k);
+        }
+        w.tri_owns[t] = owns;
+    }
     index count = 0;
     bool crossed = false;
-    // vertices against triangles
+    // pairs whose squared distance is at least keep^2 (1 + 1e-6) are far: their bound (at
+    // most the squared distance, within round-off far below that margin) at or above it
+    // drops them; the others' distances are measured by gap() and compared with keep
+    const double far = st.keep * st.keep * (1.0 + 1e-6);
+    auto measure = [&](index kind, const index* v) {
+        double c[4];
+        const V3 d = gap(st.q0, kind, v, c);
+        const double dist = std::sqrt(dot(d, d));
+        if (dist < st.keep) add_pair(w, count, kind, v, dist);
+    };
+    Batch vt, ee;
+    const bool bounded = far < std::numeric_limits<double>::infinity();  // else all kept
+    auto flush = [&]() {
+        if (bounded) {
+            vt.load(st.q0);
+            ee.load(st.q0);
+            vertex_bounds(vt);
+            edge_bounds(ee);
+        }
+        for (int p = 0; p < vt.n; ++p)
+            if (!bounded || vt.bound[p] < far) measure(kVertexTriangle, vt.v[p]);
+        for (int p = 0; p < ee.n; ++p)
+            if (!bounded || ee.bound[p] < far) measure(kEdgeEdge, ee.v[p]);
+        vt.n = ee.n = 0;
+    };
+    // a candidate is written in the batch's next row whether it counts or not, and counted
+    // when it does: no branch on its outcome
+    auto vertex_triangle = [&](index i, index t2) {
+        const index* tri2 = m.triangles.indices + 3 * t2;
+        const double* pb = particle_box(st, i);
+        const double* box2 = w.tri_box + 6 * t2;
+        const bool apart = (tri2[0] != i) & (tri2[1] != i) & (tri2[2] != i);  // else adjacent
+        if (vt.n == Batch::kSize) flush();
+        const index v[4] = {i, tri2[0], tri2[1], tri2[2]};
+        vt.push(v, apart & boxes_meet(pb, pb + 3, box2, box2 + 3, st.g));
+    };
+    // particles that are no triangle's corner (none in a mesh body): their own look-up
     for (index b = 0; b < m.bodies.count; ++b)
         for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
              ++i) {
+            if (owner[i] >= 0) continue;
             const double* box = particle_box(st, i);
-            each_triangle(st, box, box + 3, 0, [&](index t) {
-                const index* tri = m.triangles.indices + 3 * t;
-                if (!bodies_pair(st, b, m.triangles.body[t])) return true;
-                if (tri[0] == i || tri[1] == i || tri[2] == i) return true;  // adjacent
-                const index v[4] = {i, tri[0], tri[1], tri[2]};
-                double c[4];
-                const V3 d = gap(st.q0, kVertexTriangle, v, c);
-                const double dist = std::sqrt(dot(d, d));
-                if (dist < st.keep) add_pair(w, count, kVertexTriangle, v, dist);
-                return true;
+            each_triangle(st, box, box + 3, -1, -2 - i, [&](index t2) {
+                if (bodies_pair(st, b, m.triangles.body[t2])) vertex_triangle(i, t2);
             });
         }
-    // edges against edges and edges through triangles, by pairs of triangles t <= t2 whose
-    // boxes meet (each edge pair once: the pair of the triangles that own them), then the
-    // owned edges of each against the other
-    for (index t = 0; t < m.triangles.count && !crossed; ++t) {
+    for (index t = 0; t < tris && !crossed; ++t) {
         const index* tri = m.triangles.indices + 3 * t;
         const index body = m.triangles.body[t];
         const double* box = w.tri_box + 6 * t;
-        each_triangle(st, box, box + 3, t, [&](index t2) {  // t2 >= t: the pair once
-            if (!bodies_pair(st, body, m.triangles.body[t2])) return true;
+        // t's owned edges and their boxes, its owned corners
+        const index owns = w.tri_owns[t];
+        index edges = 0, edge[3][2];
+        double elo[3][3], ehi[3][3];
+        for (int k = 0; k < 3; ++k) {
+            if (!((owns >> (3 + k)) & 1)) continue;
+            edge[edges][0] = tri[k];
+            edge[edges][1] = tri[(k + 1) % 3];
+            edge_box(st, tri[k], tri[(k + 1) % 3], elo[edges], ehi[edges]);
+            ++edges;
+        }
+        index corners = 0, corner[3];
+        for (int k = 0; k < 3; ++k)
+            if ((owns >> k) & 1) corner[corners++] = tri[k];
+        each_triangle(st, box, box + 3, t, t, [&](index t2) {
+            if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
-            // an edge of one through the other at the start (their boxes overlap then)
-            if (t2 != t && boxes_meet(box, box + 3, box2, box2 + 3, 0.0)) {
-                for (int side = 0; side < 2; ++side) {
-                    const index te = side == 0 ? t : t2, tf = side == 0 ? t2 : t;
-                    const index* e = m.triangles.indices + 3 * te;
-                    const index* f = m.triangles.indices + 3 * tf;
-                    for (int k = 0; k < 3; ++k) {
-                        if (m.triangles.edge_owner[3 * te + k] == 0) continue;
-                        const index a = e[k], b = e[(k + 1) % 3];
-                        const bool touches = f[0] == a || f[1] == a || f[2] == a ||
-                                             f[0] == b || f[1] == b || f[2] == b;
-                        if (touches || !segment_crosses(load(st.q0, a), load(st.q0, b),
-                                                        load(st.q0, f[0]), load(st.q0, f[1]),
-                                                        load(st.q0, f[2])))
-                            continue;
-                        w.crossing[0] = a;
-                        w.crossing[1] = tf;
-                        crossed = true;
-                        return false;
-                    }
-                }
+            if (boxes_meet(box, box + 3, box2, box2 + 3, 0.0) &&
+                (edge_through(st, t, tri, t2, tri2) || edge_through(st, t2, tri2, t, tri))) {
+                crossed = true;
+                return;
             }
-            for (int k = 0; k < 3; ++k) {
-                if (m.triangles.edge_owner[3 * t + k] == 0) continue;
-                const index a = tri[k], b = tri[(k + 1) % 3];
-                double lo[3], hi[3];
-                edge_box(st, a, b, lo, hi);
-                for (int k2 = t2 == t ? k + 1 : 0; k2 < 3; ++k2) {
-                    if (m.triangles.edge_owner[3 * t2 + k2] == 0) continue;
-                    const index c = tri2[k2], d = tri2[(k2 + 1) % 3];
-                    if (c == a || c == b || d == a || d == b) continue;  // adjacent
-                    double clo[3], chi[3];
-                    edge_box(st, c, d, clo, chi);
-                    if (!boxes_meet(lo, hi, clo, chi, st.g)) continue;
+            for (index k = 0; k < corners; ++k) vertex_triangle(corner[k], t2);
+            const index owns2 = w.tri_owns[t2];
+            for (int k = 0; k < 3; ++k)
+                if ((owns2 >> k) & 1) vertex_triangle(tri2[k], t);
+            for (int k2 = 0; k2 < 3; ++k2) {
+                if (!((owns2 >> (3 + k2)) & 1)) continue;
+                const index c = tri2[k2], d = tri2[(k2 + 1) % 3];
+                double clo[3], chi[3];
+                edge_box(st, c, d, clo, chi);
+                for (index k = 0; k < edges; ++k) {
+                    const index a = edge[k][0], b = edge[k][1];
+                    const bool apart = (c != a) & (c != b) & (d != a) & (d != b);  // else adjacent
+                    if (ee.n == Batch::kSize) flush();
                     const index v[4] = {a, b, c, d};
-                    double cc[4];
-                    const V3 g = gap(st.q0, kEdgeEdge, v, cc);
-                    const double dist = std::sqrt(dot(g, g));
-                    if (dist < st.keep) add_pair(w, count, kEdgeEdge, v, dist);
+                    ee.push(v, apart & boxes_meet(elo[k], ehi[k], clo, chi, st.g));
                 }
             }
-            return true;
         });
+        flush();
     }
+    flush();
     return crossed ? -1 : count;
 }
 
