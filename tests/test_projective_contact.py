@@ -22,7 +22,7 @@ def stage_correction(state, q0, dt):
 
 
 @pytest.mark.parametrize(("dt", "most_correction", "most_energy", "most_spread"),
-                         [(1 / 60, 1e-3, 2e-3, 0.05), (1 / 300, 1e-6, 3e-3, None)])  # fmt: skip
+                         [(1 / 60, 1e-3, 2e-3, 0.05), (1 / 300, 1e-6, 5e-3, None)])  # fmt: skip
 def test_resting_contact_is_carried_by_the_iterations(
     dt, most_correction, most_energy, most_spread
 ):
@@ -36,7 +36,10 @@ def test_resting_contact_is_carried_by_the_iterations(
     the stage acted), the kinetic energy at rest 6.5e-4 J (3.7e-2 J before), and the force
     the ball receives, M (dv/dt + g), averages its weight within 1 % (0.2 %; 1.0 % before)
     and spreads by 0.17 N (3.5 % of it; 0.70 N before). At 1/300 s the stage does nothing
-    (5e-20 m; 1.1e-3 m before), the energy is 1.8e-3 J (6.8e-3 J before) and the mean
+    (5e-20 m; 1.1e-3 m before), the energy is 4.2e-3 J (6.8e-3 J before; 1.8e-3 J before
+    the stage gave the particles it holds back their bounded step's velocity and bounded
+    its list's drift by an affine fit: the first landing's rebound, 8 cm against 3 cm,
+    still decays over 2-4 s) and the mean
     force is the weight within 0.01 % (1.2 % low before); the spread there, 0.9 N (1.2 N
     before), is the ball bobbing on the trampoline at 3 Hz, which two iterations at small
     steps damp little."""
