@@ -129,14 +129,13 @@ def test_cloth_dropped_into_a_pile(integrator, dt):
     least three times), every vertex is at least h from each triangle not touching it less
     2 % (the response puts each pair nearer than h at h at every step's end; 2 % for pairs
     sharing particles, pushed apart one after another in one pass; measured 0.45 % below h
-    at most), and the pile rests: its kinetic energy is under 2e-4 of the potential energy
+    at most), and the pile rests: its kinetic energy is under 1e-4 of the potential energy
     its fall released (m g times its centre's drop; measured 3e-6 to 2e-5 in the explicit
-    solver and xpbd, and 0.9e-4 to 1.1e-4 in implicit Euler, still halving every 0.2 s: the
-    fold is chaotic, and the value at 2 s moves with the order the contact stage visits its
-    pairs in, which the pair list's rebuilds set). Without
-    self-contact the same run crosses itself (the check bites). The step is 2.5e-4 s in
-    the solvers whose contact stage runs once a step: at 1e-3 s implicit Euler stops with
-    Status.CROSSED, the ground collider undoing the stage's bound (the xfail test below)."""
+    solver and xpbd, 4e-5 in implicit Euler, where it varies by 2x with the order the
+    contact stage visits its pairs in: the fold is chaotic). Without self-contact the same
+    run crosses itself (the check bites). The step is 2.5e-4 s in the solvers whose contact
+    stage runs once a step (implicit Euler at 1e-3 s piles without a crossing too, since
+    the stage and the ground collider run in turn: measured, not tested here)."""
     model = pile_model()
     state, most, lowest = drop_pile(model, integrator, dt)
     q = state.particle_q
@@ -149,7 +148,7 @@ def test_cloth_dropped_into_a_pile(integrator, dt):
     mass = model.particle_mass.sum()
     drop = (model.particle_mass @ (model.particle_q[:, 1] - q[:, 1])) / mass
     assert drop > 0.5
-    assert kinetic < 2e-4 * mass * G * drop
+    assert kinetic < 1e-4 * mass * G * drop
     _, crossed, _ = drop_pile(pile_model(self_contact=False), integrator, dt)
     assert crossed > 0
 
