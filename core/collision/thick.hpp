@@ -45,6 +45,11 @@
 //      conserved: the limit of equal and opposite impulses on the pairs). Left as they
 //      were, they would propose the same long step again, every step (the vacuum-packed
 //      ball: moves of centimetres proposed, held back to millimetres, step after step).
+//      The bound limits a pair's whole relative motion, sliding included, so a held pair
+//      loses its relative velocity beyond kGamma D a step along the surface as well as
+//      toward it: sheets within the list that slide over each other faster than
+//      kGamma D / dt lose the excess, as a friction would, whatever the friction set (a
+//      bound on the approach alone would keep it; not built).
 #pragma once
 
 #include <cstring>
