@@ -136,13 +136,17 @@ def test_a_jupyter_interrupt_stops_a_long_run():
         kernel.interrupt_kernel()
         reply = client.get_shell_msg(timeout=30)["content"]
         assert (reply["status"], reply.get("ename")) == ("error", "KeyboardInterrupt")
-        printed: list[str] = []
-        client.execute_interactive(
-            "print(s.step_count > 0 and s.time == s.step_count * 1e-4)",
-            timeout=30,
-            output_hook=lambda msg: printed.append(msg["content"].get("text") or ""),
+        # read back as a user expression in the shell reply (printed output would come on
+        # the iopub channel, where it can be missed after an interrupt)
+        asked = client.execute(
+            "", user_expressions={"ok": "s.step_count > 0 and s.time == s.step_count * 1e-4"}
         )
-        assert "".join(printed).strip() == "True"
+        reply = client.get_shell_msg(timeout=30)
+        while reply["parent_header"].get("msg_id") != asked:
+            reply = client.get_shell_msg(timeout=30)
+        value = reply["content"]["user_expressions"]["ok"]
+        assert value["status"] == "ok", value
+        assert value["data"]["text/plain"] == "True"
     finally:
         client.stop_channels()
         kernel.shutdown_kernel(now=True)
