@@ -4,6 +4,8 @@ so that a ridge or a corner cannot pass between soft vertices that all stay outs
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -479,3 +481,48 @@ def test_coarse_ball_on_a_smooth_capsule_is_not_cut(integrator, dt, angle):
     else:
         assert worst == 0
         assert state.particle_q[:, 1].min() > 0.0
+
+
+def pinned_strip_through_a_box(thickness: float = 0.0) -> sb.Model:
+    """A pinned 2 m x 4 mm strip (3 x 1 squares, every particle pinned) lying along x at
+    y = 0 through a 0.5 m box mesh at the origin: its particles (x = +-1, +-1/3 m) all
+    outside the box, its long edges through it, no box edge through the strip."""
+    sheet = sb.rectangle((2.0, 0.004), (3, 1))
+    flat = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0]
+    builder = sb.ModelBuilder()
+    builder.add_cloth(sb.TriMesh(flat, sheet.faces), mass=0.1, stiffness=300.0,
+                      pinned=np.arange(len(flat)))  # fmt: skip
+    builder.add_collider(sb.ColliderMesh(sb.box((0.5, 0.5, 0.5)), restitution=0.0,
+                                         friction=0.5))  # fmt: skip
+    if thickness > 0.0:
+        builder.set_soft_contact("surface", thickness=thickness)
+    return builder.finalize()
+
+
+@pytest.mark.parametrize(
+    ("integrator", "thickness"),
+    [("midpoint", 0.0), ("implicit_euler", 0.0), ("midpoint", 1e-3), ("implicit_euler", 1e-3)],
+)
+def test_a_pinned_edge_through_a_mesh_collider_stops_the_run(integrator, thickness):
+    """Issue 32: when a crossing is detected anyway, the run stops and says where. A soft
+    edge through a mesh collider whose particles are all pinned cannot be pushed out by the
+    edge contacts (mesh.hpp, chords): the first step stops with a SimulationError naming
+    the mesh collider and the edge (two particles of one strip triangle, the first the
+    error's particle), the state left at the step's start (with and without the thickness
+    stage, whose collider pass reports it the same way)."""
+    model = pinned_strip_through_a_box(thickness)
+    sim = sb.Simulator(model, integrator=integrator, dt=5e-4)
+    state = model.state()
+    start = state.particle_q.copy()
+    with pytest.raises(sb.SimulationError, match="crossed mesh collider 0 at step 0") as err:
+        sim.run(state, 3)
+    found = re.search(r"the edge from particle (\d+) to particle (\d+)", str(err.value))
+    assert found is not None
+    a, b = int(found[1]), int(found[2])
+    assert err.value.particle == a and err.value.step == 0
+    tri = model.tri_indices
+    assert np.any(np.isin(tri, [a]).any(axis=1) & np.isin(tri, [b]).any(axis=1))
+    # the edge does pass through the box (x from one side of it to the other)
+    assert state.particle_q[a, 0] * state.particle_q[b, 0] < 0.0
+    assert state.step_count == 0
+    np.testing.assert_array_equal(state.particle_q, start)

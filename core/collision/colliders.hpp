@@ -244,7 +244,7 @@ namespace softbody::SOFTBODY_KERNELS::mesh_collider {
 // collision/mesh.hpp (included at the end of this file)
 inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc, double e,
                      double keep, double dt, const double* q_start, double* q, double* qd, V3& j,
-                     colliders::Seen* seen);
+                     colliders::Seen* seen, index* crossed);
 }  // namespace softbody::SOFTBODY_KERNELS::mesh_collider
 
 namespace softbody::SOFTBODY_KERNELS::colliders {
@@ -254,10 +254,13 @@ namespace softbody::SOFTBODY_KERNELS::colliders {
 /// [N s] accumulates what each collider receives. A plane (the ground of most scenes)
 /// has a loop of its own: one dot product per particle, no path to trace. With `seen`,
 /// the particles a collider moved are added to it. dt [s]: the step (a mesh collider's
-/// pose at the step's start, for its continuous test; collision/mesh.hpp).
+/// pose at the step's start, for its continuous test; collision/mesh.hpp). With `crossed`
+/// (2, set to -1 by the caller): where a mesh collider's edge contacts left a crossing (the
+/// first particle, mesh_collider::crossing_code), the first one found.
 inline void contacts(const Model& m, const double* cq, const double* crot, const double* cv,
                      const double* cw, const double* q_start, double* q, double* qd,
-                     double* impulse, Seen* seen = nullptr, double dt = 0.0) {
+                     double* impulse, Seen* seen = nullptr, double dt = 0.0,
+                     index* crossed = nullptr) {
     for (index k = 0; k < m.colliders.count; ++k) {
         const index kind = m.colliders.kind[k];
         const V3 center = load(cq, k);
@@ -294,7 +297,7 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
             }
         } else if (kind == ColliderKind::MESH) {
             mesh_collider::contacts(m, k, center, rot, vc, wc, e, keep, dt, q_start, q, qd, j,
-                                    seen);
+                                    seen, crossed);
         } else {
             for (index i = 0; i < m.particles.count; ++i) {
                 if (m.particles.inv_mass[i] == 0.0) continue;

@@ -515,6 +515,17 @@ inline double deepest_inside(const View& v, index root, V3 a, V3 b, const double
     return best_s;
 }
 
+/// The CROSSED result's value for a crossing the edge contacts leave (a chord still through
+/// after kRounds pushes or with both ends pinned; a cap likewise): -1 - T - code, below the
+/// thickness contacts' -1 - triangle (softbody.sim.simulator decodes it), with code =
+/// 2 (k S + x) + kind, S = max(N, T): kind 0 a soft edge (x its second particle; the result's
+/// `where` its first), kind 1 a soft triangle (x the triangle; `where` its first corner);
+/// k the collider.
+inline index crossing_code(const Model& m, index k, index x, bool triangle) {
+    const index span = std::max(m.particles.count, m.triangles.count);
+    return -1 - m.triangles.count - (2 * (k * span + x) + (triangle ? 1 : 0));
+}
+
 /// A mesh collider's pose, velocities and coefficients at the step's end.
 struct Frame {
     const Model& m;
@@ -579,13 +590,19 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
 /// pose and velocities at the step's end.
 inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc,
                           double e, double keep, double* q, double* qd, V3& j,
-                          colliders::Seen* seen) {
+                          colliders::Seen* seen, index* crossed = nullptr) {
     const index root = m.colliders.mesh_root[k];
     const View v{m};
     if (root < 0 || !v.has_sharp(root)) return;  // edge contacts off
     const Frame f{m, c, r, vc, wc, e, keep};
     const double margin = m.colliders.mesh_margin[k];
     const double* rb = v.bounds(root);
+    // a crossing left: the first soft particle, and crossing_code()'s value
+    auto report = [&](index first, index second, bool triangle) {
+        if (crossed == nullptr || crossed[0] >= 0) return;
+        crossed[0] = first;
+        crossed[1] = crossing_code(m, k, second, triangle);
+    };
     double root_box[6];
     for (int d = 0; d < 3; ++d) {
         root_box[d] = rb[d] - margin;
@@ -612,11 +629,12 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         if (!boxes_meet(lo, hi, root_box)) continue;
         bool capped = false;  // a collider edge through the triangle pushed it this round
         bool pushed = false;  // anything moved the triangle's corners
+        bool check = false;   // the round after kRounds: a cap still there is reported
         auto visit = [&](index mt, int mk) {
             const V3 p = v.corner(mt, mk), pq = v.corner(mt, (mk + 1) % 3);
             const index twin = v.sharp_twin(mt, mk);
             // the soft triangle's edges (each soft edge by its owner) against a sharp edge
-            for (int a = 0; a < 3 && twin >= 0; ++a) {
+            for (int a = 0; a < 3 && twin >= 0 && !check; ++a) {
                 if (m.triangles.edge_owner[3 * t + a] == 0) continue;
                 const V3 n1 = v.face_normal(mt), n2 = v.face_normal(twin);
                 const V3 ne = v.pseudo_normal(mt, 3 + mk);
@@ -684,9 +702,12 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 nbest = n;
             }
             if (!std::isfinite(best)) return;
+            if (check) return report(tri[0], t, true);
             const double w[3] = {at.wa, at.wb, at.wc};
-            capped |= push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false, q, qd, j,
-                           seen);
+            const bool moved = push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false,
+                                    q, qd, j, seen);
+            if (!moved) report(tri[0], t, true);  // every corner pinned
+            capped |= moved;
             pushed |= capped;
         };
         // One walk over the leaves near the triangle: its own edges' crossings of the faces
@@ -696,7 +717,8 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         // edges cross next, so the flagged edges are walked again while a cap was pushed.
         double cuts[3][kCrossings];
         int cut_count[3] = {0, 0, 0};
-        for (int round = 0; round < kRounds; ++round) {
+        for (int round = 0; round <= kRounds; ++round) {
+            check = round == kRounds;  // pushed in every round: only look whether one is left
             capped = false;
             // a mesh triangle wholly on one side of the soft triangle's plane can neither be
             // crossed by a soft edge nor have an edge through the soft triangle: most near a
@@ -724,7 +746,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                             visit(mt, mk);
                 }
             });
-            if (!capped) break;
+            if (!capped || check) break;
             place();
         }
         // chords: the triangle's own edges (each soft edge once, by its owner) through the
@@ -733,7 +755,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             if (m.triangles.edge_owner[3 * t + a] == 0) continue;
             const index idx[2] = {tri[a], tri[(a + 1) % 3]};
             V3 ls[2] = {l[a], l[(a + 1) % 3]};
-            for (int round = 0; round < kRounds; ++round) {
+            for (int round = 0; round <= kRounds; ++round) {
                 const int count = round == 0 && !pushed
                                       ? cut_count[a]
                                       : segment_crossings(v, root, ls[0], ls[1], cuts[a]);
@@ -741,13 +763,19 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 Nearest near;
                 const double at = deepest_inside(v, root, ls[0], ls[1], cuts[a], count, near);
                 if (at < 0.0) break;  // grazing the surface
+                if (round == kRounds) {  // pushed in every round and still through
+                    report(idx[0], idx[1], false);
+                    break;
+                }
                 const V3 x = ls[0] + at * (ls[1] - ls[0]);
                 const double dist = std::sqrt(near.d2);
                 const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
                 const double w[2] = {1.0 - at, at};
                 if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd,
-                          j, seen))
-                    break;  // both ends pinned
+                          j, seen)) {
+                    report(idx[0], idx[1], false);  // both ends pinned
+                    break;
+                }
                 pushed = true;
             }
             l[a] = ls[0];
@@ -762,7 +790,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
 /// q, qd (N, 3) change in place, j gathers the impulse the collider receives [N s].
 inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc, double e,
                      double keep, double dt, const double* q_start, double* q, double* qd, V3& j,
-                     colliders::Seen* seen) {
+                     colliders::Seen* seen, index* crossed) {
     const index root = m.colliders.mesh_root[k];
     if (root < 0) return;
     const View v{m};
@@ -794,7 +822,7 @@ inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 w
         colliders::respond(m, i, hit, vc + cross(wc, hit.x - c), e, keep, q, qd, j);
         if (seen != nullptr) seen->add(load(q, i), load(qd, i));
     }
-    edge_contacts(m, k, c, r, vc, wc, e, keep, q, qd, j, seen);
+    edge_contacts(m, k, c, r, vc, wc, e, keep, q, qd, j, seen, crossed);
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::mesh_collider

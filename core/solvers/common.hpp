@@ -104,6 +104,15 @@ inline void begin_run(const Model& m, const Control& c, const RunParams& p, cons
     }
 }
 
+/// A crossing a mesh collider's edge contacts left (colliders::contacts' `crossed`: a soft
+/// edge still through the mesh after their rounds, or with every particle pinned): w.crossing
+/// says where (the first particle, mesh_collider::crossing_code); returns -1 (CROSSED).
+inline index mesh_crossing(const index* crossed, const ContactBuffers& w) {
+    w.crossing[0] = crossed[0];
+    w.crossing[1] = crossed[1];
+    return -1;
+}
+
 /// The thickness contacts with rigid colliders (contacts() below, the colliders at their
 /// step's-end poses). The stage first, on the solver's positions (its bound keeps every
 /// pair from crossing along the step), without its common translation T: its bound then
@@ -131,8 +140,10 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
     index needed = thick::contacts(m, q_start, s.q, s.qd, w, false, p.dt);
     if (needed != 0) return needed;
     copy(s.q, w.q_collided, n3);
+    index crossed[2] = {-1, -1};
     colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
-                        s.q, s.qd, s.collider_impulse, seen, p.dt);
+                        s.q, s.qd, s.collider_impulse, seen, p.dt, crossed);
+    if (crossed[0] >= 0) return mesh_crossing(crossed, w);
     auto moved = [](const double* a, const double* b, index i) {
         return a[3 * i] != b[3 * i] || a[3 * i + 1] != b[3 * i + 1] || a[3 * i + 2] != b[3 * i + 2];
     };
@@ -165,8 +176,8 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
 /// Returns 0, or the spatial-hash entries surface soft contacts need when their buffer could
 /// not grow to them: then the colliders have moved but no contact was resolved, and the caller
 /// undoes the step; or -1 when the thickness contacts found a crossing at the step's start,
-/// or the colliders pushed an edge through a triangle (w.crossing says where;
-/// contact_failure makes either a RunResult).
+/// or the colliders pushed an edge through a triangle, or a mesh collider's edge contacts
+/// left a crossing (w.crossing says where; contact_failure makes any of them a RunResult).
 inline index contacts(const Model& m, const Control& c, const RunParams& p, index step, double t,
                       const StateView& s, const double* q_start, const ContactBuffers& w,
                       colliders::Seen* seen = nullptr) {
@@ -186,9 +197,12 @@ inline index contacts(const Model& m, const Control& c, const RunParams& p, inde
         const index needed = soft::contacts_surface(m, s.q, s.qd, w);
         if (needed > 0) return needed;
     }
-    if (m.colliders.count > 0)
+    if (m.colliders.count > 0) {
+        index crossed[2] = {-1, -1};
         colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
-                            s.q, s.qd, s.collider_impulse, seen, p.dt);
+                            s.q, s.qd, s.collider_impulse, seen, p.dt, crossed);
+        if (crossed[0] >= 0) return mesh_crossing(crossed, w);
+    }
     return 0;
 }
 

@@ -529,7 +529,8 @@ class Simulator:
             particle = int(index)
         elif status == Status.CROSSED:
             # value: the triangle, or -1 - the triangle where a collider pushed the edge
-            # through it in this step (core/collision/thick_system.hpp)
+            # through it in this step (core/collision/thick_system.hpp), or below -T a mesh
+            # collider's crossing
             particle, tri = int(index), int(value)
             body = int(model.particle_body[particle])
             when = (
@@ -540,10 +541,27 @@ class Simulator:
                 "the step's start)"
             )
             tri = tri if tri >= 0 else -1 - tri
-            msg = (
-                f"body {body} crossed a surface {where}: the edge at particle {particle} "
-                f"passes through triangle {tri} (body {int(model.tri_body[tri])}) {when}"
-            )
+            if tri >= model.tri_count:
+                # a mesh collider's edge contacts left it: code 2 (k S + x) + kind, S the larger
+                # of the particle and triangle counts (core/collision/mesh.hpp, crossing_code)
+                code = tri - model.tri_count
+                span = max(model.particle_count, model.tri_count)
+                collider, x = divmod(code // 2, span)
+                what = (
+                    f"the triangle {x} (particles {', '.join(map(str, model.tri_indices[x]))})"
+                    if code % 2
+                    else f"the edge from particle {particle} to particle {x}"
+                )
+                msg = (
+                    f"body {body} crossed mesh collider {collider} {where}: {what} still passes "
+                    "through it after its edge contacts (pushed to their limit, or every "
+                    "particle there pinned; the state is left at the step's start)"
+                )
+            else:
+                msg = (
+                    f"body {body} crossed a surface {where}: the edge at particle {particle} "
+                    f"passes through triangle {tri} (body {int(model.tri_body[tri])}) {when}"
+                )
         elif status == Status.NEED_HASH:
             # the core grows the contacts' hash itself up to 512 entries per triangle
             body, particle = -1, -1
