@@ -157,6 +157,18 @@ def test_a_collider_pushing_a_sheet_through_another_stops_the_run_there(integrat
     assert between_bodies(model, state.particle_q) == []
 
 
+def closing_cloths(h: float, dt: float) -> sb.Model:
+    """Two parallel 0.4 m cloths 1.45 h apart with thickness contacts h [m] (no gravity, no
+    friction), closing at h per step of dt [s] each."""
+    speed = h / dt
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("surface", thickness=h, restitution=0.0, friction=0.0)
+    for z, v in ((0.725 * h, -speed), (-0.725 * h, speed)):
+        builder.add_cloth(sb.rectangle((0.4, 0.4), (6, 6), center=(0, 0, z)), mass=0.1,
+                          stiffness=50.0, damping=0.1, velocity=(0, 0, v))  # fmt: skip
+    return builder.finalize()
+
+
 def test_an_approach_within_the_band_is_stopped_by_the_solve():
     """Two parallel cloths 1.45 h apart (inside the band h + a = 1.5 h where the contacts
     enter the solve) closing at 2 h per step, implicit Euler. Reference: a lone pair's
@@ -167,13 +179,7 @@ def test_an_approach_within_the_band_is_stopped_by_the_solve():
     nearer than h, changes nothing (|x1 - x0 - dt v1| = 0 to round-off). Before, the solve
     ran the cloths 2 h into each other and the stage's bound held them."""
     h, dt = 0.01, 1e-3
-    speed = h / dt  # each cloth moves h a step
-    builder = sb.ModelBuilder(gravity=(0, 0, 0))
-    builder.set_soft_contact("surface", thickness=h, restitution=0.0, friction=0.0)
-    for z, v in ((0.725 * h, -speed), (-0.725 * h, speed)):
-        builder.add_cloth(sb.rectangle((0.4, 0.4), (6, 6), center=(0, 0, z)), mass=0.1,
-                          stiffness=50.0, damping=0.1, velocity=(0, 0, v))  # fmt: skip
-    model = builder.finalize()
+    model = closing_cloths(h, dt)
     sim = sb.Simulator(model, integrator="implicit_euler", dt=dt)
     state = model.state()
     (a0, a1), (b0, b1) = model.body_particle_range

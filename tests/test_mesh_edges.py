@@ -70,6 +70,16 @@ def ball_over(collider, *, integrator="midpoint", dt=5e-4, gravity=(0.0, -9.81, 
     return model, sb.Simulator(model, integrator=integrator, dt=dt, **kw)
 
 
+
+def most_crossings(sim, model, state, collider, chunks: int, count) -> int:
+    """Runs `chunks` chunks of 5 steps, returning the most crossings `count(model, state,
+    collider)` found after any of them."""
+    worst = 0
+    for _ in range(chunks):
+        sim.run(state, 5)
+        worst = max(worst, count(model, state, collider))
+    return worst
+
 def test_a_box_has_twelve_sharp_edges_listed_once():
     """The 12-triangle box has 18 edges: its 12 box edges (faces at 90 degrees, convex)
     are sharp and listed once each, by the triangle whose first vertex index is the
@@ -157,10 +167,7 @@ def test_a_ball_dropped_on_a_ridge_is_not_cut_by_it(angle):
     collider = ridge(angle)
     model, sim = ball_over(collider)
     state = model.state()
-    worst = 0
-    for _ in range(320):
-        sim.run(state, 5)
-        worst = max(worst, collider_crossings(model, state, collider))
+    worst = most_crossings(sim, model, state, collider, 320, collider_crossings)
     if angle is None:
         assert worst > 0
     else:
@@ -217,10 +224,7 @@ def test_cloth_draped_over_a_box_corner_is_not_pierced(angle):
     model, collider = cloth_over_corner(sharp_angle=angle)
     sim = sb.Simulator(model, integrator="midpoint", dt=5e-4)
     state = model.state()
-    worst = 0
-    for _ in range(240):
-        sim.run(state, 5)
-        worst = max(worst, collider_crossings(model, state, collider))
+    worst = most_crossings(sim, model, state, collider, 240, collider_crossings)
     tip = 0.25 * np.sqrt(3.0)
     if angle is None:
         assert worst > 0
@@ -441,10 +445,7 @@ def test_coarse_cloth_on_a_smooth_sphere_is_not_cut(angle):
     model = builder.finalize()
     sim = sb.Simulator(model, integrator="midpoint", dt=5e-4)
     state = model.state()
-    worst = 0
-    for _ in range(240):
-        sim.run(state, 5)
-        worst = max(worst, soft_mesh_crossings(model, state, collider))
+    worst = most_crossings(sim, model, state, collider, 240, soft_mesh_crossings)
     if angle is None:
         assert worst > 0
     else:
@@ -472,10 +473,7 @@ def test_coarse_ball_on_a_smooth_capsule_is_not_cut(integrator, dt, angle):
     model = builder.finalize()
     sim = sb.Simulator(model, integrator=integrator, dt=dt)
     state = model.state()
-    worst = 0
-    for _ in range(round(0.8 / (5 * dt))):
-        sim.run(state, 5)
-        worst = max(worst, soft_mesh_crossings(model, state, collider))
+    worst = most_crossings(sim, model, state, collider, round(0.8 / (5 * dt)), soft_mesh_crossings)
     if angle is None:
         assert worst > 0
     else:

@@ -10,7 +10,7 @@ import pytest
 import softbody as sb
 from softbody.collision.crossings import edge_crossings
 from softbody.mesh.topology import unique_edges
-from test_implicit_contact import G, ball_on_trampoline
+from test_implicit_contact import G, ball_on_trampoline, closing_cloths
 from test_self_contact import body_volume, vacuum_ball
 
 
@@ -85,13 +85,7 @@ def test_an_approach_within_the_band_ends_at_its_top(iterations):
     round-off). Before, the iterations ran the cloths into each other and the stage held
     them at h (a correction of 2.3e-3 m)."""
     h, dt = 0.01, 1e-3
-    speed = h / dt  # each cloth moves h a step
-    builder = sb.ModelBuilder(gravity=(0, 0, 0))
-    builder.set_soft_contact("surface", thickness=h, restitution=0.0, friction=0.0)
-    for z, v in ((0.725 * h, -speed), (-0.725 * h, speed)):
-        builder.add_cloth(sb.rectangle((0.4, 0.4), (6, 6), center=(0, 0, z)), mass=0.1,
-                          stiffness=50.0, damping=0.1, velocity=(0, 0, v))  # fmt: skip
-    model = builder.finalize()
+    model = closing_cloths(h, dt)
     sim = sb.Simulator(model, integrator="projective", dt=dt, projective_iterations=iterations)
     state = model.state()
     (a0, a1), (b0, b1) = model.body_particle_range
