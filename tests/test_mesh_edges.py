@@ -255,7 +255,9 @@ def test_edge_contact_impulse_is_the_ball_s_momentum_change():
     0.5): the impulse the collider receives over the run is minus the change of the ball's
     momentum (internal forces sum to zero; every contact impulse, the edge contacts'
     included, has its opposite on the collider), to 1e-9 of it. The edge contacts took
-    part: the impulse differs from the run without them by more than 1 %."""
+    part: the impulse differs from the run without them by more than 0.1 % (measured 0.9
+    %; a run in which no edge contact acts is the vertex-only run to the bit, as on the
+    flat box below)."""
     out = {}
     for angle in (30.0, None):
         model, sim = ball_over(ridge(angle, restitution=0.5, friction=0.5), gravity=(0, 0, 0),
@@ -269,7 +271,7 @@ def test_edge_contact_impulse_is_the_ball_s_momentum_change():
         np.testing.assert_allclose(j, -dp, atol=1e-9 * np.linalg.norm(dp))
         assert dp[1] > 3.0  # it bounced off
         out[angle] = j
-    assert np.linalg.norm(out[30.0] - out[None]) > 0.01 * np.linalg.norm(out[None])
+    assert np.linalg.norm(out[30.0] - out[None]) > 1e-3 * np.linalg.norm(out[None])
 
 
 @pytest.mark.parametrize(
@@ -524,3 +526,103 @@ def test_a_pinned_edge_through_a_mesh_collider_stops_the_run(integrator, thickne
     assert state.particle_q[a, 0] * state.particle_q[b, 0] < 0.0
     assert state.step_count == 0
     np.testing.assert_array_equal(state.particle_q, start)
+
+
+# -- friction where a sheet rests on the ridges and corners of a smooth mesh ----------------
+DRAPE_CENTRE = np.array([0.65, 0.3, 0.0])  # the bending guide's drape sphere (radius 0.25 m)
+
+
+def drape_offset(collider, shift: float = 0.0) -> float:
+    """The bending guide's stiff drape sheet (1 x 1 m, 30 x 30 squares, 0.15 kg, stiffness
+    300, damping 0.2, D = 1e-2 N m) dropped from 0.7 m, ``shift`` [m] along x off the axis
+    of the sphere at DRAPE_CENTRE (``collider``), with the ground: 1.6 s of implicit Euler
+    at 2 ms. Returns how far [m] its centre ends off the sphere's vertical axis."""
+    sheet = sb.rectangle((1.0, 1.0), (30, 30))
+    flat = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0] + [0.65 + shift, 0.7, 0.0]
+    builder = sb.ModelBuilder()
+    builder.add_collider(sb.ColliderPlane())
+    builder.add_collider(collider)
+    builder.add_cloth(sb.TriMesh(flat, sheet.faces), mass=0.15, stiffness=300.0, damping=0.2,
+                      bending=sb.Bending(1e-2))  # fmt: skip
+    model = builder.finalize()
+    state = model.state()
+    sb.Simulator(model, integrator="implicit_euler", dt=2e-3).run(state, 800)
+    centre = state.particle_q.mean(axis=0) - DRAPE_CENTRE
+    return float(np.hypot(centre[0], centre[2]))
+
+
+def drape_sphere_mesh(friction: float) -> sb.ColliderMesh:
+    """The drape sphere as a 1,280-triangle mesh collider (default sharp_angle: every edge
+    bent, none sharp; the edge contacts on)."""
+    return sb.ColliderMesh(sb.icosphere(3, radius=0.25, center=DRAPE_CENTRE),
+                           friction=friction)  # fmt: skip
+
+
+def test_a_stiff_sheet_rests_on_a_smooth_sphere_mesh_as_on_the_sphere():
+    """Issue 32 (cloth slid off smooth mesh colliders). Reference: the analytic
+    ColliderSphere (friction 0.1) holds the stiff drape sheet where it lands: dropped
+    centred it ends 0.0004 m off the axis, dropped 3 cm off it ends 2.8 cm off (a vertex
+    resting on it goes back to where its path entered it each step). On the 1,280-triangle
+    mesh of the same sphere the sheet rests on the mesh's ridges and corners (its edges'
+    chords and caps hold it 0.2-0.8 mm out, its vertices off the faces), and those
+    contacts take the contact point back to where its path crossed their level, as the
+    vertex contacts do: dropped centred it ends within 2 cm of the axis (the tessellation
+    breaks the symmetry as it lands; measured 0.005 m; vertices alone 0.027 m; before the
+    fix 0.23 m: it slid off), and dropped 3 cm off it ends within 1 cm of the analytic
+    run (measured 3.0 cm; before the fix 45 cm). Frictionless, the same mesh lets it slide
+    off (measured 0.31 m; the contacts hold positions, friction holds velocities)."""
+    sphere = drape_offset(sb.ColliderSphere(center=DRAPE_CENTRE, radius=0.25, friction=0.1),
+                          shift=0.03)  # fmt: skip
+    assert abs(sphere - 0.03) < 0.01  # the analytic sphere holds it where it was
+    assert drape_offset(drape_sphere_mesh(0.1)) < 0.02
+    assert abs(drape_offset(drape_sphere_mesh(0.1), shift=0.03) - sphere) < 0.01
+    assert drape_offset(drape_sphere_mesh(0.0)) > 0.1
+
+
+INCLINE = np.radians(20.0)  # the slope of the inclined plane and box mesh below
+
+
+def incline_slide(collider, height: float, friction: float, steps: int = 150) -> float:
+    """A 0.1 m cloth patch (4 x 4 squares, 0.01 kg) laid at rest ``height`` [m] over the top
+    face of a 2 x 0.2 x 2 m box turned INCLINE about z (its top face at y = 0.1 before the
+    turn), ``collider`` the box or its top face's plane: implicit Euler at 2 ms for
+    ``steps`` steps. Returns how far [m] the patch's centre went down the slope."""
+    rot = sb.collision.rotation_about((0, 0, 1), INCLINE)
+    sheet = sb.rectangle((0.1, 0.1), (4, 4))
+    local = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0] + [0.013, 0.1 + height, 0.021]
+    builder = sb.ModelBuilder()
+    builder.add_cloth(sb.TriMesh(local @ rot.T, sheet.faces), mass=0.01, stiffness=300.0)
+    builder.add_collider(collider)
+    model = builder.finalize()
+    state = model.state()
+    start = state.particle_q.mean(axis=0)
+    sb.Simulator(model, integrator="implicit_euler", dt=2e-3).run(state, steps)
+    return float((state.particle_q.mean(axis=0) - start) @ (rot @ [-1.0, 0.0, 0.0]))
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.05, 0.3])
+def test_a_patch_slides_down_an_inclined_box_mesh_as_down_the_plane(friction):
+    """A cloth patch resting on the top face of an inclined box mesh (20 degrees; 4 x 4
+    squares a face, so it slides across the face's tessellation; edge contacts on) slides
+    as on a ColliderPlane of the same pose. Reference, closed form of the discrete scheme:
+    every vertex touches every step (restitution 0), implicit Euler moves it by dt (v + a
+    dt) and the contact keeps c = 1 - friction of its tangential velocity, so after N
+    steps of dt the patch went a dt^2 (N - c (1 - c^N) / (1 - c)) / (1 - c) down the slope
+    (a = g sin 20 deg; a dt^2 N (N + 1) / 2 frictionless). The plane and the mesh (the
+    patch laid within its margin) each match it to 1e-6 of the distance (round-off: the
+    scheme is exact; measured 3e-9): the edge contacts add no tangential motion on a
+    flat face and remove none."""
+    rot = sb.collision.rotation_about((0, 0, 1), INCLINE)
+    steps, dt, c = 150, 2e-3, 1.0 - friction
+    a = 9.81 * np.sin(INCLINE)
+    if friction == 0.0:
+        expected = a * dt**2 * steps * (steps + 1) / 2
+    else:
+        expected = a * dt**2 * (steps - c * (1 - c**steps) / (1 - c)) / (1 - c)
+    plane = sb.ColliderPlane(point=rot @ [0.0, 0.1, 0.0], normal=rot @ [0.0, 1.0, 0.0],
+                             restitution=0.0, friction=friction)  # fmt: skip
+    box = sb.ColliderMesh(sb.box((2.0, 0.2, 2.0), subdivisions=2), rotation=rot,
+                          restitution=0.0, friction=friction, margin=1e-4)  # fmt: skip
+    assert np.any(box.data.sharp_edges >= 0)  # the edge contacts are on
+    np.testing.assert_allclose(incline_slide(plane, 0.0, friction), expected, rtol=1e-6)
+    np.testing.assert_allclose(incline_slide(box, 0.5e-4, friction), expected, rtol=1e-6)

@@ -533,6 +533,11 @@ struct Frame {
     const double* r;  // its rotation (3, 3)
     V3 vc, wc;        // its velocity [m/s] and angular velocity [rad/s]
     double e, keep;   // restitution, 1 - friction
+    // the positions (N, 3) at the step's start and the collider's pose then (push(): where
+    // a contact point's path crossed the level it goes to); none: straight out
+    const double* q_start = nullptr;
+    V3 c0{0.0, 0.0, 0.0};
+    const double* r0 = nullptr;
 };
 
 /// The soft side of one edge or corner contact: particles idx[0..n) with barycentric
@@ -547,7 +552,7 @@ struct Frame {
 /// the move, not move / w, which folds the soft surface through itself as w goes to 0.
 inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l, V3 x_local,
                  V3 move, V3 normal, bool resting, double* q, double* qd, V3& j,
-                 colliders::Seen* seen) {
+                 colliders::Seen* seen, bool stick = false) {
     const Model& m = f.m;
     double sum = 0.0, free_weight = 0.0;
     V3 vel{0.0, 0.0, 0.0};
@@ -563,6 +568,29 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
     const V3 rel = vel - (f.vc + cross(f.wc, xw - f.c));
     const double vn = dot(rel, nw);
     if (resting && vn >= 0.0) return false;  // within the margin but leaving: free
+    if (stick && f.q_start != nullptr) {
+        // The contact point goes back to where its path of this step (from its position at
+        // the step's start, in the collider's frame then) crossed the level it is pushed
+        // to (the plane through its target, across `normal`), as a vertex goes back to
+        // where its path entered (resolve(); the analytic colliders' path entry): of its
+        // motion into the surface, the part along the surface after that crossing is
+        // undone; the part along the normal is the push's. Straight out along the normal
+        // instead, the tangential motion of a sheet resting on the mesh's ridges and
+        // corners is never held back (only its velocity's, by the friction), and a sheet
+        // on a smooth mesh slides off where the analytic shape holds it.
+        V3 x0{0.0, 0.0, 0.0}, x1{0.0, 0.0, 0.0};
+        for (int k = 0; k < n; ++k) {
+            x1 = x1 + w[k] * l[k];
+            x0 = x0 + w[k] * to_local(f.r0, load(f.q_start, idx[k]) - f.c0);
+        }
+        const V3 path = x1 - x0;
+        const double h1 = -dot(move, normal);       // the end's height over the level
+        const double h0 = h1 - dot(path, normal);   // the start's
+        if (h1 < 0.0 && h0 > h1) {  // it moved down through (or below) the level
+            const double s = h0 > 0.0 ? h0 / (h0 - h1) : 0.0;
+            move = move - (1.0 - s) * (path - dot(path, normal) * normal);
+        }
+    }
     const double gain = free_weight < kFreeWeight ? free_weight / kFreeWeight : 1.0;
     move = gain * move;
     const V3 dx = to_world(f.r, move);
@@ -590,11 +618,13 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
 /// pose and velocities at the step's end.
 inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc,
                           double e, double keep, double* q, double* qd, V3& j,
-                          colliders::Seen* seen, index* crossed = nullptr) {
+                          colliders::Seen* seen, index* crossed = nullptr,
+                          const double* q_start = nullptr, V3 c0 = {0.0, 0.0, 0.0},
+                          const double* r0 = nullptr) {
     const index root = m.colliders.mesh_root[k];
     const View v{m};
     if (root < 0 || !v.has_sharp(root)) return;  // edge contacts off
-    const Frame f{m, c, r, vc, wc, e, keep};
+    const Frame f{m, c, r, vc, wc, e, keep, q_start, c0, r0 != nullptr ? r0 : r};
     const double margin = m.colliders.mesh_margin[k];
     const double* rb = v.bounds(root);
     // a crossing left: the first soft particle, and crossing_code()'s value
@@ -630,6 +660,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         bool capped = false;  // a collider edge through the triangle pushed it this round
         bool pushed = false;  // anything moved the triangle's corners
         bool check = false;   // the round after kRounds: a cap still there is reported
+        bool first = true;    // the first round: push() takes the contact point back along its path
         auto visit = [&](index mt, int mk) {
             const V3 p = v.corner(mt, mk), pq = v.corner(mt, (mk + 1) % 3);
             const index twin = v.sharp_twin(mt, mk);
@@ -674,7 +705,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 const double w[2] = {1.0 - s, s};
                 V3 ls[2] = {l[a], l[b]};
                 if (push(f, 2, idx, w, ls, xm, (xm + margin * n) - xs, n, !inside, q, qd, j,
-                         seen)) {
+                         seen, first)) {
                     l[a] = ls[0];
                     l[b] = ls[1];
                     pushed = true;
@@ -705,7 +736,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             if (check) return report(tri[0], t, true);
             const double w[3] = {at.wa, at.wb, at.wc};
             const bool moved = push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false,
-                                    q, qd, j, seen);
+                                    q, qd, j, seen, first);
             if (!moved) report(tri[0], t, true);  // every corner pinned
             capped |= moved;
             pushed |= capped;
@@ -719,6 +750,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         int cut_count[3] = {0, 0, 0};
         for (int round = 0; round <= kRounds; ++round) {
             check = round == kRounds;  // pushed in every round: only look whether one is left
+            first = round == 0;
             capped = false;
             // a mesh triangle wholly on one side of the soft triangle's plane can neither be
             // crossed by a soft edge nor have an edge through the soft triangle: most near a
@@ -772,7 +804,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
                 const double w[2] = {1.0 - at, at};
                 if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd,
-                          j, seen)) {
+                          j, seen, round == 0)) {
                     report(idx[0], idx[1], false);  // both ends pinned
                     break;
                 }
@@ -822,7 +854,7 @@ inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 w
         colliders::respond(m, i, hit, vc + cross(wc, hit.x - c), e, keep, q, qd, j);
         if (seen != nullptr) seen->add(load(q, i), load(qd, i));
     }
-    edge_contacts(m, k, c, r, vc, wc, e, keep, q, qd, j, seen, crossed);
+    edge_contacts(m, k, c, r, vc, wc, e, keep, q, qd, j, seen, crossed, q_start, c0, r0);
 }
 
 }  // namespace softbody::SOFTBODY_KERNELS::mesh_collider
