@@ -55,6 +55,11 @@
 // sum_l w_l^2 / m_l times the contact point's move, cut where pinned particles carry most of
 // the weight: push()), and the contact point's velocity relative to the collider takes
 // restitution and friction as a vertex's does; the collider receives the opposite impulse.
+// A ridge's or a cap's first push of a step puts the contact point where its path of the step
+// crossed the level it is pushed to, as a vertex goes back to where its path entered: so a
+// sheet resting on a smooth mesh's corners is held there as on the analytic shape (the
+// chords' deepest sample is pushed straight out: taken back along its path it left soft
+// edges through the ring of the balloon-ring scene).
 // Concave edges take part only in 2.
 #pragma once
 
@@ -550,6 +555,8 @@ struct Frame {
 /// thickness stage holds in its second pass), the move and the velocity change are scaled by
 /// that sum over kFreeWeight: a free particle then moves at most about 1 / kFreeWeight times
 /// the move, not move / w, which folds the soft surface through itself as w goes to 0.
+/// `stick` (a ridge's or a cap's first push of the step): the move also takes the contact
+/// point back along its path of the step, to where it crossed the level it goes to (below).
 inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l, V3 x_local,
                  V3 move, V3 normal, bool resting, double* q, double* qd, V3& j,
                  colliders::Seen* seen, bool stick = false) {
@@ -571,13 +578,13 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
     if (stick && f.q_start != nullptr) {
         // The contact point goes back to where its path of this step (from its position at
         // the step's start, in the collider's frame then) crossed the level it is pushed
-        // to (the plane through its target, across `normal`), as a vertex goes back to
-        // where its path entered (resolve(); the analytic colliders' path entry): of its
-        // motion into the surface, the part along the surface after that crossing is
-        // undone; the part along the normal is the push's. Straight out along the normal
-        // instead, the tangential motion of a sheet resting on the mesh's ridges and
-        // corners is never held back (only its velocity's, by the friction), and a sheet
-        // on a smooth mesh slides off where the analytic shape holds it.
+        // to (the plane through its target, across `normal`; from the start's own place
+        // when it began below it), as a vertex goes back to where its path entered
+        // (resolve(); the analytic sphere and box likewise): of its motion into the
+        // surface, the part along the surface after that crossing is undone; the part
+        // along the normal is the push's. Pushed straight out instead, a sheet resting on
+        // a smooth mesh's corners (its caps) is never held back but by the friction on
+        // its velocity, and slides off where the analytic shape holds it.
         V3 x0{0.0, 0.0, 0.0}, x1{0.0, 0.0, 0.0};
         for (int k = 0; k < n; ++k) {
             x1 = x1 + w[k] * l[k];
@@ -660,7 +667,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         bool capped = false;  // a collider edge through the triangle pushed it this round
         bool pushed = false;  // anything moved the triangle's corners
         bool check = false;   // the round after kRounds: a cap still there is reported
-        bool first = true;    // the first round: push() takes the contact point back along its path
+        bool first = true;    // the first round: push() takes the contact back along its path
         auto visit = [&](index mt, int mk) {
             const V3 p = v.corner(mt, mk), pq = v.corner(mt, (mk + 1) % 3);
             const index twin = v.sharp_twin(mt, mk);
@@ -804,7 +811,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
                 const double w[2] = {1.0 - at, at};
                 if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd,
-                          j, seen, round == 0)) {
+                          j, seen)) {
                     report(idx[0], idx[1], false);  // both ends pinned
                     break;
                 }
