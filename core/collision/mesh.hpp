@@ -869,7 +869,8 @@ inline double first_touch(V3 a0, V3 b0, V3 a1, V3 b1, V3 p, V3 pq, double tol, d
 /// velocities at the step's end; c0, r0 its pose at the step's start), before the edge
 /// contacts at the step's end: a soft edge that passes wholly over an edge of the mesh
 /// within the step (its ends outside at both ends, its chord outside at the end) is
-/// otherwise missed. Each soft edge (by its owner) moves linearly in the collider's frame
+/// otherwise missed; one that ends the step through the mesh's faces is left to them (as
+/// before, pushed out the nearest way). Each soft edge (by its owner) moves linearly in the collider's frame
 /// from its start (q_start, in the start's frame) to its end (q, after the vertex
 /// contacts); against every edge taking part in the edge contacts (sharp or bent) whose box
 /// meets the edge's swept box (the tree's has_sharp subtrees), first_touch gives the first
@@ -947,6 +948,11 @@ inline void swept_edge_contacts(const Frame& f, index k, V3 c0, const double* r0
                     stack[top++] = v.child(node, 1);
                 }
                 if (mt_best < 0) break;
+                // a soft edge that ends the step through the mesh's faces is the step's-end
+                // edge contacts' (ridges, chords: pushed out the nearest way); only one that
+                // ends wholly outside, past the edge it touched, would be missed
+                double cuts[kCrossings];
+                if (segment_crossings(v, root, s1[0], s1[1], cuts) > 0) break;
                 const V3 p = v.corner(mt_best, mk_best), pq = v.corner(mt_best, (mk_best + 1) % 3);
                 const V3 E = pq - p, xm = p + u_best * E;
                 // the contact normal: the two edges' common normal there, toward where the
