@@ -60,6 +60,7 @@
 
 #include <algorithm>
 #include <limits>
+#include <vector>
 
 #include "collision/colliders.hpp"
 #include "collision/soft.hpp"
@@ -828,8 +829,9 @@ inline double first_touch(V3 a0, V3 b0, V3 a1, V3 b1, V3 p, V3 pq, double tol, d
                           double& u) {
     const V3 E = pq - p, e0 = b0 - a0, de = (b1 - a1) - e0, r0 = a0 - p, dr = a1 - a0;
     const V3 n0 = cross(e0, E), dn = cross(de, E);
-    const double scale = (std::sqrt(dot(n0, n0)) + std::sqrt(dot(dn, dn))) *
-                         (std::sqrt(dot(r0, r0)) + std::sqrt(dot(dr, dr)) + std::sqrt(dot(E, E)));
+    // the terms' size (within a factor of 3 of the sum of the norms' products)
+    const double scale =
+        std::sqrt((dot(n0, n0) + dot(dn, dn)) * (dot(r0, r0) + dot(dr, dr) + dot(E, E)));
     if (!(scale > 0.0)) return 2.0;
     double t[6];
     int count = roots01(dot(n0, r0), dot(n0, dr) + dot(dn, r0), dot(dn, dr), scale, t);
@@ -870,7 +872,8 @@ inline double first_touch(V3 a0, V3 b0, V3 a1, V3 b1, V3 p, V3 pq, double tol, d
 /// contacts at the step's end: a soft edge that passes wholly over an edge of the mesh
 /// within the step (its ends outside at both ends, its chord outside at the end) is
 /// otherwise missed; one that ends the step through the mesh's faces is left to them (as
-/// before, pushed out the nearest way). Each soft edge (by its owner) moves linearly in the collider's frame
+/// before, pushed out the nearest way), and one whose ends move less than the margin
+/// relative to the collider ends that way where it touched an edge. Each soft edge (by its owner) moves linearly in the collider's frame
 /// from its start (q_start, in the start's frame) to its end (q, after the vertex
 /// contacts); against every edge taking part in the edge contacts (sharp or bent) whose box
 /// meets the edge's swept box (the tree's has_sharp subtrees), first_touch gives the first
@@ -897,16 +900,33 @@ inline void swept_edge_contacts(const Frame& f, index k, V3 c0, const double* r0
         root_box[d] = rb[d] - margin;
         root_box[3 + d] = rb[3 + d] + margin;
     }
+    // a soft edge moves only as far as its ends (below): none that moved past the margin
+    // relative to the collider, nothing to test (a resting or slow soft body: one pass)
+    bool moving = false;
+    for (index i = 0; i < m.particles.count && !moving; ++i) {
+        const V3 d = to_local(f.r, load(q, i) - f.c) - to_local(r0, load(q_start, i) - c0);
+        moving = dot(d, d) > margin * margin;
+    }
+    if (!moving) return;
+    // each particle's start in the collider's frame, once (its edges share it)
+    std::vector<V3> start(static_cast<size_t>(m.particles.count));
+    for (index i = 0; i < m.particles.count; ++i) start[i] = to_local(r0, load(q_start, i) - c0);
     for (index t = 0; t < m.triangles.count; ++t) {
         for (int a = 0; a < 3; ++a) {
             if (m.triangles.edge_owner[3 * t + a] == 0) continue;
             const index idx[2] = {m.triangles.indices[3 * t + a],
                                   m.triangles.indices[3 * t + (a + 1) % 3]};
-            const V3 s0[2] = {to_local(r0, load(q_start, idx[0]) - c0),
-                              to_local(r0, load(q_start, idx[1]) - c0)};
+            const V3 s0[2] = {start[idx[0]], start[idx[1]]};
             for (int round = 0; round < kRounds; ++round) {
                 V3 s1[2] = {to_local(f.r, load(q, idx[0]) - f.c),
                             to_local(f.r, load(q, idx[1]) - f.c)};
+                // Ends that move less than the margin relative to the collider (no point of
+                // the edge moves farther than its ends) cannot carry the edge wholly past a
+                // part of the mesh thicker than the margin: where it touched an edge, it ends
+                // the step through a face, which the step's-end contacts see. So a resting
+                // or slow soft body costs one test per edge.
+                const V3 da = s1[0] - s0[0], db = s1[1] - s0[1];
+                if (std::max(dot(da, da), dot(db, db)) <= margin * margin) break;
                 double lo[3], hi[3];
                 for (int d = 0; d < 3; ++d) {
                     const double x0 = (&s0[0].x)[d], x1 = (&s0[1].x)[d], x2 = (&s1[0].x)[d],
