@@ -240,3 +240,33 @@ def test_the_ground_under_a_ball_on_a_cloth_carries_both_weights(integrator, dt,
     assert -ground[1] / window == pytest.approx(weight, rel=0.02)
     if walls:
         assert np.abs(state.collider_impulse[1:]).max() == 0.0
+
+
+def test_an_edge_falling_parallel_to_a_box_edge_through_it_is_caught():
+    """Parallel edges: a 1 m x 2 cm strip along x (two squares across its width: rows at
+    z = 0.25, 0.26, 0.27 m) falling 1.2 m in one step, its row at z = 0.25 in the plane of
+    the box's front face, so that its edge there falls through the box's top front edge,
+    parallel to it (the two lines coplanar all along: first_touch's quadratic is zero; the
+    edge meets the top's edges along z at the box's corners at the same time). Only that
+    edge touches the box (the other rows pass in front of it, every particle outside the
+    box at both ends): its two particles stop at the margin above the edge (y = 0.25 m +
+    margin, to 1e-9 m; the contact normal +y, toward the side it came from), the others
+    fall on past the box, and no edge of either passes through the other. Before the
+    continuous test the whole strip ended 0.65 m below the box's bottom."""
+    sheet = sb.rectangle((1.0, 0.02), (1, 2))
+    flat = sheet.vertices[:, [0, 2, 1]] * [1.0, 0.0, 1.0] + [0.0, HALF + 0.05, HALF + 0.01]
+    builder = sb.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+    builder.add_cloth(sb.TriMesh(flat, sheet.faces), mass=0.1, stiffness=50.0,
+                      velocity=(0.0, -FALL, 0.0))  # fmt: skip
+    collider = sb.ColliderMesh(sb.box((2 * HALF, 2 * HALF, 2 * HALF)), restitution=0.0,
+                               friction=0.0)  # fmt: skip
+    builder.add_collider(collider)
+    model = builder.finalize()
+    state = model.state()
+    on_face = np.isclose(state.particle_q[:, 2], HALF)
+    assert on_face.sum() == 2
+    sb.Simulator(model, integrator="symplectic_euler", dt=DT).run(state, 1)
+    margin = model.collider_mesh_margin[0]
+    np.testing.assert_allclose(state.particle_q[on_face, 1], HALF + margin, atol=1e-9)
+    np.testing.assert_allclose(state.particle_q[~on_face, 1], HALF + 0.05 - FALL * DT)
+    assert crossings(model, state, collider) == 0

@@ -832,9 +832,11 @@ inline double first_touch(V3 a0, V3 b0, V3 a1, V3 b1, V3 p, V3 pq, double tol, d
     // the terms' size (within a factor of 3 of the sum of the norms' products)
     const double scale =
         std::sqrt((dot(n0, n0) + dot(dn, dn)) * (dot(r0, r0) + dot(dr, dr) + dot(E, E)));
-    if (!(scale > 0.0)) return 2.0;
     double t[6];
-    int count = roots01(dot(n0, r0), dot(n0, dr) + dot(dn, r0), dot(dn, dr), scale, t);
+    // parallel lines that keep their direction: scale 0, every term 0 (the case below)
+    int count = scale > 0.0 ? roots01(dot(n0, r0), dot(n0, dr) + dot(dn, r0), dot(dn, dr),
+                                      scale, t)
+                            : 0;
     if (count == 0) {
         // coplanar all along (or never, which the checks below then reject): the plane's
         // normal from the mesh edge and whichever of the soft edge's offsets is not along it
