@@ -905,8 +905,10 @@ inline void swept_edge_contacts(const Frame& f, index k, V3 c0, const double* r0
     // a soft edge moves only as far as its ends (below): none that moved past the margin
     // relative to the collider, nothing to test (a resting or slow soft body: one pass)
     bool moving = false;
+    const bool still = dot(f.vc, f.vc) == 0.0 && dot(f.wc, f.wc) == 0.0;  // the frame fixed
     for (index i = 0; i < m.particles.count && !moving; ++i) {
-        const V3 d = to_local(f.r, load(q, i) - f.c) - to_local(r0, load(q_start, i) - c0);
+        const V3 d = still ? load(q, i) - load(q_start, i)  // a rotation keeps lengths
+                           : to_local(f.r, load(q, i) - f.c) - to_local(r0, load(q_start, i) - c0);
         moving = dot(d, d) > margin * margin;
     }
     if (!moving) return;
