@@ -256,11 +256,16 @@ namespace softbody::SOFTBODY_KERNELS::colliders {
 /// the particles a collider moved are added to it. dt [s]: the step (a mesh collider's
 /// pose at the step's start, for its continuous test; collision/mesh.hpp). With `crossed`
 /// (2, set to -1 by the caller): where a mesh collider's edge contacts left a crossing (the
-/// first particle, mesh_collider::crossing_code), the first one found.
+/// first particle, mesh_collider::crossing_code), the first one found. With `caught_mass`
+/// (C) and q_before (N, 3; the positions before this call): caught_mass[k] is set to the
+/// mass [kg] of the particles collider k moved that no collider before it had moved (each
+/// particle counted for the first collider that caught it).
 inline void contacts(const Model& m, const double* cq, const double* crot, const double* cv,
                      const double* cw, const double* q_start, double* q, double* qd,
                      double* impulse, Seen* seen = nullptr, double dt = 0.0,
-                     index* crossed = nullptr) {
+                     index* crossed = nullptr, const double* q_before = nullptr,
+                     double* caught_mass = nullptr) {
+    double counted = 0.0;  // the mass the colliders before k caught
     for (index k = 0; k < m.colliders.count; ++k) {
         const index kind = m.colliders.kind[k];
         const V3 center = load(cq, k);
@@ -309,6 +314,15 @@ inline void contacts(const Model& m, const double* cq, const double* crot, const
             }
         }
         add_to(impulse, k, j);
+        if (caught_mass != nullptr && q_before != nullptr) {
+            double moved = 0.0;
+            for (index i = 0; i < m.particles.count; ++i)
+                if (q[3 * i] != q_before[3 * i] || q[3 * i + 1] != q_before[3 * i + 1] ||
+                    q[3 * i + 2] != q_before[3 * i + 2])
+                    moved += m.particles.mass[i];
+            caught_mass[k] = moved - counted;
+            counted = moved;
+        }
     }
 }
 

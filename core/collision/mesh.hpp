@@ -63,7 +63,9 @@
 // Concave edges take part only in 2.
 #pragma once
 
+#include <algorithm>
 #include <limits>
+#include <vector>
 
 #include "collision/colliders.hpp"
 #include "collision/soft.hpp"
@@ -823,6 +825,256 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
     }
 }
 
+/// The roots in [0, 1] of c0 + c1 t + c2 t^2 (at most 2, ascending, into t; returns how
+/// many), with `scale` the size of the terms for what counts as zero: a quadratic whose
+/// leading term is below round-off of it is solved as linear (Citardauq form otherwise, no
+/// cancellation), one whose every term is: none (the caller's degenerate case). Roots within
+/// round-off outside [0, 1] are clamped in.
+inline int roots01(double c0, double c1, double c2, double scale, double* t) {
+    constexpr double kEps = 1e-12, kSlack = 1e-9;
+    const double zero = kEps * scale;
+    int count = 0;
+    auto keep = [&](double x) {
+        if (!(x >= -kSlack && x <= 1.0 + kSlack)) return;
+        t[count++] = std::min(1.0, std::max(0.0, x));
+    };
+    if (std::fabs(c2) <= zero) {
+        if (std::fabs(c1) > zero) keep(-c0 / c1);
+        return count;
+    }
+    double disc = c1 * c1 - 4.0 * c2 * c0;
+    if (disc < 0.0) {
+        if (disc < -zero * scale) return 0;
+        disc = 0.0;  // a touching (double) root within round-off
+    }
+    const double qq = -0.5 * (c1 + (c1 >= 0.0 ? 1.0 : -1.0) * std::sqrt(disc));
+    keep(qq / c2);
+    if (qq != 0.0) keep(c0 / qq);
+    if (count == 2 && t[1] < t[0]) std::swap(t[0], t[1]);
+    return count;
+}
+
+/// The first time t in [0, 1] at which the soft segment a(t)-b(t) (its ends moving linearly
+/// from a0, b0 to a1, b1) touches the fixed segment p-pq (all in the collider's frame), to
+/// within `tol` [m]; > 1: never. s, u: the parameters along the soft and the mesh segment
+/// there. The lines are coplanar where (b - a) x (pq - p) . (a - p) = 0: with the mesh
+/// edge fixed in this frame a quadratic in t (the moving-edge case's cubic of Provot 1997 /
+/// Bridson et al. 2002 loses its cubic term), solved exactly (roots01), each root checked by
+/// the segments' closest points. Coplanar all along (parallel lines, or a motion within one
+/// plane holding the mesh edge): in that plane the first touch is an end of one segment on
+/// the other, at a root of an end's signed distance to the other's line (linear for the soft
+/// ends against the fixed edge, quadratic for the mesh edge's ends against the moving one).
+inline double first_touch(V3 a0, V3 b0, V3 a1, V3 b1, V3 p, V3 pq, double tol, double& s,
+                          double& u) {
+    const V3 E = pq - p, e0 = b0 - a0, de = (b1 - a1) - e0, r0 = a0 - p, dr = a1 - a0;
+    const V3 n0 = cross(e0, E), dn = cross(de, E);
+    // the terms' size (within a factor of 3 of the sum of the norms' products)
+    const double scale =
+        std::sqrt((dot(n0, n0) + dot(dn, dn)) * (dot(r0, r0) + dot(dr, dr) + dot(E, E)));
+    double t[6];
+    // parallel lines that keep their direction: scale 0, every term 0 (the case below)
+    int count = scale > 0.0 ? roots01(dot(n0, r0), dot(n0, dr) + dot(dn, r0), dot(dn, dr),
+                                      scale, t)
+                            : 0;
+    if (count == 0) {
+        // coplanar all along (or never, which the checks below then reject): the plane's
+        // normal from the mesh edge and whichever of the soft edge's offsets is not along it
+        V3 pn = cross(E, r0);
+        if (dot(pn, pn) <= 1e-24 * dot(E, E) * dot(r0, r0)) pn = cross(E, r0 + dr);
+        if (dot(pn, pn) <= 1e-24 * dot(E, E) * dot(r0 + dr, r0 + dr)) pn = cross(E, e0);
+        if (!(dot(pn, pn) > 0.0)) return 2.0;  // all on the mesh edge's line
+        const double len = std::sqrt(dot(E, E)) + std::sqrt(dot(e0, e0)) +
+                           std::sqrt(dot(r0, r0)) + std::sqrt(dot(dr, dr)) +
+                           std::sqrt(dot(de, de));
+        const double sc = std::sqrt(dot(pn, pn)) * len * len;
+        const V3 ep = cross(E, pn);  // side of x against the mesh edge's line: (x - p) . ep
+        // the soft ends a(t) = a0 + t dr and b(t) = b0 + t (dr + de) against the mesh line
+        count = roots01(dot(r0, ep), dot(dr, ep), 0.0, sc, t);
+        count += roots01(dot(r0 + e0, ep), dot(dr + de, ep), 0.0, sc, t + count);
+        // the mesh ends x against the soft line: (x - a(t)) . (e(t) x pn), quadratic in t
+        for (const V3 x : {p, pq}) {
+            const V3 g0 = x - a0, k0 = cross(e0, pn), k1 = cross(de, pn);
+            count += roots01(dot(g0, k0), dot(g0, k1) - dot(dr, k0), -dot(dr, k1), sc,
+                             t + count);
+        }
+        std::sort(t, t + count);
+    }
+    for (int k = 0; k < count; ++k) {
+        const V3 a = a0 + t[k] * (a1 - a0), b = b0 + t[k] * (b1 - b0);
+        thick::closest_segments(a, b, p, pq, s, u);
+        const V3 d = (a + s * (b - a)) - (p + u * E);
+        if (dot(d, d) <= tol * tol) return t[k];
+    }
+    return 2.0;
+}
+
+/// Continuous soft-edge against mesh-edge contacts of mesh collider k (f: its pose and
+/// velocities at the step's end; c0, r0 its pose at the step's start), before the edge
+/// contacts at the step's end: a soft edge that passes wholly over an edge of the mesh
+/// within the step (its ends outside at both ends, its chord outside at the end) is
+/// otherwise missed; one that ends the step through the mesh's faces is left to them (as
+/// before, pushed out the nearest way), and one whose ends move less than the margin
+/// relative to the collider ends that way where it touched an edge. Each soft edge (by its owner) moves linearly in the collider's frame
+/// from its start (q_start, in the start's frame) to its end (q, after the vertex
+/// contacts); against every edge taking part in the edge contacts (sharp or bent) whose box
+/// meets the edge's swept box (the tree's has_sharp subtrees), first_touch gives the first
+/// time of contact. At the earliest, when the side the soft edge came from is outside the
+/// mesh (a point half the margin out along the contact normal: the nearest feature's
+/// pseudo-normal test), the soft edge goes back to that side: its contact point to the mesh
+/// edge's point plus `margin` along the normal (the two edges' common normal there, toward
+/// where the soft point came from), and its velocity relative to the collider takes
+/// restitution and friction (push(): mass-weighted by the barycentric weights, free
+/// particles only, the opposite impulse to j). Again from the new end (up to kRounds); a hit
+/// no free particle can answer (every one pinned) is reported as a crossing.
+inline void swept_edge_contacts(const Frame& f, index k, V3 c0, const double* r0,
+                                const double* q_start, double* q, double* qd, V3& j,
+                                colliders::Seen* seen, index* crossed) {
+    const Model& m = f.m;
+    const index root = m.colliders.mesh_root[k];
+    const View v{m};
+    if (root < 0 || !v.has_sharp(root)) return;
+    const double margin = m.colliders.mesh_margin[k];
+    const double tol = 0.01 * margin;
+    const double* rb = v.bounds(root);
+    double root_box[6];
+    for (int d = 0; d < 3; ++d) {
+        root_box[d] = rb[d] - margin;
+        root_box[3 + d] = rb[3 + d] + margin;
+    }
+    // a soft edge moves only as far as its ends (below): none that moved past the margin
+    // relative to the collider, nothing to test (a resting or slow soft body: one pass)
+    bool moving = false;
+    const bool still = dot(f.vc, f.vc) == 0.0 && dot(f.wc, f.wc) == 0.0;  // the frame fixed
+    for (index i = 0; i < m.particles.count && !moving; ++i) {
+        const V3 d = still ? load(q, i) - load(q_start, i)  // a rotation keeps lengths
+                           : to_local(f.r, load(q, i) - f.c) - to_local(r0, load(q_start, i) - c0);
+        moving = dot(d, d) > margin * margin;
+    }
+    if (!moving) return;
+    // each particle's start in the collider's frame, once (its edges share it)
+    std::vector<V3> start(static_cast<size_t>(m.particles.count));
+    for (index i = 0; i < m.particles.count; ++i) start[i] = to_local(r0, load(q_start, i) - c0);
+    for (index t = 0; t < m.triangles.count; ++t) {
+        for (int a = 0; a < 3; ++a) {
+            if (m.triangles.edge_owner[3 * t + a] == 0) continue;
+            const index idx[2] = {m.triangles.indices[3 * t + a],
+                                  m.triangles.indices[3 * t + (a + 1) % 3]};
+            const V3 s0[2] = {start[idx[0]], start[idx[1]]};
+            for (int round = 0; round < kRounds; ++round) {
+                V3 s1[2] = {to_local(f.r, load(q, idx[0]) - f.c),
+                            to_local(f.r, load(q, idx[1]) - f.c)};
+                // Ends that move less than the margin relative to the collider (no point of
+                // the edge moves farther than its ends) cannot carry the edge wholly past a
+                // part of the mesh thicker than the margin: where it touched an edge, it ends
+                // the step through a face, which the step's-end contacts see. So a resting
+                // or slow soft body costs one test per edge.
+                const V3 da = s1[0] - s0[0], db = s1[1] - s0[1];
+                if (std::max(dot(da, da), dot(db, db)) <= margin * margin) break;
+                double lo[3], hi[3];
+                for (int d = 0; d < 3; ++d) {
+                    const double x0 = (&s0[0].x)[d], x1 = (&s0[1].x)[d], x2 = (&s1[0].x)[d],
+                                 x3 = (&s1[1].x)[d];
+                    lo[d] = std::min(std::min(x0, x1), std::min(x2, x3)) - tol;
+                    hi[d] = std::max(std::max(x0, x1), std::max(x2, x3)) + tol;
+                }
+                if (!boxes_meet(lo, hi, root_box)) break;
+                double t_best = 2.0, s_best = 0.0, u_best = 0.0;
+                index mt_best = -1;
+                int mk_best = 0;
+                index stack[kStack];
+                int top = 0;
+                stack[top++] = root;
+                while (top > 0) {
+                    const index node = stack[--top];
+                    if (!v.has_sharp(node) || !boxes_meet(lo, hi, v.bounds(node))) continue;
+                    const index tb = v.begin(node), te = v.end(node);
+                    if (te > tb) {
+                        for (index mt = tb; mt < te; ++mt)
+                            for (int mk = 0; mk < 3; ++mk) {
+                                if (!v.takes_part(mt, mk)) continue;
+                                const V3 p = v.corner(mt, mk), pq = v.corner(mt, (mk + 1) % 3);
+                                if (!segment_box_meets(p, pq, lo, hi)) continue;
+                                double s = 0.0, u = 0.0;
+                                const double when =
+                                    first_touch(s0[0], s0[1], s1[0], s1[1], p, pq, tol, s, u);
+                                if (when >= t_best) continue;
+                                t_best = when;
+                                s_best = s;
+                                u_best = u;
+                                mt_best = mt;
+                                mk_best = mk;
+                            }
+                        continue;
+                    }
+                    if (top + 2 > kStack) continue;
+                    stack[top++] = v.child(node, 0);
+                    stack[top++] = v.child(node, 1);
+                }
+                if (mt_best < 0) break;
+                // a soft edge that ends the step through the mesh's faces is the step's-end
+                // edge contacts' (ridges, chords: pushed out the nearest way); only one that
+                // ends wholly outside, past the edge it touched, would be missed
+                double cuts[kCrossings];
+                if (segment_crossings(v, root, s1[0], s1[1], cuts) > 0) break;
+                const V3 p = v.corner(mt_best, mk_best), pq = v.corner(mt_best, (mk_best + 1) % 3);
+                const V3 E = pq - p, xm = p + u_best * E;
+                // the contact normal: the two edges' common normal there, toward where the
+                // soft point came from (against its velocity, or its start's side); along
+                // (nearly) parallel edges, the start's offset across the mesh edge
+                const V3 at0 = s0[0] + t_best * (s1[0] - s0[0]);
+                const V3 at1 = s0[1] + t_best * (s1[1] - s0[1]);
+                const V3 vel = (1.0 - s_best) * (s1[0] - s0[0]) + s_best * (s1[1] - s0[1]);
+                const V3 from = (s0[0] + s_best * (s0[1] - s0[0])) - xm;
+                V3 n = cross(at1 - at0, E);
+                const double nn = dot(n, n);
+                if (nn > 1e-18 * dot(at1 - at0, at1 - at0) * dot(E, E)) {
+                    n = (1.0 / std::sqrt(nn)) * n;
+                    const double sv = dot(n, vel), sf = dot(n, from);
+                    const double side = std::fabs(sv) > 1e-9 * std::sqrt(dot(vel, vel)) ? -sv : sf;
+                    if (side < 0.0) n = -1.0 * n;
+                    if (side == 0.0) break;
+                } else {
+                    n = unit(from - (dot(from, E) / dot(E, E)) * E);
+                    if (!(dot(n, n) > 0.0)) break;
+                }
+                // from outside: a point half the margin out along n is outside the mesh
+                const V3 probe = xm + 0.5 * margin * n;
+                const Nearest near = nearest(v, root, probe);
+                if (dot(probe - near.x, near.n) < 0.0) break;
+                // Both ends free: the edge back to where it was at the contact, plus the
+                // margin along n (for an edge what the vertex contacts' entry point is for a
+                // vertex), each end then responding as a caught vertex does (restitution and
+                // friction on its velocity relative to the collider, against n). Soft edges
+                // share particles: contact-point impulses applied edge after edge would undo
+                // each other's and feed energy in (a strip caught at 120 m/s, restitution 0,
+                // left particles moving at +44 and -72 m/s); a vertex's response, once
+                // applied, leaves a second one nothing to do. Else the contact point to the
+                // margin by push()'s weights, its velocity likewise, the pinned ends held.
+                if (m.particles.inv_mass[idx[0]] > 0.0 && m.particles.inv_mass[idx[1]] > 0.0) {
+                    const V3 nw = to_world(f.r, n);
+                    for (int e = 0; e < 2; ++e) {
+                        const V3 x = f.c + to_world(f.r, (e == 0 ? at0 : at1) + margin * n);
+                        colliders::respond(m, idx[e], {true, x, nw}, f.vc + cross(f.wc, x - f.c),
+                                           f.e, f.keep, q, qd, j);
+                        if (seen != nullptr) seen->add(load(q, idx[e]), load(qd, idx[e]));
+                    }
+                    continue;
+                }
+                const V3 xs = s1[0] + s_best * (s1[1] - s1[0]);
+                const V3 move = (xm + margin * n) - xs;
+                const double w[2] = {1.0 - s_best, s_best};
+                if (!push(f, 2, idx, w, s1, xm, move, n, false, q, qd, j, seen)) {
+                    if (crossed != nullptr && crossed[0] < 0) {
+                        crossed[0] = idx[0];
+                        crossed[1] = crossing_code(m, k, idx[1], false);
+                    }
+                    break;
+                }
+            }
+        }
+    }
+}
+
 /// Mesh collider k (centre c, rotation r at the step's end; velocity vc [m/s], angular
 /// velocity wc [rad/s]) against every particle: q_start (N, 3) the positions at the step's
 /// start, dt [s] the step (the collider's pose at its start is taken back along vc, wc);
@@ -861,6 +1113,7 @@ inline void contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 w
         colliders::respond(m, i, hit, vc + cross(wc, hit.x - c), e, keep, q, qd, j);
         if (seen != nullptr) seen->add(load(q, i), load(qd, i));
     }
+    swept_edge_contacts({m, c, r, vc, wc, e, keep}, k, c0, r0, q_start, q, qd, j, seen, crossed);
     edge_contacts(m, k, c, r, vc, wc, e, keep, q, qd, j, seen, crossed, q_start, c0, r0);
 }
 

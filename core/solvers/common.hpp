@@ -4,6 +4,8 @@
 // step inside a collider).
 #pragma once
 
+#include <vector>
+
 #include "collision/colliders.hpp"
 #include "collision/soft.hpp"
 #include "collision/thick.hpp"
@@ -129,8 +131,13 @@ inline index mesh_crossing(const index* crossed, const ContactBuffers& w) {
 /// particle that a collider carried farther than its pairs' distances allow, nor see the
 /// last push. The colliders acting last alone let a particle resting on one follow the
 /// stage's T into it and be pushed back, unbounded, through a sheet falling onto it.
-/// The impulse the stage's response gives a caught particle's other side is not passed on
-/// to the collider holding it (s.collider_impulse has the caught particles' own contacts).
+/// The momentum the second pass's response gives the free side (the particles it does not
+/// hold) comes through the caught particles from the colliders holding them: each such
+/// collider receives its opposite (Newton's third law; the stage's pairs among free
+/// particles conserve momentum), so that the ground under a ball resting on a cloth
+/// receives both weights. Shared among several catching colliders by the mass each caught
+/// (exact for one, which holds all the caught particles; an apportionment for several, the
+/// stage not telling which caught particle a free one pressed on).
 /// Returns contacts()'s codes.
 inline index thick_with_colliders(const Model& m, const RunParams& p, const StateView& s,
                                   const double* q_start, const ContactBuffers& w,
@@ -141,8 +148,11 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
     if (needed != 0) return needed;
     copy(s.q, w.q_collided, n3);
     index crossed[2] = {-1, -1};
+    // the mass each collider caught, to share the second pass's reaction among several
+    std::vector<double> caught_mass(m.colliders.count > 1 ? m.colliders.count : 0, 0.0);
     colliders::contacts(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w, q_start,
-                        s.q, s.qd, s.collider_impulse, seen, p.dt, crossed);
+                        s.q, s.qd, s.collider_impulse, seen, p.dt, crossed, w.q_collided,
+                        caught_mass.empty() ? nullptr : caught_mass.data());
     if (crossed[0] >= 0) return mesh_crossing(crossed, w);
     auto moved = [](const double* a, const double* b, index i) {
         return a[3 * i] != b[3 * i] || a[3 * i + 1] != b[3 * i + 1] || a[3 * i + 2] != b[3 * i + 2];
@@ -157,8 +167,24 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
     Model held = m;
     held.particles.inv_mass = w.held_inv_mass;
     copy(s.q, w.q_collided, n3);
+    auto free_momentum = [&] {  // of the particles the second pass does not hold [kg m/s]
+        V3 sum{0.0, 0.0, 0.0};
+        for (index i = 0; i < n; ++i)
+            if (w.held_inv_mass[i] > 0.0) sum = sum + m.particles.mass[i] * load(s.qd, i);
+        return sum;
+    };
+    const V3 before = free_momentum();
     needed = thick::contacts(held, q_start, s.q, s.qd, w, false, p.dt);
     if (needed != 0) return needed;
+    const V3 given = free_momentum() - before;  // through the caught particles
+    if (caught_mass.empty()) {
+        add_to(s.collider_impulse, 0, -1.0 * given);
+    } else {
+        double total = 0.0;
+        for (const double c : caught_mass) total += c;
+        for (index k = 0; k < m.colliders.count && total > 0.0; ++k)
+            add_to(s.collider_impulse, k, (-caught_mass[k] / total) * given);
+    }
     bool any = false;  // the colliders again, for the particles the second pass moved
     for (index i = 0; i < n; ++i) {
         const bool mine = moved(s.q, w.q_collided, i);
