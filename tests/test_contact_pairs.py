@@ -202,19 +202,19 @@ def swept_core_pairs(model, q0, q):
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_swept_gather_keeps_every_pair_that_can_come_near_along_the_step(seed):
     """The stage's swept gather (swept boxes grown by the margin g, then each pair kept only
-    when its distance at q0 is below its reach: 2 h plus the most its particles' scaled
+    when its distance at q0 is at most its reach: h plus the most its particles' scaled
     moves can close it) on a folded cloth sliding over itself and a ball sliding the other
     way. Reference: a brute force over every pair at the positions the stage may reach
     along the step, q0 + T + tau a_k u_k (tau 1/2 and 1, the bound's scales a_k 0 or 1 at
-    random per particle, 12 patterns, and all 1): every pair nearer than min(g, 2 h) there
-    (the boxes keep those nearer than g, the reach those nearer than 2 h) is kept, with its
-    distance at q0 (to 1e-12 m); and the gather does prune: every kept pair is nearer at q0
-    than its reach, fewer are kept than lie within 2 h + max |u| at q0, and many pairs the
-    sweep brings near at some scales are far at q0."""
+    random per particle, 12 patterns, and all 1): every pair nearer than h (<= g) there is
+    kept (the stage's response must see it), with its distance at q0 (to 1e-12 m); and the
+    gather does prune: no kept pair is farther at q0 than its reach, fewer are kept than
+    lie within h + max |u| at q0, and many pairs the sweep brings near at some scales are
+    far at q0."""
     rng = np.random.default_rng(100 + seed)
     model, q0, q, u = swept_scene(seed)
     h = model.contact_thickness
-    within = min(model.contact_margin, 2 * h)
+    within = min(model.contact_margin, h)
     found = swept_core_pairs(model, q0, q)
     start = brute_pairs(model, q0, 1.0)  # every pair's distance at q0
     near = {}
@@ -227,7 +227,7 @@ def test_swept_gather_keeps_every_pair_that_can_come_near_along_the_step(seed):
     assert max(abs(found[k] - start[k]) for k in found) < 1e-12
     far_at_start = [k for k in near if start[k] > within + 0.01]
     assert len(far_at_start) > 20
-    # the reach: 2 h + max(|u_k| over the pair's particles, |u_a - u_b| across its sides)
+    # the reach: h + max(|u_k| over the pair's particles, |u_a - u_b| across its sides)
     for key, dist in found.items():
         if key[0] == "vt":
             a, b = [key[1]], list(key[2])
@@ -235,8 +235,8 @@ def test_swept_gather_keeps_every_pair_that_can_come_near_along_the_step(seed):
             a, b = list(key[1]), list(key[2])
         most = max(np.linalg.norm(u[a + b], axis=1).max(),
                    max(np.linalg.norm(u[i] - u[j]) for i in a for j in b))  # fmt: skip
-        assert dist < 2 * h + most + 1e-12
-    assert len(found) < len(brute_pairs(model, q0, 2 * h + np.linalg.norm(u, axis=1).max()))
+        assert dist <= h + most + 1e-12
+    assert len(found) < len(brute_pairs(model, q0, h + np.linalg.norm(u, axis=1).max()))
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -17,9 +17,9 @@
 //      for the triangles after it, and each vertex-triangle and edge-edge pair is found
 //      through the pair of triangles that own its primitives (collect()). Every pair whose
 //      boxes meet is a candidate, with its distance D at the step's start; in a step's swept
-//      boxes only where D is below its reach, 2 h plus the most its particles' moves, at
+//      boxes only where D is at most its reach, h plus the most its particles' moves, at
 //      any scales the bound may give them, can close it (swept_reach): a pair beyond that
-//      stays at least h apart along the step.
+//      stays more than h apart up to the response, and apart after it.
 //      Any pair of primitives that could meet below (every path stays in its box grown by
 //      h / 2) is a candidate. Most steps take their candidates from a list kept between
 //      steps instead, and read only its rows that could matter (see contacts()).
@@ -157,6 +157,7 @@ struct Stage {
     bool self;         // pairs within a body too
     bool swept = true; // boxes over q0 and q - T (the step's pairs), or q0 alone (the list's)
     double keep = std::numeric_limits<double>::infinity();  // pairs nearer than this are kept
+    bool check = true;  // the crossing check at q0 (off: a gather whose step's stage checks)
 };
 
 /// Box of particle i over q0 and q0 + u (u = q - q0 - T), or q0 alone, into lo, hi.
@@ -399,7 +400,7 @@ inline void vertex_bounds(Batch& b) {
     }
 }
 
-/// Each pair's reach in a swept gather into b.reach: 2 h plus the most its particles' paths
+/// Each pair's reach in a swept gather into b.reach: h plus the most its particles' paths
 /// can close its distance, max(max_k |u_k|, max |u_a - u_b|) over its particles k and the
 /// pairs a, b of particles on its two sides (u = q - q0 - T; the first `side` particles
 /// are the first side). The stage moves particle k to q0 + T + a_k u_k + e_k, a_k in [0, 1]
@@ -408,11 +409,12 @@ inline void vertex_bounds(Batch& b) {
 /// |a_a u_a - a_b u_b| + h, and |a_a u_a - a_b u_b| (convex in a_a, a_b) is largest at a
 /// corner of [0, 1]^2: 0, |u_a|, |u_b| or |u_a - u_b|. A pair's gap with the coefficients
 /// of its closest points at q0 (each side's weights sum to 1) then stays at least D minus
-/// that much along the straight path, so a pair whose distance D at q0 is at least its
-/// reach stays at least h apart along the step, before and after the response: neither
-/// the bound (no crossing) nor the response needs it.
+/// that much along the straight path, so a pair whose distance D at q0 is over its reach
+/// stays more than h apart up to the response (which then has nothing to do for it), and
+/// more than 0 after its moves (a crossing needs 0): neither the bound nor the response
+/// needs it (as a pair whose boxes stay farther apart than the margin g >= h).
 inline void swept_reach(const Stage& st, Batch& b, int side) {
-    const double h2 = 2.0 * st.m.soft_contacts.thickness;
+    const double h = st.m.soft_contacts.thickness;
     for (int p = 0; p < b.n; ++p) {
         V3 u[4];
         double most = 0.0;
@@ -426,12 +428,12 @@ inline void swept_reach(const Stage& st, Batch& b, int side) {
                 const V3 r = u[k] - u[l];
                 most = std::max(most, dot(r, r));
             }
-        b.reach[p] = std::sqrt(most) + h2;
+        b.reach[p] = std::sqrt(most) + h;
     }
 }
 
 /// A swept gather's batches (collect(), st.swept with no distance to keep below): each
-/// pair whose distance at q0 is below its reach (swept_reach) into w.pairs, with that
+/// pair whose distance at q0 is at most its reach (swept_reach) into w.pairs, with that
 /// distance. The lower bounds (vertex_bounds, edge_bounds: an edge-edge pair's is its
 /// squared distance where neither segment is degenerate) drop the others before gap()
 /// measures them. Empties the batches.
@@ -446,15 +448,15 @@ inline void flush_swept(const Stage& st, Batch& vt, Batch& ee, index& count) {
         double c[4];
         const V3 d = gap(st.q0, kind, v, c);
         const double dist = std::sqrt(dot(d, d));
-        if (dist < reach) add_pair(st.w, count, kind, v, dist);
+        if (dist <= reach) add_pair(st.w, count, kind, v, dist);
     };
     for (int p = 0; p < vt.n; ++p)  // the bound within its 1e-6 slack of the distance
-        if (vt.bound[p] < vt.reach[p] * vt.reach[p] * (1.0 + 1e-6))
+        if (vt.bound[p] <= vt.reach[p] * vt.reach[p] * (1.0 + 1e-6))
             measure(kVertexTriangle, vt.v[p], vt.reach[p]);
     for (int p = 0; p < ee.n; ++p) {
         if (ee.bound[p] > 0.0) {  // the distance itself
             const double dist = std::sqrt(ee.bound[p]);
-            if (dist < ee.reach[p]) add_pair(st.w, count, kEdgeEdge, ee.v[p], dist);
+            if (dist <= ee.reach[p]) add_pair(st.w, count, kEdgeEdge, ee.v[p], dist);
         } else {  // a degenerate segment, or touching: gap() says
             measure(kEdgeEdge, ee.v[p], ee.reach[p]);
         }
@@ -624,7 +626,7 @@ inline index collect(const Stage& st) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
-            if (starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
+            if (st.check && starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
                 (edge_through(st, t, tri, t2, tri2) || edge_through(st, t2, tri2, t, tri))) {
                 crossed = true;
                 return;
@@ -662,20 +664,27 @@ inline index collect(const Stage& st) {
 /// this pass or the last (w.held's slot 3 holds the pass of each particle's last change,
 /// hold() writes it afresh): a row read once leaves its particles' scales within its limit
 /// (or at 0), so it holds until one of them changes, and the rows skipped would change
-/// nothing (the scales come out as when every row is read in every pass).
+/// nothing (the scales come out as when every row is read in every pass). Each particle's
+/// u and |u| are measured once, into w.held's slots 4-7 (hold() writes them afresh).
 inline void bound(const Stage& st, index pairs, bool mark = false) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
     double* s = w.scale;
     double* changed_in = w.held;  // slot 3 of each particle's row: the pass of its last change
+    auto u = [&](index i) { return load(st.q, i) - load(st.q0, i) - st.T; };
     for (index p = 0; p < pairs; ++p)
         for (int k = 0; k < 4; ++k) {
             const index i = w.pairs->data[kSlots * p + 1 + k];
             s[i] = 1.0;
-            changed_in[8 * i + 3] = -2.0;
-            if (mark) w.held[8 * i] = w.held[8 * i + 1] = w.held[8 * i + 2] = 0.0;
+            double* e = w.held + 8 * i;
+            e[3] = -2.0;
+            const V3 ui = u(i);
+            e[4] = ui.x;
+            e[5] = ui.y;
+            e[6] = ui.z;
+            e[7] = std::sqrt(dot(ui, ui));
+            if (mark) e[0] = e[1] = e[2] = 0.0;
         }
-    auto u = [&](index i) { return load(st.q, i) - load(st.q0, i) - st.T; };
     for (index pass = 0; pass <= pairs; ++pass) {
         bool changed = false;
         const double recent = static_cast<double>(pass - 1);
@@ -691,8 +700,9 @@ inline void bound(const Stage& st, index pairs, bool mark = false) {
             V3 du[4];
             double len[4];
             for (int k = 0; k < 4; ++k) {
-                du[k] = u(v[k]);
-                len[k] = std::sqrt(dot(du[k], du[k]));
+                const double* e = w.held + 8 * v[k];
+                du[k] = V3{e[4], e[5], e[6]};
+                len[k] = e[7];
                 if (m.particles.inv_mass[v[k]] == 0.0)
                     pinned_most = std::max(pinned_most, len[k]);
                 else
