@@ -88,9 +88,15 @@ index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers&
     return 0;
 }
 
-index contact_pairs(const Model& m, double* q, double radius, const ContactBuffers& w) {
+index contact_pairs(const Model& m, double* q, double radius, double* q_end,
+                    const ContactBuffers& w) {
     thick::Stage st{m, q, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size, radius,
                     m.soft_contacts.self_contact != 0};
+    if (q_end != nullptr) {  // a step's swept gather, after the step's common translation
+        st.q = q_end;
+        st.T = thick::motion(m, q, q_end, nullptr, false).T;
+        return thick::gather(st);
+    }
     st.swept = false;
     st.keep = radius;
     return thick::gather(st);

@@ -122,8 +122,11 @@ struct KernelTable {
     /// build gathers them (collision/thick.hpp): every vertex-triangle and edge-edge pair
     /// nearer than `radius` [m] (adjacent ones, and a body's own without self-contact, left
     /// out) into w.pairs' rows; returns their count, -1 for a crossing at q (w.crossing), or
-    /// below -1 when a buffer could not grow to them.
-    index (*contact_pairs)(const Model&, double* q, double radius, const ContactBuffers& w);
+    /// below -1 when a buffer could not grow to them. With q_end (N, 3; else null): the
+    /// candidates of a step from q to q_end as the stage's swept gather finds them (its
+    /// boxes grown by `radius` [m], as the stage's by the margin).
+    index (*contact_pairs)(const Model&, double* q, double radius, double* q_end,
+                           const ContactBuffers& w);
 };
 
 namespace isa_scalar {

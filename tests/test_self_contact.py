@@ -408,6 +408,26 @@ def test_a_held_back_sheet_takes_the_velocity_of_its_bounded_step(integrator):
     assert np.abs(momentum(model, state)).max() < 1e-12
 
 
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "midpoint"])
+def test_sheets_that_start_beyond_h_and_end_within_it_are_pushed_to_h(integrator):
+    """The response must see every pair that ends a step within h, including pairs that
+    started it farther than h (the response reads a row only where its particles' moves
+    can bring it within h). Two sheets 1.2 h apart thrown at each other at 0.5 h per step
+    each: the bound lets them close 0.4 of 1.2 h, to 0.72 h, and the response pushes every
+    pair back to h. Reference: after the step the sheets' heights are at least h apart
+    everywhere (to 1e-5 h: the pairs' pushes, one after another, leave the sheets a little
+    uneven), and they did approach (less than 1.2 h apart)."""
+    h, dt = 0.01, 1e-3
+    model = two_sheets(0.1, 0.1, 0.5 * h / dt, 0.5 * h / dt, h=h, gap=1.2 * h)
+    sim = sb.Simulator(model, integrator=integrator, dt=dt)
+    state = model.state()
+    sim.run(state, 1)
+    (a0, a1), (b0, b1) = model.body_particle_range
+    z = state.particle_q[:, 2]
+    assert z[a0:a1].min() - z[b0:b1].max() >= h * (1.0 - 1e-5)
+    assert z[a0:a1].max() - z[b0:b1].min() < 1.2 * h
+
+
 @pytest.mark.parametrize("friction", [0.0, 0.5])
 def test_a_held_back_pair_of_unequal_sheets_conserves_momentum(friction):
     """Sheets of 0.1 kg and 0.3 kg thrown at each other at 400 and 100 m/s (momentum -10

@@ -69,21 +69,28 @@ Index soft_contacts(const CoreModel& core, F64 q, F64 qd, std::optional<Index> h
 
 /// The thickness contacts' candidate pairs nearer than `radius` [m] at q (N, 3), gathered
 /// as the pair list's build gathers them (for tests of its broad and narrow phase): (kinds
-/// (P,): 0 vertex-triangle, 1 edge-edge; particles (P, 4); distances (P,) [m]).
-nb::tuple contact_pairs(const CoreModel& core, ConstF64 q, double radius) {
+/// (P,): 0 vertex-triangle, 1 edge-edge; particles (P, 4); distances (P,) [m] at q). With
+/// q_end (N, 3), the candidates of a step from q to q_end as the contact stage's swept
+/// gather finds them, its boxes grown by `radius`.
+nb::tuple contact_pairs(const CoreModel& core, ConstF64 q, double radius,
+                        std::optional<ConstF64> q_end) {
     const softbody::Model& m = core.model();
     check_shape(q, "q", {m.particles.count, 3});
+    if (q_end) check_shape(*q_end, "q_end", {m.particles.count, 3});
     if (m.soft_contacts.mode != SoftContactMode::SURFACE || !(m.soft_contacts.thickness > 0.0))
         fail("contact_pairs needs surface soft contacts with a thickness");
     if (!(radius > 0.0) || !std::isfinite(radius))
         fail("radius must be finite and > 0, got " + std::to_string(radius));
     std::vector<double> x(q.data(), q.data() + q.size());
+    std::vector<double> end;
+    if (q_end) end.assign(q_end->data(), q_end->data() + q_end->size());
     Buffers b(m, 0, checked_capacity(m, std::nullopt));
     b.allow_growth();
     Index pairs = 0;
     {
         nb::gil_scoped_release release;
-        pairs = softbody::kernels().contact_pairs(m, x.data(), radius, b.contact);
+        pairs = softbody::kernels().contact_pairs(m, x.data(), radius,
+                                                  q_end ? end.data() : nullptr, b.contact);
     }
     if (pairs == -1)
         fail("an edge at particle " + std::to_string(b.contact.crossing[0]) +
@@ -497,11 +504,13 @@ void bind_terms(nb::module_& mod) {
             "One pass of the model's soft-soft contacts on q, qd (N, 3) in place; returns "
             "the hash entries the surface contacts needed when they did not fit, else 0.");
     mod.def("contact_pairs", &contact_pairs, nb::arg("model"), nb::arg("q").noconvert(),
-            nb::arg("radius"),
+            nb::arg("radius"), nb::arg("q_end").noconvert() = nb::none(),
             "The thickness contacts' candidate pairs nearer than radius [m] at q (N, 3), "
             "gathered as the pair list's build gathers them: (kinds (P,): 0 vertex-triangle, "
-            "1 edge-edge; particles (P, 4); distances (P,) [m]). Raises ValueError where an "
-            "edge passes through a triangle at q.");
+            "1 edge-edge; particles (P, 4); distances (P,) [m]). With q_end (N, 3): the "
+            "candidates of a step from q to q_end as the contact stage's swept gather finds "
+            "them, its boxes grown by radius. Raises ValueError where an edge passes through "
+            "a triangle at q.");
     mod.def("body_volumes", &body_volumes, nb::arg("q").noconvert(),
             nb::arg("tri_indices").noconvert(), nb::arg("body_particle_range").noconvert(),
             nb::arg("body_tri_range").noconvert(), nb::arg("body_volume_method").noconvert(),

@@ -16,7 +16,10 @@
 //      (soft_contacts.margin); each triangle's box over the same points is looked up in it
 //      for the triangles after it, and each vertex-triangle and edge-edge pair is found
 //      through the pair of triangles that own its primitives (collect()). Every pair whose
-//      boxes meet is a candidate, with its distance D at the step's start.
+//      boxes meet is a candidate, with its distance D at the step's start; in a step's swept
+//      boxes only where D is at most its reach, h plus the most its particles' moves, at
+//      any scales the bound may give them, can close it (swept_reach): a pair beyond that
+//      stays more than h apart up to the response, and apart after it.
 //      Any pair of primitives that could meet below (every path stays in its box grown by
 //      h / 2) is a candidate. Most steps take their candidates from a list kept between
 //      steps instead, and read only its rows that could matter (see contacts()).
@@ -154,6 +157,7 @@ struct Stage {
     bool self;         // pairs within a body too
     bool swept = true; // boxes over q0 and q - T (the step's pairs), or q0 alone (the list's)
     double keep = std::numeric_limits<double>::infinity();  // pairs nearer than this are kept
+    bool check = true;  // the crossing check at q0 (off: a gather whose step's stage checks)
 };
 
 /// Box of particle i over q0 and q0 + u (u = q - q0 - T), or q0 alone, into lo, hi.
@@ -304,6 +308,7 @@ struct Batch {
     index v[kSize][4];
     double x[12][kSize];
     double bound[kSize];  // a lower bound on each pair's squared distance
+    double reach[kSize];  // a swept gather's: the distance below which each pair is kept
     /// Writes pair u in the next row, and counts it when `keep` (room: n < kSize).
     void push(const index* u, bool keep) {
         for (int k = 0; k < 4; ++k) v[n][k] = u[k];
@@ -395,6 +400,70 @@ inline void vertex_bounds(Batch& b) {
     }
 }
 
+/// Each pair's reach in a swept gather into b.reach: h plus the most its particles' paths
+/// can close its distance, max(max_k |u_k|, max |u_a - u_b|) over its particles k and the
+/// pairs a, b of particles on its two sides (u = q - q0 - T; the first `side` particles
+/// are the first side). The stage moves particle k to q0 + T + a_k u_k + e_k, a_k in [0, 1]
+/// (the bound's scale, of the whole move after the response too) and |e_k| <= h / 2 (the
+/// response's clipped move): the relative move of a and b is at most
+/// |a_a u_a - a_b u_b| + h, and |a_a u_a - a_b u_b| (convex in a_a, a_b) is largest at a
+/// corner of [0, 1]^2: 0, |u_a|, |u_b| or |u_a - u_b|. A pair's gap with the coefficients
+/// of its closest points at q0 (each side's weights sum to 1) then stays at least D minus
+/// that much along the straight path, so a pair whose distance D at q0 is over its reach
+/// stays more than h apart up to the response (which then has nothing to do for it), and
+/// more than 0 after its moves (a crossing needs 0): neither the bound nor the response
+/// needs it (as a pair whose boxes stay farther apart than the margin g >= h).
+inline void swept_reach(const Stage& st, Batch& b, int side) {
+    const double h = st.m.soft_contacts.thickness;
+    for (int p = 0; p < b.n; ++p) {
+        V3 u[4];
+        double most = 0.0;
+        for (int k = 0; k < 4; ++k) {
+            const index i = b.v[p][k];
+            u[k] = load(st.q, i) - load(st.q0, i) - st.T;
+            most = std::max(most, dot(u[k], u[k]));
+        }
+        for (int k = 0; k < side; ++k)
+            for (int l = side; l < 4; ++l) {
+                const V3 r = u[k] - u[l];
+                most = std::max(most, dot(r, r));
+            }
+        b.reach[p] = std::sqrt(most) + h;
+    }
+}
+
+/// A swept gather's batches (collect(), st.swept with no distance to keep below): each
+/// pair whose distance at q0 is at most its reach (swept_reach) into w.pairs, with that
+/// distance. The lower bounds (vertex_bounds, edge_bounds: an edge-edge pair's is its
+/// squared distance where neither segment is degenerate) drop the others before gap()
+/// measures them. Empties the batches.
+inline void flush_swept(const Stage& st, Batch& vt, Batch& ee, index& count) {
+    vt.load(st.q0);
+    ee.load(st.q0);
+    vertex_bounds(vt);
+    edge_bounds(ee);
+    swept_reach(st, vt, 1);
+    swept_reach(st, ee, 2);
+    auto measure = [&](index kind, const index* v, double reach) {
+        double c[4];
+        const V3 d = gap(st.q0, kind, v, c);
+        const double dist = std::sqrt(dot(d, d));
+        if (dist <= reach) add_pair(st.w, count, kind, v, dist);
+    };
+    for (int p = 0; p < vt.n; ++p)  // the bound within its 1e-6 slack of the distance
+        if (vt.bound[p] <= vt.reach[p] * vt.reach[p] * (1.0 + 1e-6))
+            measure(kVertexTriangle, vt.v[p], vt.reach[p]);
+    for (int p = 0; p < ee.n; ++p) {
+        if (ee.bound[p] > 0.0) {  // the distance itself
+            const double dist = std::sqrt(ee.bound[p]);
+            if (dist <= ee.reach[p]) add_pair(st.w, count, kEdgeEdge, ee.v[p], dist);
+        } else {  // a degenerate segment, or touching: gap() says
+            measure(kEdgeEdge, ee.v[p], ee.reach[p]);
+        }
+    }
+    vt.n = ee.n = 0;
+}
+
 /// Whether an owned edge of triangle e (its corners' indices ei) passes through triangle f
 /// (corners fi) at q0, an edge sharing a corner with f left out; writes the first such edge's
 /// first particle and f into w.crossing. When all three corners of e lie strictly on one
@@ -430,13 +499,35 @@ inline bool edge_through(const Stage& st, index e, const index* ei, index f, con
     return false;
 }
 
+/// The box of triangle tri (its three corners) at q0 into lo, hi.
+inline void start_box(const Stage& st, const index* tri, double* lo, double* hi) {
+    for (int k = 0; k < 3; ++k) {
+        const double a = st.q0[3 * tri[0] + k], b = st.q0[3 * tri[1] + k],
+                     c = st.q0[3 * tri[2] + k];
+        lo[k] = std::min(std::min(a, b), c);
+        hi[k] = std::max(std::max(a, b), c);
+    }
+}
+
+/// Whether two triangles' boxes at q0 meet (without growth): an edge of one crossing the
+/// other at q0 lies in both. box (6: lo, hi) is the first's at q0; the second's is its
+/// gathered box box2 (6) when the gather's boxes are over q0 alone, else its corners' (tri2)
+/// box at q0 (a swept gather's boxes also hold the step's paths: many more of them meet).
+inline bool starts_meet(const Stage& st, const double* box, const index* tri2,
+                        const double* box2) {
+    if (!st.swept) return boxes_meet(box, box + 3, box2, box2 + 3, 0.0);
+    double at0[6];
+    start_box(st, tri2, at0, at0 + 3);
+    return boxes_meet(box, box + 3, at0, at0 + 3, 0.0);
+}
+
 /// The candidate pairs into w.pairs; returns their count, or -1 after writing a crossing
 /// found at q0 into w.crossing (particle, triangle). Every pair is found through the pair
 /// of triangles that own its primitives, once: each triangle t looks up the triangles
 /// t2 > t whose grown boxes meet its box (each_triangle), and for each such pair
-///   - the crossing check, when the two boxes meet without growth: the owned edges of each
-///     through the other (an edge crossing a triangle at q0 lies in its owner's box, which
-///     then meets the triangle's);
+///   - the crossing check, when the two triangles' boxes at q0 meet (starts_meet): the owned
+///     edges of each through the other (an edge crossing a triangle at q0 lies in its
+///     owner's box at q0, which then meets the triangle's);
 ///   - vertex-triangle: the corners each owns (w.vertex_owner: the first triangle a
 ///     particle is a corner of) against the other triangle, where the vertex's box meets
 ///     it grown by g (a vertex's box lies in its owner's);
@@ -477,6 +568,7 @@ inline index collect(const Stage& st) {
     Batch vt, ee;
     const bool bounded = far < std::numeric_limits<double>::infinity();  // else all kept
     auto flush = [&]() {
+        if (st.swept && !bounded) return flush_swept(st, vt, ee, count);
         if (bounded) {
             vt.load(st.q0);
             ee.load(st.q0);
@@ -528,11 +620,13 @@ inline index collect(const Stage& st) {
         index corners = 0, corner[3];
         for (int k = 0; k < 3; ++k)
             if ((owns >> k) & 1) corner[corners++] = tri[k];
+        double at0[6];  // swept: t's box at q0, where an edge of it crossing t2 lies
+        if (st.swept) start_box(st, tri, at0, at0 + 3);
         each_triangle(st, box, box + 3, t, t, [&](index t2) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
-            if (boxes_meet(box, box + 3, box2, box2 + 3, 0.0) &&
+            if (st.check && starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
                 (edge_through(st, t, tri, t2, tri2) || edge_through(st, t2, tri2, t, tri))) {
                 crossed = true;
                 return;
@@ -566,29 +660,49 @@ inline index collect(const Stage& st) {
 /// the rows' particles are read and written: w.scale is 1 for every particle before and
 /// after (a scaled particle is stored, then its scale set back to 1; with mark, to -1:
 /// held back, its move in w.held, for hold(), which sets it back to 1).
+/// The passes after the first read only the rows with a particle whose scale changed in
+/// this pass or the last (w.held's slot 3 holds the pass of each particle's last change,
+/// hold() writes it afresh): a row read once leaves its particles' scales within its limit
+/// (or at 0), so it holds until one of them changes, and the rows skipped would change
+/// nothing (the scales come out as when every row is read in every pass). Each particle's
+/// u and |u| are measured once, into w.held's slots 4-7 (hold() writes them afresh).
 inline void bound(const Stage& st, index pairs, bool mark = false) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
     double* s = w.scale;
+    double* changed_in = w.held;  // slot 3 of each particle's row: the pass of its last change
+    auto u = [&](index i) { return load(st.q, i) - load(st.q0, i) - st.T; };
     for (index p = 0; p < pairs; ++p)
         for (int k = 0; k < 4; ++k) {
             const index i = w.pairs->data[kSlots * p + 1 + k];
             s[i] = 1.0;
-            if (mark) w.held[8 * i] = w.held[8 * i + 1] = w.held[8 * i + 2] = 0.0;
+            double* e = w.held + 8 * i;
+            e[3] = -2.0;
+            const V3 ui = u(i);
+            e[4] = ui.x;
+            e[5] = ui.y;
+            e[6] = ui.z;
+            e[7] = std::sqrt(dot(ui, ui));
+            if (mark) e[0] = e[1] = e[2] = 0.0;
         }
-    auto u = [&](index i) { return load(st.q, i) - load(st.q0, i) - st.T; };
     for (index pass = 0; pass <= pairs; ++pass) {
         bool changed = false;
+        const double recent = static_cast<double>(pass - 1);
         for (index p = 0; p < pairs; ++p) {
             const index* row = w.pairs->data + kSlots * p;
             const index* v = row + 1;
+            if (pass > 0 && changed_in[8 * v[0] + 3] < recent &&
+                changed_in[8 * v[1] + 3] < recent && changed_in[8 * v[2] + 3] < recent &&
+                changed_in[8 * v[3] + 3] < recent)
+                continue;  // no scale of its particles changed since it was read
             const double limit = kGamma * pair_distance(row);
             double free_most = 0.0, pinned_most = 0.0;
             V3 du[4];
             double len[4];
             for (int k = 0; k < 4; ++k) {
-                du[k] = u(v[k]);
-                len[k] = std::sqrt(dot(du[k], du[k]));
+                const double* e = w.held + 8 * v[k];
+                du[k] = V3{e[4], e[5], e[6]};
+                len[k] = e[7];
                 if (m.particles.inv_mass[v[k]] == 0.0)
                     pinned_most = std::max(pinned_most, len[k]);
                 else
@@ -613,6 +727,7 @@ inline void bound(const Stage& st, index pairs, bool mark = false) {
                 const double sk = std::min(s[v[k]], cap / len[k]);
                 if (sk < s[v[k]]) {
                     s[v[k]] = sk;
+                    changed_in[8 * v[k] + 3] = static_cast<double>(pass);
                     changed = true;
                 }
             }
@@ -725,7 +840,11 @@ inline void hold(const Stage& st, index pairs, double* qd, double dt) {
     reset();
 }
 
-/// Step 5: pairs closer than h pushed apart to h, approaching ones' velocities turned.
+/// Step 5: pairs closer than h pushed apart to h, approaching ones' velocities turned. A
+/// row whose distance at q0 (slot 5) less the most its particles moved apart from each
+/// other since, max |(q_a - q0_a) - (q_b - q0_b)| over a and b on its two sides, is at
+/// least h is not measured: its gap with its closest points' coefficients at q0 (each
+/// side's weights sum to 1) changed by at most that much, so it is not closer than h.
 inline void respond(const Stage& st, index pairs, double* qd) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
@@ -734,6 +853,19 @@ inline void respond(const Stage& st, index pairs, double* qd) {
     for (index p = 0; p < pairs; ++p) {
         const index* row = w.pairs->data + kSlots * p;
         const index* v = row + 1;
+        const double start = pair_distance(row);
+        if (start >= h) {  // not measured when its particles' moves cannot bring it within h
+            V3 du[4];
+            for (int k = 0; k < 4; ++k) du[k] = load(st.q, v[k]) - load(st.q0, v[k]);
+            const int side = row[0] == kVertexTriangle ? 1 : 2;
+            double most = 0.0;
+            for (int k = 0; k < side; ++k)
+                for (int l = side; l < 4; ++l) {
+                    const V3 r = du[k] - du[l];
+                    most = std::max(most, dot(r, r));
+                }
+            if (start - std::sqrt(most) >= h) continue;
+        }
         double c[4];
         V3 g = gap(st.q, row[0], v, c);
         double d = std::sqrt(dot(g, g));

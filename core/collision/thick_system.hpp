@@ -119,7 +119,8 @@ inline double forecast_motion(const Model& m, const double* v0, double dt) {
 /// motion (v0 (N, 3) over dt) is within half the margin, so that the stage will keep a
 /// list, the list is built at q0 as the stage builds it, and the stage then uses it; when
 /// the step will take its pairs from swept boxes, only the pairs nearer than reach are
-/// gathered, the list left dropped. 0 when none can be near (bodies apart, no
+/// gathered, the list left dropped, without the crossing check (the stage's gather at the
+/// same q0, swept or a list's, checks it). 0 when none can be near (bodies apart, no
 /// self-contact), or when the gather found a crossing at q0 or could not grow its buffers
 /// (the stage after the step finds that again and stops the run).
 inline index near_pairs(const Model& m, double* q0, const double* v0, double dt,
@@ -136,6 +137,7 @@ inline index near_pairs(const Model& m, double* q0, const double* v0, double dt,
     if (forecast_motion(m, v0, dt) > 0.5 * g) {  // the stage will sweep: the near pairs only
         st.g = reach;
         st.keep = reach;
+        st.check = false;
         return std::max<index>(thick::gather(st), 0);
     }
     return std::max<index>(thick::build_list(st, g), 0);
