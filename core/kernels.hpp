@@ -124,6 +124,11 @@ struct KernelTable {
     /// out) into w.pairs' rows; returns their count, -1 for a crossing at q (w.crossing), or
     /// below -1 when a buffer could not grow to them.
     index (*contact_pairs)(const Model&, double* q, double radius, const ContactBuffers& w);
+    /// The thickness contacts' stage (collision/thick.hpp contacts()) on q (N, 3) in place
+    /// from the step's start q0 (N, 3), velocities qd (N, 3), keeping its pair list in w
+    /// between calls (for tests of the list); contacts()'s value.
+    index (*contact_stage)(const Model&, const double* q0, double* q, double* qd,
+                           const ContactBuffers& w);
 };
 
 namespace isa_scalar {
