@@ -102,6 +102,11 @@ index contact_pairs(const Model& m, double* q, double radius, double* q_end,
     return thick::gather(st);
 }
 
+index contact_stage(const Model& m, const double* q0, double* q, double* qd,
+                    const ContactBuffers& w) {
+    return thick::contacts(m, q0, q, qd, w);
+}
+
 void eval_energies(const Model& m, const Control& c, double t, const double* q,
                    const BodyGas& gas, TermEnergies& out) {
     forms::energies(Eval{m, c, t, q, q, gas}, out.total, out.body);
@@ -191,7 +196,7 @@ const KernelTable& kernel_table() {
                                    eval_energies, eval_flows, active_terms, prepare,
                                    prepare_spectral, spectral_product,
                                    linearization_size, check_stencil, stiffness_bounds,
-                                   contact_pairs};
+                                   contact_pairs, contact_stage};
     return table;
 }
 

@@ -127,6 +127,11 @@ struct KernelTable {
     /// boxes grown by `radius` [m], as the stage's by the margin).
     index (*contact_pairs)(const Model&, double* q, double radius, double* q_end,
                            const ContactBuffers& w);
+    /// The thickness contacts' stage (collision/thick.hpp contacts()) on q (N, 3) in place
+    /// from the step's start q0 (N, 3), velocities qd (N, 3), keeping its pair list in w
+    /// between calls (for tests of the list); contacts()'s value.
+    index (*contact_stage)(const Model&, const double* q0, double* q, double* qd,
+                           const ContactBuffers& w);
 };
 
 namespace isa_scalar {

@@ -194,7 +194,7 @@ struct ContactBuffers {
     // (N, 6: lo, hi).
     double* q_build = nullptr;    // (N, 3)
     index* list = nullptr;        // (3,)
-    double* list_skin = nullptr;  // (2,)
+    double* list_skin = nullptr;  // (22,): the skin, the steps served, the drift's fit (thick::Fit)
     double* particle_box = nullptr;  // (N, 6)
     // a gather's scratch: the last look-up that met each triangle (T,), each particle's
     // first triangle (N,; -1: none), and which of each triangle's corners and edges it owns

@@ -73,14 +73,14 @@ public:
             contact.hash_count = hash_count_.data();
             if (m.soft_contacts.thickness > 0.0) {  // collision/thick.hpp
                 const size_t tris = static_cast<size_t>(m.triangles.count);
-                thick_.assign(6 * n3 + 10 * (n3 / 3) + 6 * tris + 2, 0.0);
+                thick_.assign(6 * n3 + 10 * (n3 / 3) + 6 * tris + 22, 0.0);
                 contact.q_pre = thick_.data();
                 contact.scale = contact.q_pre + n3;
                 contact.tri_box = contact.scale + n3 / 3;
                 contact.q_build = contact.tri_box + 6 * tris;
                 contact.particle_box = contact.q_build + n3;
                 contact.list_skin = contact.particle_box + 2 * n3;
-                contact.q_collided = contact.list_skin + 2;
+                contact.q_collided = contact.list_skin + 22;
                 contact.held_inv_mass = contact.q_collided + n3;
                 contact.q_solved = contact.held_inv_mass + n3 / 3;
                 contact.held = contact.q_solved + n3;

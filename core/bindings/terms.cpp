@@ -116,6 +116,65 @@ nb::tuple contact_pairs(const CoreModel& core, ConstF64 q, double radius,
                           nb::ndarray<nb::numpy, double>(distances, {n}, own_d));
 }
 
+/// The thickness contacts' stage run over frames (F, N, 3): step k from frames[k] to
+/// frames[k + 1] (the stage's bound and response act on a copy, the next step starts at
+/// frames[k + 1] whatever they did), its pair list kept between the steps as a solver's
+/// run keeps it (for tests of the list): after each step (counts (F - 1,): the list's
+/// rows, -1 when the step dropped it; rows (sum of counts, 5): each listed pair's kind and
+/// four particles; q_build (F - 1, N, 3): the positions the list was built at; skins
+/// (F - 1,): its skin S [m], its radius 2 h + S).
+nb::tuple contact_list(const CoreModel& core, ConstF64 frames) {
+    const softbody::Model& m = core.model();
+    if (m.soft_contacts.mode != SoftContactMode::SURFACE || !(m.soft_contacts.thickness > 0.0))
+        fail("contact_list needs surface soft contacts with a thickness");
+    if (frames.ndim() != 3 || frames.shape(0) < 2 ||
+        static_cast<Index>(frames.shape(1)) != m.particles.count || frames.shape(2) != 3)
+        fail("frames must have shape (F >= 2, " + std::to_string(m.particles.count) + ", 3)");
+    const size_t n3 = static_cast<size_t>(3 * m.particles.count);
+    const size_t steps = frames.shape(0) - 1;
+    Buffers b(m, 0, checked_capacity(m, std::nullopt));
+    b.allow_growth();
+    std::vector<double> q(n3), qd(n3, 0.0);
+    std::vector<Index> counts(steps), rows;
+    std::vector<double> built(steps * n3), skins(steps);
+    for (size_t k = 0; k < steps; ++k) {
+        const double* q0 = frames.data() + k * n3;
+        std::copy(q0 + n3, q0 + 2 * n3, q.begin());
+        std::fill(qd.begin(), qd.end(), 0.0);
+        Index status = 0;
+        {
+            nb::gil_scoped_release release;
+            status = softbody::kernels().contact_stage(m, q0, q.data(), qd.data(), b.contact);
+        }
+        if (status == -1)
+            fail("step " + std::to_string(k) + ": an edge at particle " +
+                 std::to_string(b.contact.crossing[0]) + " passes through triangle " +
+                 std::to_string(b.contact.crossing[1]));
+        if (status != 0) fail("step " + std::to_string(k) + ": the pairs do not fit their buffers");
+        counts[k] = b.contact.list[0];
+        const Index* data = b.contact.pairs->data;
+        for (Index p = 0; p < counts[k]; ++p)
+            for (Index j = 0; j < 5; ++j)
+                rows.push_back(data[softbody::ContactBuffers::kPairSlots * p + j]);
+        std::copy(b.contact.q_build, b.contact.q_build + n3, built.begin() + k * n3);
+        skins[k] = b.contact.list_skin[0];
+    }
+    auto* c = new std::vector<Index>(std::move(counts));
+    auto* r = new std::vector<Index>(std::move(rows));
+    auto* x = new std::vector<double>(std::move(built));
+    auto* s = new std::vector<double>(std::move(skins));
+    nb::capsule own_c(c, [](void* p) noexcept { delete static_cast<std::vector<Index>*>(p); });
+    nb::capsule own_r(r, [](void* p) noexcept { delete static_cast<std::vector<Index>*>(p); });
+    nb::capsule own_x(x, [](void* p) noexcept { delete static_cast<std::vector<double>*>(p); });
+    nb::capsule own_s(s, [](void* p) noexcept { delete static_cast<std::vector<double>*>(p); });
+    const size_t shape_r[2] = {r->size() / 5, 5};
+    const size_t shape_x[3] = {steps, static_cast<size_t>(m.particles.count), 3};
+    return nb::make_tuple(nb::ndarray<nb::numpy, Index>(c->data(), {steps}, own_c),
+                          nb::ndarray<nb::numpy, Index>(r->data(), 2, shape_r, own_r),
+                          nb::ndarray<nb::numpy, double>(x->data(), 3, shape_x, own_x),
+                          nb::ndarray<nb::numpy, double>(s->data(), {steps}, own_s));
+}
+
 /// The registry position of the term called `name`.
 int term_position(const std::string& name) {
     const softbody::KernelTable& k = softbody::kernels();
@@ -503,6 +562,11 @@ void bind_terms(nb::module_& mod) {
             nb::arg("qd").noconvert(), nb::arg("hash_capacity") = nb::none(),
             "One pass of the model's soft-soft contacts on q, qd (N, 3) in place; returns "
             "the hash entries the surface contacts needed when they did not fit, else 0.");
+    mod.def("contact_list", &contact_list, nb::arg("model"), nb::arg("frames").noconvert(),
+            "The thickness contacts' stage run over frames (F, N, 3), its pair list kept "
+            "between steps: (counts (F - 1,): the list's rows after each step, -1 none; rows "
+            "(sum of counts, 5): kind and four particles; q_build (F - 1, N, 3); skins "
+            "(F - 1,) [m]).");
     mod.def("contact_pairs", &contact_pairs, nb::arg("model"), nb::arg("q").noconvert(),
             nb::arg("radius"), nb::arg("q_end").noconvert() = nb::none(),
             "The thickness contacts' candidate pairs nearer than radius [m] at q (N, 3), "

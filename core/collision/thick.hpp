@@ -158,6 +158,10 @@ struct Stage {
     bool swept = true; // boxes over q0 and q - T (the step's pairs), or q0 alone (the list's)
     double keep = std::numeric_limits<double>::infinity();  // pairs nearer than this are kept
     bool check = true;  // the crossing check at q0 (off: a gather whose step's stage checks)
+    // a list's patch (patch_list): the particles gathered again (moved[8 i] != 0; null: a
+    // whole gather), and the rows kept before the new ones
+    const double* moved = nullptr;
+    index first = 0;
 };
 
 /// Box of particle i over q0 and q0 + u (u = q - q0 - T), or q0 alone, into lo, hi.
@@ -219,6 +223,13 @@ inline index build_hash(const Stage& st) {
     }
     return soft::hash_triangles(m, w, [&](index t, index* r) {
         const double* box = w.tri_box + 6 * t;
+        const index* tri = m.triangles.indices + 3 * t;
+        if (st.moved != nullptr && st.moved[8 * tri[0]] == 0.0 && st.moved[8 * tri[1]] == 0.0 &&
+            st.moved[8 * tri[2]] == 0.0) {  // a patch hashes the triangles that moved alone
+            r[0] = r[1] = r[2] = 0;
+            r[3] = r[4] = r[5] = -1;
+            return;
+        }
         for (int k = 0; k < 3; ++k) {
             r[k] = soft::cell_of((box[k] - st.g) * st.inv);
             r[3 + k] = soft::cell_of((box[3 + k] + st.g) * st.inv);
@@ -544,16 +555,26 @@ inline index collect(const Stage& st) {
     for (index i = 0; i < m.particles.count; ++i) owner[i] = -1;
     for (index t = tris; t-- > 0;)  // the first triangle of each corner is the last written
         for (int k = 0; k < 3; ++k) owner[m.triangles.indices[3 * t + k]] = t;
+    // a patch: a pair is gathered when one of its particles moved (bit 6 of tri_owns: a
+    // triangle with a moved corner)
+    const double* moved = st.moved;
+    const bool patch = moved != nullptr;
+    auto involved = [&](const index* v) {
+        return !patch || ((moved[8 * v[0]] != 0.0) | (moved[8 * v[1]] != 0.0) |
+                          (moved[8 * v[2]] != 0.0) | (moved[8 * v[3]] != 0.0));
+    };
     for (index t = 0; t < tris; ++t) {
         w.tri_mark[t] = -1;
         index owns = 0;
         for (int k = 0; k < 3; ++k) {
-            owns |= index(owner[m.triangles.indices[3 * t + k]] == t) << k;
+            const index i = m.triangles.indices[3 * t + k];
+            owns |= index(owner[i] == t) << k;
             owns |= index(m.triangles.edge_owner[3 * t + k] != 0) << (3 + k);
+            if (patch) owns |= index(moved[8 * i] != 0.0) << 6;
         }
         w.tri_owns[t] = owns;
     }
-    index count = 0;
+    index count = st.first;
     bool crossed = false;
     // pairs whose squared distance is at least keep^2 (1 + 1e-6) are far: their bound (at
     // most the squared distance, within round-off far below that margin) at or above it
@@ -590,7 +611,7 @@ inline index collect(const Stage& st) {
         const bool apart = (tri2[0] != i) & (tri2[1] != i) & (tri2[2] != i);  // else adjacent
         if (vt.n == Batch::kSize) flush();
         const index v[4] = {i, tri2[0], tri2[1], tri2[2]};
-        vt.push(v, apart & boxes_meet(pb, pb + 3, box2, box2 + 3, st.g));
+        vt.push(v, apart & boxes_meet(pb, pb + 3, box2, box2 + 3, st.g) & involved(v));
     };
     // particles that are no triangle's corner (none in a mesh body): their own look-up
     for (index b = 0; b < m.bodies.count; ++b)
@@ -622,11 +643,14 @@ inline index collect(const Stage& st) {
             if ((owns >> k) & 1) corner[corners++] = tri[k];
         double at0[6];  // swept: t's box at q0, where an edge of it crossing t2 lies
         if (st.swept) start_box(st, tri, at0, at0 + 3);
-        each_triangle(st, box, box + 3, t, t, [&](index t2) {
+        // a patch's hash holds the moved triangles alone: a moved t meets those after it,
+        // any other t all of them, so each pair of triangles with a moved one meets once
+        const index after = patch && !((w.tri_owns[t] >> 6) & 1) ? -1 : t;
+        each_triangle(st, box, box + 3, after, t, [&](index t2) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
-            if (st.check && starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
+            if (!patch && st.check && starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
                 (edge_through(st, t, tri, t2, tri2) || edge_through(st, t2, tri2, t, tri))) {
                 crossed = true;
                 return;
@@ -645,7 +669,8 @@ inline index collect(const Stage& st) {
                     const bool apart = (c != a) & (c != b) & (d != a) & (d != b);  // else adjacent
                     if (ee.n == Batch::kSize) flush();
                     const index v[4] = {a, b, c, d};
-                    ee.push(v, apart & boxes_meet(elo[k], ehi[k], clo, chi, st.g));
+                    const bool meet = boxes_meet(elo[k], ehi[k], clo, chi, st.g);
+                    ee.push(v, apart & meet & involved(v));
                 }
             }
         });
@@ -1017,6 +1042,10 @@ struct Motion {
     double sigma = std::numeric_limits<double>::infinity();
     double stretch = 1.0;  // a lower bound on sigma_min(I + A), the affine part's
     double residual = std::numeric_limits<double>::infinity();  // max_i |e_i| [m]
+    // the fit the residual was measured with, e_i = q0_i - qb_i - C - A (qb_i - c) (A = 0:
+    // the translation's; set where motion() measured the residual itself)
+    V3 C{0.0, 0.0, 0.0}, c{0.0, 0.0, 0.0};
+    double A[9] = {};
     /// The smallest build distance a pair may have and still come within x at q0 (x >= 0):
     /// (x + 2 residual) / stretch.
     double reach(double x) const {
@@ -1124,6 +1153,7 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
     Motion out;
     if (mass > 0.0 && translate) out.T = (1.0 / mass) * sum_u;
     const V3 C = mass > 0.0 ? (1.0 / mass) * sum_d : V3{0.0, 0.0, 0.0};
+    out.C = C;
     if (!(hi_u[0] >= lo_u[0])) {  // no particle in a body
         out.sigma = out.residual = 0.0;
         return out;
@@ -1190,12 +1220,87 @@ inline Motion motion(const Model& m, const double* q0, const double* q, const do
         out.sigma = affine;
         out.stretch = stretch;
         out.residual = residual;
+        out.c = c;
+        for (int k = 0; k < 9; ++k) out.A[k] = A[k];
     }
     return out;
 }
 
 constexpr double kServe = 32.0;  // steps a new list's skin is sized to serve
 constexpr double kMostSkin = 2.0;  // a list's skin at most, in margins g
+
+/// The list's drift fit kept between steps, in w.list_skin[2..21]: whether it is set, A
+/// (3x3), its centre c, C (the mean of q0 - qb - A (qb - c) at the last step, moved on by
+/// that step's T: the next step's estimate), the last step's T, and least_stretch(A).
+struct Fit {
+    double* x;
+    explicit Fit(const ContactBuffers& w) : x(w.list_skin + 2) {}
+    bool set() const { return x[0] != 0.0; }
+    const double* A() const { return x + 1; }
+    V3 c() const { return V3{x[10], x[11], x[12]}; }
+    V3 C() const { return V3{x[13], x[14], x[15]}; }
+    V3 T() const { return V3{x[16], x[17], x[18]}; }
+    double stretch() const { return x[19]; }
+    /// The fit mo was measured with (its C the estimate for the next step, after T).
+    void keep(const Motion& mo) {
+        x[0] = 1.0;
+        for (int k = 0; k < 9; ++k) x[1 + k] = mo.A[k];
+        for (int k = 0; k < 3; ++k) {
+            x[10 + k] = (&mo.c.x)[k];
+            x[13 + k] = (&mo.C.x)[k] + (&mo.T.x)[k];
+            x[16 + k] = (&mo.T.x)[k];
+        }
+        x[19] = mo.stretch;
+    }
+    /// A new list's: its drift 0 (A = 0, C = 0).
+    void reset() {
+        for (int k = 0; k < 20; ++k) x[k] = 0.0;
+        x[0] = 1.0;
+        x[19] = 1.0;
+    }
+};
+
+/// The bodies' motion in one pass with the kept fit (Fit: any C, A give a valid bound, the
+/// residual measured with them): T the mean displacement of the free particles, mu <=
+/// max_i |u_i - T_last| + |T - T_last| (u_i = q_i - q0_i), the residual max_i |q0_i - qb_i -
+/// C - A (qb_i - c)| with C the fit's estimate, and sigma from the fit's stretch; C out is
+/// the mean the pass found (for the next step's estimate). With translate false, T = 0.
+inline Motion kept_motion(const Model& m, const double* q0, const double* q, const double* qb,
+                          const Fit& fit, bool translate, double radius) {
+    const double* A = fit.A();
+    const V3 c = fit.c(), C = fit.C(), T_last = translate ? fit.T() : V3{0.0, 0.0, 0.0};
+    double mass = 0.0, mu = 0.0, resid = 0.0;
+    V3 sum_u{0.0, 0.0, 0.0}, sum_e{0.0, 0.0, 0.0};
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            const V3 x0 = load(q0, i), xb = load(qb, i);
+            const V3 du = load(q, i) - x0;
+            const V3 r = xb - c;
+            const V3 e{x0.x - xb.x - (A[0] * r.x + A[1] * r.y + A[2] * r.z),
+                       x0.y - xb.y - (A[3] * r.x + A[4] * r.y + A[5] * r.z),
+                       x0.z - xb.z - (A[6] * r.x + A[7] * r.y + A[8] * r.z)};
+            const V3 u = du - T_last, f = e - C;
+            mu = std::max(mu, dot(u, u));
+            resid = std::max(resid, dot(f, f));
+            const double mi = m.particles.inv_mass[i] == 0.0 ? 0.0 : m.particles.mass[i];
+            mass += mi;
+            sum_u = sum_u + mi * du;
+            sum_e = sum_e + mi * e;
+        }
+    Motion out;
+    if (mass > 0.0 && translate) out.T = (1.0 / mass) * sum_u;
+    const V3 dT = out.T - T_last;
+    out.mu = std::sqrt(mu) + std::sqrt(dot(dT, dT));
+    out.stretch = fit.stretch();
+    out.residual = std::sqrt(resid) * (1.0 + 1e-12);
+    out.sigma = out.residual + 0.5 * (1.0 - out.stretch) * radius;
+    for (int k = 0; k < 9; ++k) out.A[k] = A[k];
+    out.c = c;
+    out.C = C;
+    if (mass > 0.0) out.C = (1.0 / mass) * sum_e;  // for keep(): the next step's estimate
+    return out;
+}
 
 /// The list at st.q0 with skin s [m]: the pairs nearer than 2 h + s (gather, with its
 /// crossing check), their rows ordered by band of build distance, the build positions in
@@ -1213,10 +1318,105 @@ inline index build_list(const Stage& st, double s) {
     const index pairs = gather(list);
     if (pairs < 0) return pairs;
     for (index k = 0; k < 3 * st.m.particles.count; ++k) w.q_build[k] = st.q0[k];
+    Fit(w).reset();
     sort_bands(w.pairs->data, pairs, kBands / list.g);
     w.list[0] = pairs;
     w.list_skin[0] = s;
     w.list_skin[1] = 1.0;
+    return pairs;
+}
+
+constexpr double kPatchKeep = 0.5;   // a patch leaves residuals up to this share of the room
+constexpr double kPatchRoom = 0.25;  // the least room (of S / 2) a patch is tried with
+constexpr double kPatchMost = 0.25;  // the most particles (a share of all) a patch moves
+
+/// The list patched where it drifted (contacts(), "a patch"): the particles whose residual
+/// e_i (mo's fit) exceeds kPatchKeep of the room the step leaves, S / 2 - mu -
+/// (1 - stretch) R / 2, are moved in w.q_build to where the fit maps to their q0, their
+/// rows dropped and their pairs gathered again at the new w.q_build (without the crossing
+/// check), the rows ordered again; drift: the list's drift for the step, after the patch.
+/// whole: true (nothing changed but w.q_build) when a patch would not serve (too little
+/// room, too many particles, a singular fit): build the list whole. Returns the list's
+/// rows, or below -1 when a buffer could not grow to them (the list dropped, as gather()).
+inline index patch_list(const Stage& st, const Motion& mo, Motion& drift, bool& whole) {
+    const Model& m = st.m;
+    const ContactBuffers& w = st.w;
+    whole = true;
+    const double S = w.list_skin[0], R = 2.0 * m.soft_contacts.thickness + S;
+    const double bend = 0.5 * (1.0 - mo.stretch) * R;
+    const double room = 0.5 * S - mo.mu - bend;  // the residual the list allows this step
+    if (!(room > kPatchRoom * 0.5 * S) || !(mo.stretch > 0.0)) return 0;
+    const double keep = kPatchKeep * room;
+    // (I + A)^-1 by its adjugate
+    const double* A = mo.A;
+    const double F[9] = {1.0 + A[0], A[1], A[2], A[3], 1.0 + A[4], A[5], A[6], A[7], 1.0 + A[8]};
+    const double adj[9] = {F[4] * F[8] - F[5] * F[7], F[2] * F[7] - F[1] * F[8],
+                           F[1] * F[5] - F[2] * F[4], F[5] * F[6] - F[3] * F[8],
+                           F[0] * F[8] - F[2] * F[6], F[2] * F[3] - F[0] * F[5],
+                           F[3] * F[7] - F[4] * F[6], F[1] * F[6] - F[0] * F[7],
+                           F[0] * F[4] - F[1] * F[3]};
+    const double det = F[0] * adj[0] + F[1] * adj[3] + F[2] * adj[6];
+    if (!(det > 0.0) || !std::isfinite(det)) return 0;
+    auto map = [&](const double* M, V3 r) {
+        return V3{M[0] * r.x + M[1] * r.y + M[2] * r.z, M[3] * r.x + M[4] * r.y + M[5] * r.z,
+                  M[6] * r.x + M[7] * r.y + M[8] * r.z};
+    };
+    double* moved = w.held;  // its first slot a flag per particle (hold()'s scratch till then)
+    for (index i = 0; i < m.particles.count; ++i) moved[8 * i] = 0.0;
+    index count = 0, particles = 0;
+    double most = 0.0;
+    bool lone = false;  // a moved particle that is no triangle's corner (the last gather's)
+    for (index b = 0; b < m.bodies.count; ++b)
+        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
+             ++i) {
+            ++particles;
+            const V3 x0 = load(st.q0, i), xb = load(w.q_build, i);
+            const V3 e = x0 - xb - mo.C - map(A, xb - mo.c);
+            if (dot(e, e) <= keep * keep) {
+                most = std::max(most, dot(e, e));
+                continue;
+            }
+            // q0_i - C - c = (I + A) (x - c): x, the build position the fit maps to q0_i
+            const V3 x = mo.c + (1.0 / det) * map(adj, x0 - mo.C - mo.c);
+            const V3 e2 = x0 - x - mo.C - map(A, x - mo.c);
+            most = std::max(most, dot(e2, e2));
+            store(w.q_build, i, x);
+            moved[8 * i] = 1.0;
+            ++count;
+            lone |= w.vertex_owner[i] < 0;
+        }
+    if (count == 0) return 0;  // the room left no particle to move (round-off): build whole
+    const double residual = std::sqrt(most) * (1.0 + 1e-12);
+    if (lone || static_cast<double>(count) > kPatchMost * static_cast<double>(particles) ||
+        residual + bend + mo.mu > 0.5 * S)
+        return 0;  // w.q_build is built again whole
+    whole = false;
+    // the rows between particles that stayed, in their order
+    index* rows = w.pairs->data;
+    index kept = 0;
+    for (index p = 0; p < w.list[0]; ++p) {
+        const index* row = rows + kSlots * p;
+        if (moved[8 * row[1]] != 0.0 || moved[8 * row[2]] != 0.0 || moved[8 * row[3]] != 0.0 ||
+            moved[8 * row[4]] != 0.0)
+            continue;
+        if (kept != p) std::memmove(rows + kSlots * kept, row, sizeof(index) * kSlots);
+        ++kept;
+    }
+    Stage part = st;
+    part.q0 = w.q_build;
+    part.swept = false;
+    part.g = R;
+    part.keep = R;
+    part.moved = moved;
+    part.first = kept;
+    w.list[0] = -1;
+    const index pairs = gather(part);
+    if (pairs < 0) return pairs;  // no room (a patch makes no crossing check)
+    sort_bands(w.pairs->data, pairs, kBands / R);
+    w.list[0] = pairs;
+    drift = mo;
+    drift.residual = residual;
+    drift.sigma = residual + bend;
     return pairs;
 }
 
@@ -1264,6 +1464,38 @@ inline index build_list(const Stage& st, double s) {
 /// too: on the implicit ball drop the step's affine residual stays 1-6 cm, over
 /// kMostSkin g / 2, so it would not spare those steps their sweep; and with rigid
 /// colliders the stage runs with T = 0, its bound holding particles toward q0).
+///
+/// The kept fit: a step first bounds the drift with the fit (C, A, c, stretch) kept from
+/// the step before (kept_motion, one pass over the particles: any C and A serve, the
+/// residual is measured with them; mu <= max |u_i - T_last| + |T - T_last|), and runs
+/// motion()'s passes, which fit afresh, only where that bound fails.
+///
+/// Patches (where the drift bound fails, before a whole build): nothing above needs the
+/// build positions q_b to be positions the bodies had at one time; it needs only that the
+/// list holds every pair nearer than R at q_b, each particle's own q_b,i. A patch moves the
+/// particles whose residual |e_i| (the step's fit) is over kPatchKeep of the room
+/// rho = S / 2 - mu - (1 - stretch) R / 2 to x_i = c + (I + A)^-1 (q0_i - C - c), the point
+/// the fit maps to q0_i (residual 0 to round-off, measured); the others keep q_b,i and a
+/// residual <= kPatchKeep rho. The list then holds every pair nearer than R at the new q_b
+/// again: a pair without a moved particle keeps its distance at q_b, so its row (and its
+/// build distance) stays or it stays off; a pair with a moved particle has a primitive
+/// whose owner triangle has a moved corner, and all such pairs are gathered again at the
+/// new q_b with the list's own radius R (a hash of the triangles with a moved corner, grown
+/// by R, looked up by every triangle). The radius cannot be less: a pair of a moved
+/// particle and a kept one is measured between their build positions, x_i and the kept
+/// q_b,j, and the drift bound covers both from there (stretch D_b - |e_i| - |e_j|, each side
+/// at most the residual); a pair left off at D_b < R would start the step nearer than the
+/// bound assumes. The step goes on with the largest residual after the patch (<=
+/// kPatchKeep rho, so sigma + mu <= S / 2); later steps fit A over the mixed build
+/// positions as over any others, and the fit's stretch bounds them alike. A patch makes no
+/// crossing check (its gather runs at q_b, not at positions the bodies had; each step's
+/// bound keeps them from crossing, the whole builds check). It is refused, and the list
+/// built whole, when rho is under kPatchRoom of S / 2 (the fit's stretch and the step's
+/// motion take the skin), when more than kPatchMost of the particles would move (a patch
+/// looks up every triangle, and each triangle with a moved corner meets all its
+/// neighbours, not half: on the ball drop a patch that moves a fifth of the particles
+/// costs about a quarter of a whole build), or when a moved particle is no triangle's
+/// corner.
 /// dt [s]: the step, for the velocities of the particles the bound held back (hold; 0: a
 /// pass from rest, none changed).
 inline index contacts(const Model& m, const double* q0, double* q, double* qd,
@@ -1275,8 +1507,17 @@ inline index contacts(const Model& m, const double* q0, double* q, double* qd,
     const bool listed = w.list[0] >= 0;
     const double h = m.soft_contacts.thickness;
     double* skin = w.list_skin;  // the list's skin S, and the steps it has served
-    const Motion mo = motion(m, q0, q, listed ? w.q_build : nullptr, false, translate,
-                             listed ? 2.0 * h + skin[0] : 0.0);
+    // with a list, the kept fit's one pass first; where its bound fails, motion()'s own
+    // (its fit then kept)
+    Fit fit(w);
+    const double list_radius = listed ? 2.0 * h + skin[0] : 0.0;
+    Motion mo;
+    bool quick = false;
+    if (listed && fit.set()) {
+        mo = kept_motion(m, q0, q, w.q_build, fit, translate, list_radius);
+        quick = mo.sigma + mo.mu <= 0.5 * skin[0];
+    }
+    if (!quick) mo = motion(m, q0, q, listed ? w.q_build : nullptr, false, translate, list_radius);
     st.T = mo.T;
     if (!st.self && !any_bodies_near(st)) return 0;
     // 2-3. the pairs: the list (built again when it no longer covers the step), or the
@@ -1287,9 +1528,21 @@ inline index contacts(const Model& m, const double* q0, double* q, double* qd,
     double radius = 0.0;
     Motion drift;  // the list's drift as the rows read see it: none for a new list
     drift.residual = 0.0;
+    bool whole = true;  // the list to be built whole (or the step's pairs swept)
     if (listed && mo.sigma + mo.mu <= 0.5 * skin[0]) {
         drift = mo;
         skin[1] += 1.0;
+        whole = false;
+        fit.keep(mo);
+    } else if (listed && 2.0 * mo.mu <= most_skin) {
+        pairs = patch_list(st, mo, drift, whole);
+        if (pairs < -1) return -1 - pairs;
+        if (!whole) {
+            skin[1] += 1.0;
+            fit.keep(mo);  // the moved particles' residual 0 with it, the others' kept
+        }
+    }
+    if (!whole) {
     } else if (2.0 * mo.mu <= most_skin) {
         // a new list at q0, its skin from the motion per step the last one saw
         double rate = mo.mu;
