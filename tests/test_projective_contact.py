@@ -40,10 +40,9 @@ def test_resting_contact_is_carried_by_the_iterations(
     (5e-20 m; 1.1e-3 m before), the energy is 4.2e-3 J (6.8e-3 J before; 1.8e-3 J before
     the stage gave the particles it holds back their bounded step's velocity and bounded
     its list's drift by an affine fit: the first landing's rebound, 8 cm against 3 cm,
-    still decays over 2-4 s) and the mean
-    force is the weight within 0.01 % (1.2 % low before); the spread there, 0.9 N (1.2 N
-    before), is the ball bobbing on the trampoline at 3 Hz, which two iterations at small
-    steps damp little. That bobbing sets the mean force at 1/300 s too: the mean of
+    still decays over 2-4 s); the spread of the force there, 0.9 N (1.2 N before), is the
+    ball bobbing on the trampoline at 3 Hz, which two iterations at small steps damp
+    little. That bobbing sets the mean force at 1/300 s too: the mean of
     M (dv/dt + g) over the window is the weight plus M (v_end - v_start) / 2 s, the
     bobbing's velocity at the window's ends, measured 0.65-1.04 % off the weight at steps
     1/250-1/350 s (0.97 % at 1/300 s; 1.14 % once the list is patched where it drifts,
