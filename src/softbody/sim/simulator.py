@@ -553,9 +553,10 @@ class Simulator:
                     else f"the edge from particle {particle} to particle {x}"
                 )
                 msg = (
-                    f"body {body} crossed mesh collider {collider} {where}: {what} still passes "
-                    "through it after its edge contacts (pushed to their limit, or every "
-                    "particle there pinned; the state is left at the step's start)"
+                    f"body {body} crossed mesh collider {collider} {where}: {what} passes "
+                    "through it, or passed through it within the step, and its edge contacts "
+                    "could not hold it back (pushed to their limit, or every particle there "
+                    "pinned; the state is left at the step's start)"
                 )
             else:
                 msg = (
