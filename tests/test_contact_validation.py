@@ -234,8 +234,11 @@ def test_a_ball_falling_onto_a_sheet_on_the_ground_stays_a_thickness_above_it():
 FAR_COLLIDERS = {
     "plane": sb.ColliderPlane(point=(0.0, -1.0, 0.0)),
     "sphere": sb.ColliderSphere(center=(0.0, -1.0, 0.0), radius=0.5),
-    "box": sb.ColliderBox(center=(0.9, 0.0, 0.0), half_extents=(0.4, 0.4, 0.4),
-                          rotation=rotation_about((0.0, 1.0, 0.0), 0.3)),  # fmt: skip
+    "box": sb.ColliderBox(
+        center=(0.9, 0.0, 0.0),
+        half_extents=(0.4, 0.4, 0.4),
+        rotation=rotation_about((0.0, 1.0, 0.0), 0.3),
+    ),
     "container": sb.ColliderBox(half_extents=(1.0, 1.0, 1.0), container=True),
     "mesh": sb.ColliderMesh(sb.box((0.4, 0.4, 0.4)), center=(0.0, 0.0, -0.9)),
 }
@@ -269,11 +272,17 @@ def test_a_ball_with_self_contact_falls_as_without_the_ground_until_near_it():
     ends bit-equal to the same run without the ground (the stage takes the common
     translation T there, as without colliders); once the ball reaches it, the ground holds
     every vertex at y >= 0 and the runs part."""
+
     def ball(ground):
         builder = sb.ModelBuilder()
         builder.set_soft_contact("surface", thickness=0.01, self_contact=True)
-        builder.add_soft_body(sb.icosphere(2, radius=0.5, center=(0.0, 1.5, 0.0)), mass=1.0,
-                              stiffness=500.0, damping=0.5, gas=sb.Gas.isothermal(150.0))  # fmt: skip
+        builder.add_soft_body(
+            sb.icosphere(2, radius=0.5, center=(0.0, 1.5, 0.0)),
+            mass=1.0,
+            stiffness=500.0,
+            damping=0.5,
+            gas=sb.Gas.isothermal(150.0),
+        )
         if ground:
             builder.add_collider(sb.ColliderPlane(restitution=0.5, friction=0.1))
         return builder.finalize()

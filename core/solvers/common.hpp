@@ -227,22 +227,26 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
                                   colliders::Seen* seen) {
     const index n = m.particles.count, n3 = 3 * m.particles.count;
     copy(s.q, w.q_solved, n3);
-    // the stage translated where no collider can be involved: every particle over q_start,
-    // q_start + T and q, grown by h / 2, lies apart from every collider
+    // the stage translated where no collider can be involved: the box of every particle's
+    // q_start, q_start + T and q, grown by h / 2, apart from every collider. One pass: the
+    // box of the start positions and the box of the displacements d_i = q_i - q_start_i
+    // with 0; their sum (Minkowski) holds q_start_i + 0, q_start_i + T (T, a mean of the
+    // bodies' d_i, lies in their box) and q_i = q_start_i + d_i.
     const double inf = std::numeric_limits<double>::infinity();
-    const V3 T = thick::motion(m, q_start, s.q, nullptr, false, true).T;
     double lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};
-    for (index i = 0; i < n; ++i) {
-        const V3 a = load(q_start, i), b = load(s.q, i), t = a + T;
+    double lo_d[3] = {0.0, 0.0, 0.0}, hi_d[3] = {0.0, 0.0, 0.0};
+    for (index k = 0; k < n3; k += 3)
         for (int d = 0; d < 3; ++d) {
-            lo[d] = std::min(lo[d], std::min((&a.x)[d], std::min((&b.x)[d], (&t.x)[d])));
-            hi[d] = std::max(hi[d], std::max((&a.x)[d], std::max((&b.x)[d], (&t.x)[d])));
+            const double a = q_start[k + d], u = s.q[k + d] - a;
+            lo[d] = std::min(lo[d], a);
+            hi[d] = std::max(hi[d], a);
+            lo_d[d] = std::min(lo_d[d], u);
+            hi_d[d] = std::max(hi_d[d], u);
         }
-    }
     const double grow = 0.5 * m.soft_contacts.thickness;
     for (int d = 0; d < 3; ++d) {
-        lo[d] -= grow;
-        hi[d] += grow;
+        lo[d] += lo_d[d] - grow;
+        hi[d] += hi_d[d] + grow;
     }
     const bool far = n > 0 && colliders_far(m, s.collider_q, s.collider_rot, w.collider_v,
                                             w.collider_w, lo, hi);
