@@ -251,8 +251,9 @@ def test_a_collider_far_from_the_sheets_leaves_their_steps_bit_equal(kind):
     below, a sphere, a turned solid box, a mesh box beside them, a container 1 m around):
     every one of 20 steps ends bit-equal, positions and velocities, to the run without
     it (loop::thick_with_colliders runs the stage with the common translation T where the
-    box of the step's paths, grown by h / 2, is apart from every collider: then the
-    colliders catch nothing and the step is the no-collider path). Without T the stage's
+    box of the step's paths, grown by h / 2, is apart from every collider and a stage
+    without T would sweep, 30 mm a step here: then the colliders catch nothing and the step
+    is the no-collider path). Without T the stage's
     bound holds the sheets back toward their start instead of toward the start plus T:
     different positions (measured: from the second step)."""
     free = sheet_onto_sheet(False)
@@ -270,8 +271,10 @@ def test_a_ball_with_self_contact_falls_as_without_the_ground_until_near_it():
     """A 162-vertex gas ball with self-contact (h 1 cm) dropped 1 m onto a ground plane, by
     implicit Euler at 1/60 s: each step whose paths (grown by h / 2) stay above the ground
     ends bit-equal to the same run without the ground (the stage takes the common
-    translation T there, as without colliders); once the ball reaches it, the ground holds
-    every vertex at y >= 0 and the runs part."""
+    translation T there, as without colliders, where the step's motion would make it sweep
+    without T; in the first steps, of small motion, it keeps a list either way, and its
+    bound holds nothing back); once the ball reaches it, the ground holds every vertex at
+    y >= 0 and the runs part."""
 
     def ball(ground):
         builder = sb.ModelBuilder()

@@ -1464,8 +1464,8 @@ inline index patch_list(const Stage& st, const Motion& mo, Motion& drift, bool& 
 /// dropped). The step's own motion is bounded after T alone (not fitted by an affine map
 /// too: on the implicit ball drop the step's affine residual stays 1-6 cm, over
 /// kMostSkin g / 2, so it would not spare those steps their sweep; and with rigid
-/// colliders near the bodies the stage runs with T = 0, its bound holding particles toward
-/// q0).
+/// colliders near the bodies, or in a step it could keep its list without T, the stage
+/// runs with T = 0, its bound holding particles toward q0: loop::thick_with_colliders).
 ///
 /// The kept fit: a step first bounds the drift with the fit (C, A, c, stretch) kept from
 /// the step before (kept_motion, one pass over the particles: any C and A serve, the
