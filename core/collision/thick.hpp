@@ -1421,8 +1421,9 @@ inline index patch_list(const Stage& st, const Motion& mo, Motion& drift, bool& 
 }
 
 /// The stage (steps 1-5) on q, qd (N, 3) in place, from the step's start q0 (N, 3); with
-/// translate false, T = 0 (with rigid colliders: the bound then holds particles back toward
-/// where they started, outside the colliders, not toward q0 + T, which may be inside one).
+/// translate false, T = 0 (with rigid colliders near: the bound then holds particles back
+/// toward where they started, outside the colliders, not toward q0 + T, which may be inside
+/// one; loop::thick_with_colliders).
 /// Returns
 /// 0; the entries the hash, or the pairs the list, needed when its buffer could not grow to
 /// them (nothing resolved; w.list[2] says which: 0 the hash, 1 the list); or -1 for a
@@ -1463,7 +1464,8 @@ inline index patch_list(const Stage& st, const Motion& mo, Motion& drift, bool& 
 /// dropped). The step's own motion is bounded after T alone (not fitted by an affine map
 /// too: on the implicit ball drop the step's affine residual stays 1-6 cm, over
 /// kMostSkin g / 2, so it would not spare those steps their sweep; and with rigid
-/// colliders the stage runs with T = 0, its bound holding particles toward q0).
+/// colliders near the bodies, or in a step it could keep its list without T, the stage
+/// runs with T = 0, its bound holding particles toward q0: loop::thick_with_colliders).
 ///
 /// The kept fit: a step first bounds the drift with the fit (C, A, c, stretch) kept from
 /// the step before (kept_motion, one pass over the particles: any C and A serve, the
