@@ -73,9 +73,10 @@ def brute_pairs(model, q, radius):
     return out
 
 
-def core_pairs(model, q, radius):
-    """The core's pairs as brute_pairs keys them, each found once."""
-    kinds, particles, distances = _core.contact_pairs(core_model(model), q, radius)
+def core_pairs(model, q, radius, q_end=None):
+    """The core's pairs as brute_pairs keys them, each found once; with q_end, the candidate
+    pairs of a step from q to q_end (the stage's swept gather, its boxes grown by radius)."""
+    kinds, particles, distances = _core.contact_pairs(core_model(model), q, radius, q_end=q_end)
     out = {}
     for kind, v, dist in zip(kinds, particles.tolist(), distances, strict=True):
         if kind == 0:
@@ -182,23 +183,6 @@ def swept_scene(seed):
     return model, q0, q0 + d, u
 
 
-def swept_core_pairs(model, q0, q):
-    """The core's candidate pairs of a step from q0 to q (the stage's swept gather, its
-    boxes grown by the margin), keyed as brute_pairs keys them, each found once."""
-    kinds, particles, distances = _core.contact_pairs(
-        core_model(model), q0, model.contact_margin, q_end=q
-    )
-    out = {}
-    for kind, v, dist in zip(kinds, particles.tolist(), distances, strict=True):
-        if kind == 0:
-            key = ("vt", v[0], tuple(sorted(v[1:])))
-        else:
-            key = ("ee", *sorted((tuple(sorted(v[:2])), tuple(sorted(v[2:])))))
-        assert key not in out, f"pair {key} found twice"
-        out[key] = float(dist)
-    return out
-
-
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_swept_gather_keeps_every_pair_that_can_come_near_along_the_step(seed):
     """The stage's swept gather (swept boxes grown by the margin g, then each pair kept only
@@ -215,7 +199,7 @@ def test_swept_gather_keeps_every_pair_that_can_come_near_along_the_step(seed):
     model, q0, q, u = swept_scene(seed)
     h = model.contact_thickness
     within = min(model.contact_margin, h)
-    found = swept_core_pairs(model, q0, q)
+    found = core_pairs(model, q0, model.contact_margin, q_end=q)
     start = brute_pairs(model, q0, 1.0)  # every pair's distance at q0
     near = {}
     patterns = [np.ones(len(q0))] + [rng.integers(0, 2, len(q0)) for _ in range(12)]
@@ -260,10 +244,10 @@ def test_swept_gather_crossing_check_finds_a_crossing_wherever_there_is_one(seed
     edges = unique_edges(model.tri_indices)
     crossings = edge_crossings(q0, model.tri_indices, edges)
     if not len(crossings):
-        swept_core_pairs(model, q0, q)
+        core_pairs(model, q0, model.contact_margin, q_end=q)
         return
     with pytest.raises(ValueError, match=r"an edge at particle \d+ passes through "
                        r"triangle \d+") as info:  # fmt: skip
-        swept_core_pairs(model, q0, q)
+        core_pairs(model, q0, model.contact_margin, q_end=q)
     particle, triangle = (int(x) for x in re.findall(r"\d+", str(info.value)))
     assert any(t == triangle and particle in edges[e] for e, t in crossings.tolist())

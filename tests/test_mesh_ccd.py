@@ -11,6 +11,8 @@ import pytest
 
 import softbody as sb
 from softbody.collision.mesh_collider import inside_mesh
+from softbody.mesh.topology import unique_edges
+from test_mesh_edges import crossings as segment_crossings
 
 G = 9.81
 HALF = 0.25  # the box mesh's half-size [m]: its top face at y = HALF
@@ -35,36 +37,15 @@ def strip(*, velocity=(0.0, -FALL, 0.0), restitution=0.0, friction=0.0, motion=N
     return builder.finalize(), collider
 
 
-def edges(tri: np.ndarray) -> np.ndarray:
-    """Every edge of triangles ``tri`` (T, 3) once, (E, 2)."""
-    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    return np.unique(np.sort(e, axis=1), axis=0)
-
-
 def crossings(model, state, collider) -> int:
     """Brute force: the box's edges through the strip's triangles plus the strip's edges
     through the box's triangles (segments strictly through a triangle's inside)."""
-
-    def through(q, tri, a, b):
-        p0, p1, p2 = q[tri[:, 0]], q[tri[:, 1]], q[tri[:, 2]]
-        n = np.cross(p1 - p0, p2 - p0)
-        total = 0
-        for x0, x1 in zip(a, b, strict=True):
-            da = np.einsum("ij,ij->i", x0 - p0, n)
-            db = np.einsum("ij,ij->i", x1 - p0, n)
-            straddle = da * db < 0
-            x = x0 + (da / np.where(straddle, da - db, 1.0))[:, None] * (x1 - x0)
-            w = [np.einsum("ij,ij->i", np.cross(u - x, v - x), n)
-                 for u, v in ((p1, p2), (p2, p0), (p0, p1))]  # fmt: skip
-            total += int(np.count_nonzero(straddle & (w[0] > 0) & (w[1] > 0) & (w[2] > 0)))
-        return total
-
     box = state.collider_q[0] + collider.data.vertices @ state.collider_rotation[0].T
     bt, st = collider.data.triangles, model.tri_indices
-    be, se = edges(bt), edges(st)
+    be, se = unique_edges(bt), unique_edges(st)
     q = state.particle_q
-    soft_through = through(q, st, box[be[:, 0]], box[be[:, 1]])
-    return soft_through + through(box, bt, q[se[:, 0]], q[se[:, 1]])
+    soft_through = segment_crossings(q, st, box[be[:, 0]], box[be[:, 1]])
+    return soft_through + segment_crossings(box, bt, q[se[:, 0]], q[se[:, 1]])
 
 
 def above_the_box(model, state, collider) -> bool:
@@ -72,7 +53,7 @@ def above_the_box(model, state, collider) -> bool:
     none inside the box (the mesh's ray-parity test) and those over the top face's
     footprint (|x|, |z| < 0.25 m from the box's centre) above the top (y > top)."""
     c = state.collider_q[0]
-    e = edges(model.tri_indices)
+    e = unique_edges(model.tri_indices)
     f = np.linspace(0.0, 1.0, 65)[:, None, None]
     q = state.particle_q
     x = (q[e[:, 0]] + f * (q[e[:, 1]] - q[e[:, 0]])).reshape(-1, 3) - c

@@ -11,14 +11,9 @@ import pytest
 
 import softbody as sb
 from softbody.collision.mesh_collider import sharp_edges
+from softbody.mesh.topology import unique_edges
 
 RIDGE_TOP = 0.5 * np.sqrt(2.0)  # a unit cube turned 45 degrees about z: its top edge's height
-
-
-def mesh_edges(faces: np.ndarray) -> np.ndarray:
-    """Every edge of a triangle mesh once, (E, 2)."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    return np.unique(np.sort(e, axis=1), axis=0)
 
 
 def crossings(q: np.ndarray, tri: np.ndarray, a: np.ndarray, b: np.ndarray) -> int:
@@ -46,7 +41,7 @@ def collider_crossings(model, state, collider: sb.ColliderMesh) -> int:
     """Crossings of every edge of the collider's mesh (in its pose in ``state``) through
     the soft triangles."""
     world = state.collider_q[0] + collider.data.vertices @ state.collider_rotation[0].T
-    e = mesh_edges(collider.data.triangles)
+    e = unique_edges(collider.data.triangles)
     return crossings(state.particle_q, model.tri_indices, world[e[:, 0]], world[e[:, 1]])
 
 
@@ -401,7 +396,6 @@ def soft_mesh_crossings(model, state, collider: sb.ColliderMesh) -> int:
     through soft triangles (edge_crossings, the independent NumPy check of the contact
     scenes, over the two surfaces together)."""
     from softbody.collision.crossings import edge_crossings
-    from softbody.mesh.topology import unique_edges
 
     q, n = state.particle_q, len(state.particle_q)
     world = state.collider_q[0] + collider.data.vertices @ state.collider_rotation[0].T

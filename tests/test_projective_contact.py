@@ -10,7 +10,7 @@ import pytest
 import softbody as sb
 from softbody.collision.crossings import edge_crossings
 from softbody.mesh.topology import unique_edges
-from test_implicit_contact import G, ball_on_trampoline, closing_cloths
+from test_implicit_contact import G, ball_on_trampoline, closing_cloths, two_balls_thrown
 from test_self_contact import body_volume, vacuum_ball
 
 
@@ -110,13 +110,7 @@ def test_contact_in_the_iterations_conserves_momentum():
     (4e-12 kg m/s measured) while each ball's own momentum is turned around by the
     contact. The iterations carry the impact: the stage's largest correction per step
     averages 3.3e-4 m over the 0.5 s (6.7e-3 m when only the stage acted)."""
-    builder = sb.ModelBuilder(gravity=(0, 0, 0))
-    builder.set_soft_contact("surface", thickness=0.02, restitution=0.5, friction=0.0)
-    for x, v in ((-0.53, 1.0), (0.53, -1.0)):
-        builder.add_soft_body(sb.icosphere(2, radius=0.5).translated((x, 0.03, 0.0)),
-                              mass=1.0, stiffness=500.0, damping=1.0, gas=300.0,
-                              velocity=(v, 0.5 * v, 0))  # fmt: skip
-    model = builder.finalize()
+    model = two_balls_thrown()
     dt = 5e-3
     sim = sb.Simulator(model, integrator="projective", dt=dt)
     state = model.state()
