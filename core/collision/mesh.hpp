@@ -951,15 +951,14 @@ inline void swept_edge_contacts(const Frame& f, index k, V3 c0, const double* r0
         moving = dot(d, d) > margin * margin;
     }
     if (!moving) return;
-    // each particle's start in the collider's frame, once (its edges share it)
-    std::vector<V3> start(static_cast<size_t>(m.particles.count));
-    for (index i = 0; i < m.particles.count; ++i) start[i] = to_local(r0, load(q_start, i) - c0);
+    // each end's start in the collider's frame (a rotation per end: no per-step buffer)
+    auto start = [&](index i) { return to_local(r0, load(q_start, i) - c0); };
     for (index t = 0; t < m.triangles.count; ++t) {
         for (int a = 0; a < 3; ++a) {
             if (m.triangles.edge_owner[3 * t + a] == 0) continue;
             const index idx[2] = {m.triangles.indices[3 * t + a],
                                   m.triangles.indices[3 * t + (a + 1) % 3]};
-            const V3 s0[2] = {start[idx[0]], start[idx[1]]};
+            const V3 s0[2] = {start(idx[0]), start(idx[1])};
             for (int round = 0; round < kRounds; ++round) {
                 V3 s1[2] = {to_local(f.r, load(q, idx[0]) - f.c),
                             to_local(f.r, load(q, idx[1]) - f.c)};
