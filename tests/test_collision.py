@@ -157,6 +157,63 @@ def test_no_vertex_ends_a_step_inside_a_static_collider(collider):
     assert np.mean(state.particle_qd[:, 0]) < 0  # it bounced back
 
 
+def slid(collider, integrator: str, steps: int = 500, dt: float = 1e-3) -> np.ndarray:
+    """A point mass set on y = 0 (on top of `collider`) moving at 1 m/s along x under
+    gravity, after `steps` steps: its positions [m] and velocities [m/s] at every step,
+    shape (steps, 2, 3)."""
+    builder = sb.ModelBuilder(gravity=(0.0, -G, 0.0))
+    builder.add_particle((0.0, 0.0, 0.0), mass=1.0, velocity=(1.0, 0.0, 0.0))
+    builder.add_collider(collider)
+    model = builder.finalize()
+    sim = sb.Simulator(model, integrator=integrator, dt=dt)
+    state = model.state()
+    out = []
+    for _ in range(steps):
+        sim.step(state)
+        out.append([state.particle_q[0].copy(), state.particle_qd[0].copy()])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "implicit_euler"])
+@pytest.mark.parametrize("friction", [0.0, 0.1])
+def test_a_particle_slides_on_a_box_top_as_on_the_plane(integrator, friction):
+    """A solid box's top face is a plane: a particle sliding on it (re-entering it each step
+    as gravity pulls it in) goes where it goes on a ColliderPlane of the same restitution
+    and friction, step by step, to round-off. Frictionless that is x = v t (0.5 m in
+    0.5 s); with friction its velocity loses the fraction each contact, as on the plane.
+    Before, a path entering the box was put back where it entered, so the particle stayed
+    at x = 0 whatever the friction while its velocity said 1 m/s."""
+    kw = dict(restitution=0.5, friction=friction)
+    box = slid(sb.ColliderBox(center=(0.0, -1.0, 0.0), half_extents=(5.0, 1.0, 5.0), **kw),
+               integrator)  # fmt: skip
+    plane = slid(sb.ColliderPlane(**kw), integrator)
+    np.testing.assert_allclose(box, plane, rtol=0.0, atol=1e-12)
+    if friction == 0.0:
+        assert box[-1, 0, 0] == pytest.approx(0.5, abs=1e-12)
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "implicit_euler"])
+def test_a_frictionless_particle_slides_over_a_sphere_keeping_its_energy(integrator):
+    """A point mass sliding frictionless over the top of a solid sphere of radius 100 m at
+    1 m/s follows the surface (its distance from the centre stays R to within a step's
+    sag, g dt^2 plus the tangent's rise |v|^2 dt^2 / 2 R) and keeps its energy: gravity
+    along the surface speeds it up as it goes down, |v|^2 = 1 + 2 g (0 - y). The
+    restitution's losses in the normal direction are of order g dt per contact, so the
+    tolerance on |v|^2 is 2 g dt. Its path along the surface is the sum of its speeds times
+    dt, to within 2 steps' motion. Before, it stayed at its start."""
+    radius, dt = 100.0, 1e-3
+    run = slid(sb.ColliderSphere(center=(0.0, -radius, 0.0), radius=radius, restitution=0.5,
+                                 friction=0.0), integrator, dt=dt)  # fmt: skip
+    q, v = run[:, 0], run[:, 1]
+    r = np.linalg.norm(q - [0.0, -radius, 0.0], axis=1)
+    sag = G * dt**2 + 2.0**2 * dt**2 / (2 * radius)  # |v| < 2 m/s
+    assert np.all(np.abs(r - radius) <= sag + 1e-12)
+    speed2 = (v**2).sum(axis=1)
+    np.testing.assert_allclose(speed2, 1.0 - 2.0 * G * q[:, 1], rtol=0.0, atol=2 * G * dt)
+    arc = radius * np.arctan2(q[-1, 0], q[-1, 1] + radius)
+    assert arc == pytest.approx(dt * np.sqrt(speed2).sum(), abs=2 * 1.02 * dt)
+
+
 def test_fast_ball_stays_in_container():
     """A container clamps particles in its own frame, so a ball at 20 m/s (2 cm per step,
     a twentieth of its width; faster, its 1 kg would flatten it against the gas) cannot

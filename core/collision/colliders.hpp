@@ -1,7 +1,8 @@
 // Rigid colliders (paper, section 3.5, with continuous detection): their poses over time, and
 // particles against them. A particle found inside is put back on the surface (for a solid
-// collider, where its path of this step entered it), its approaching normal velocity relative
-// to the surface reflected and scaled by the restitution, its tangential part scaled by
+// collider, where its path of this step entered it plus the rest of the path along the
+// surface, as the plane's projection does), its approaching normal velocity relative to the
+// surface reflected and scaled by the restitution, its tangential part scaled by
 // (1 - friction); the collider receives the opposite impulse. Port of softbody.collision.
 #pragma once
 
@@ -120,8 +121,20 @@ inline double clamp_inward(double& value, double h) {
     return 0.0;
 }
 
+/// Where a particle whose path p0 + s' u (s' in [0, 1]) entered a solid at s, through the
+/// surface with outward normal n there, is put: the entry, plus the rest of the path's part
+/// along the surface's tangent plane, (1 - s) (u - (u . n) n). So a particle sliding along
+/// the surface keeps its motion along it, as on a plane (where this is the projection of
+/// the step's end): friction acts on the velocity alone (respond). Outside a convex solid:
+/// the tangent plane supports it.
+inline V3 entered(V3 p0, V3 u, double s, V3 n) {
+    const V3 along = u - dot(u, n) * n;
+    return p0 + s * u + (1.0 - s) * along;
+}
+
 /// Whether a particle at p (at p0 when the step began) violates collider kind `kind` with
-/// centre c, rotation r (3, 3; columns are its local axes) and half extents h.
+/// centre c, rotation r (3, 3; columns are its local axes) and half extents h. A solid's
+/// path entry goes to entered().
 inline Hit contact(index kind, V3 c, const double* r, V3 h, V3 p, V3 p0) {
     Hit out;
     const V3 ax{r[0], r[3], r[6]}, ay{r[1], r[4], r[7]}, az{r[2], r[5], r[8]};
@@ -151,9 +164,9 @@ inline Hit contact(index kind, V3 c, const double* r, V3 h, V3 p, V3 p0) {
         if (a > 0.0 && cc >= 0.0 && b < 0.0 && b * b - a * cc >= 0.0) {
             const double s = (-b - std::sqrt(b * b - a * cc)) / a;
             if (s <= 1.0) {
-                const V3 x = p0 + s * u;
-                const V3 rel = x - c;
-                return {true, x, {rel.x / radius, rel.y / radius, rel.z / radius}};
+                const V3 rel = p0 + s * u - c;
+                const V3 n{rel.x / radius, rel.y / radius, rel.z / radius};
+                return {true, entered(p0, u, s, n), n};
             }
         }
         if (d2 >= radius * radius) return out;
@@ -177,17 +190,12 @@ inline Hit contact(index kind, V3 c, const double* r, V3 h, V3 p, V3 p0) {
     slab(bx, lx, h.x, 0, s_in, s_out, axis, side);
     slab(by, ly, h.y, 1, s_in, s_out, axis, side);
     slab(bz, lz, h.z, 2, s_in, s_out, axis, side);
-    if (axis >= 0 && 0.0 <= s_in && s_in <= s_out && s_in <= 1.0) {
-        lx = bx + s_in * (lx - bx);
-        ly = by + s_in * (ly - by);
-        lz = bz + s_in * (lz - bz);
-        if (axis == 0)
-            lx = side * h.x;
-        else if (axis == 1)
-            ly = side * h.y;
-        else
-            lz = side * h.z;
-    } else if (std::fabs(lx) < h.x && std::fabs(ly) < h.y && std::fabs(lz) < h.z) {
+    const bool entry = axis >= 0 && 0.0 <= s_in && s_in <= s_out && s_in <= 1.0;
+    if (entry) {
+        const V3 n = side * (axis == 0 ? ax : axis == 1 ? ay : az);
+        return {true, entered(p0, p - p0, s_in, n), n};
+    }
+    if (std::fabs(lx) < h.x && std::fabs(ly) < h.y && std::fabs(lz) < h.z) {
         const double ox = h.x - std::fabs(lx), oy = h.y - std::fabs(ly), oz = h.z - std::fabs(lz);
         if (ox <= oy && ox <= oz) {
             axis = 0;
