@@ -214,6 +214,38 @@ def test_a_frictionless_particle_slides_over_a_sphere_keeping_its_energy(integra
     assert arc == pytest.approx(dt * np.sqrt(speed2).sum(), abs=2 * 1.02 * dt)
 
 
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "implicit_euler"])
+@pytest.mark.parametrize("kind", ["box", "sphere"])
+def test_a_moving_solid_carries_a_particle_resting_on_it_by_its_friction(kind, integrator):
+    """A conveyor: a solid box (or a 100 m sphere) moving at 1 m/s along x under a point
+    mass resting on its top, restitution 0. With friction 1 a contact gives the particle
+    the surface's velocity along it, so from the first step's contact on it rides along:
+    x = 1 m/s (T - dt) = 0.499 m after 0.5 s (to 1e-3 on the sphere, whose top curves away
+    below it by 1.2 mm). Frictionless the surface slides away under it: it stays at x = 0
+    on the box. Before, the particle went back to where its path entered the moving solid
+    each step: with friction 1 it kept the velocity 1 m/s and stayed at x = 0 on the box
+    (0.087 m on the sphere)."""
+    def ride(friction: float) -> float:
+        builder = sb.ModelBuilder(gravity=(0.0, -G, 0.0))
+        builder.add_particle((0.0, 0.0, 0.0), mass=1.0)
+        kw = dict(friction=friction, restitution=0.0,
+                  motion=sb.MotionTranslation(velocity=(1.0, 0.0, 0.0)))
+        if kind == "box":
+            builder.add_collider(sb.ColliderBox(center=(0.0, -1.0, 0.0),
+                                                half_extents=(5.0, 1.0, 5.0), **kw))
+        else:
+            builder.add_collider(sb.ColliderSphere(center=(0.0, -100.0, 0.0), radius=100.0,
+                                                   **kw))
+        model = builder.finalize()
+        state = model.state()
+        sb.Simulator(model, integrator=integrator, dt=1e-3).run(state, 500)
+        return float(state.particle_q[0, 0])
+
+    assert ride(1.0) == pytest.approx(0.499, abs=1e-9 if kind == "box" else 1e-3)
+    if kind == "box":
+        assert ride(0.0) == pytest.approx(0.0, abs=1e-12)
+
+
 def test_fast_ball_stays_in_container():
     """A container clamps particles in its own frame, so a ball at 20 m/s (2 cm per step,
     a twentieth of its width; faster, its 1 kg would flatten it against the gas) cannot
