@@ -89,13 +89,18 @@ index soft_contacts(const Model& m, double* q, double* qd, const ContactBuffers&
 }
 
 index contact_pairs(const Model& m, double* q, double radius, double* q_end,
-                    const ContactBuffers& w) {
+                    const ContactBuffers& w, double* q_later, double slack) {
     thick::Stage st{m, q, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size, radius,
                     m.soft_contacts.self_contact != 0};
     if (q_end != nullptr) {  // a step's swept gather, after the step's common translation
         st.q = q_end;
         st.T = thick::motion(m, q, q_end, nullptr, false).T;
-        return thick::gather(st);
+        if (q_later == nullptr) return thick::gather(st);
+        st.slack = slack;
+        const index earlier = thick::gather(st);
+        if (earlier < 0) return earlier;
+        st.q = q_later;  // the later pass, from the earlier's rows
+        return thick::reuse_swept(st, q_end, slack, earlier);
     }
     st.swept = false;
     st.keep = radius;

@@ -124,9 +124,11 @@ struct KernelTable {
     /// out) into w.pairs' rows; returns their count, -1 for a crossing at q (w.crossing), or
     /// below -1 when a buffer could not grow to them. With q_end (N, 3; else null): the
     /// candidates of a step from q to q_end as the stage's swept gather finds them (its
-    /// boxes grown by `radius` [m], as the stage's by the margin).
+    /// boxes grown by `radius` [m], as the stage's by the margin); with q_later (N, 3; else
+    /// null) too, that gather made with slack [m] (Stage::slack), then a later pass's from
+    /// its rows to q_later (reuse_swept, the same T).
     index (*contact_pairs)(const Model&, double* q, double radius, double* q_end,
-                           const ContactBuffers& w);
+                           const ContactBuffers& w, double* q_later, double slack);
     /// The thickness contacts' stage (collision/thick.hpp contacts()) on q (N, 3) in place
     /// from the step's start q0 (N, 3), velocities qd (N, 3), keeping its pair list in w
     /// between calls (for tests of the list); contacts()'s value.

@@ -136,9 +136,10 @@ def test_a_collider_pushing_a_sheet_through_another_stops_the_run_there(integrat
     """The box collider pushes the large cloth's edges through the small cloth in step 3
     (it acts after the thickness contacts, which cannot hold what it moves). With the
     default margin (h) the steps move more than half of it and take their pairs from swept
-    boxes: the check builds the pair list at the step's end with its full crossing check;
-    with a 0.05 m margin the steps keep the stage's list, and the check tests the edges of
-    the listed vertex-triangle pairs touching a particle the box moved. Reference: the
+    boxes: the check runs the gather's crossing check at the step's end over the pairs of
+    triangles with a corner that moved in the contacts; with a 0.05 m margin the steps
+    keep the stage's list, and the check tests the edges of the listed vertex-triangle
+    pairs touching a particle the box moved. Reference: the
     run stops with Status.CROSSED at that step, naming a particle of one cloth and a
     triangle of the other (which edge the check meets first depends on the list's row
     order) and saying a collider pushed it there, with the state left

@@ -73,24 +73,31 @@ Index soft_contacts(const CoreModel& core, F64 q, F64 qd, std::optional<Index> h
 /// q_end (N, 3), the candidates of a step from q to q_end as the contact stage's swept
 /// gather finds them, its boxes grown by `radius`.
 nb::tuple contact_pairs(const CoreModel& core, ConstF64 q, double radius,
-                        std::optional<ConstF64> q_end) {
+                        std::optional<ConstF64> q_end, std::optional<ConstF64> q_later,
+                        double slack) {
     const softbody::Model& m = core.model();
     check_shape(q, "q", {m.particles.count, 3});
     if (q_end) check_shape(*q_end, "q_end", {m.particles.count, 3});
+    if (q_later && !q_end) fail("q_later needs q_end");
+    if (q_later) check_shape(*q_later, "q_later", {m.particles.count, 3});
+    if (!(slack >= 0.0) || !std::isfinite(slack))
+        fail("slack must be finite and >= 0, got " + std::to_string(slack));
     if (m.soft_contacts.mode != SoftContactMode::SURFACE || !(m.soft_contacts.thickness > 0.0))
         fail("contact_pairs needs surface soft contacts with a thickness");
     if (!(radius > 0.0) || !std::isfinite(radius))
         fail("radius must be finite and > 0, got " + std::to_string(radius));
     std::vector<double> x(q.data(), q.data() + q.size());
-    std::vector<double> end;
+    std::vector<double> end, later;
     if (q_end) end.assign(q_end->data(), q_end->data() + q_end->size());
+    if (q_later) later.assign(q_later->data(), q_later->data() + q_later->size());
     Buffers b(m, 0, checked_capacity(m, std::nullopt));
     b.allow_growth();
     Index pairs = 0;
     {
         nb::gil_scoped_release release;
         pairs = softbody::kernels().contact_pairs(m, x.data(), radius,
-                                                  q_end ? end.data() : nullptr, b.contact);
+                                                  q_end ? end.data() : nullptr, b.contact,
+                                                  q_later ? later.data() : nullptr, slack);
     }
     if (pairs == -1)
         fail("an edge at particle " + std::to_string(b.contact.crossing[0]) +
@@ -569,12 +576,14 @@ void bind_terms(nb::module_& mod) {
             "(F - 1,) [m]).");
     mod.def("contact_pairs", &contact_pairs, nb::arg("model"), nb::arg("q").noconvert(),
             nb::arg("radius"), nb::arg("q_end").noconvert() = nb::none(),
+            nb::arg("q_later").noconvert() = nb::none(), nb::arg("slack") = 0.0,
             "The thickness contacts' candidate pairs nearer than radius [m] at q (N, 3), "
             "gathered as the pair list's build gathers them: (kinds (P,): 0 vertex-triangle, "
             "1 edge-edge; particles (P, 4); distances (P,) [m]). With q_end (N, 3): the "
             "candidates of a step from q to q_end as the contact stage's swept gather finds "
-            "them, its boxes grown by radius. Raises ValueError where an edge passes through "
-            "a triangle at q.");
+            "them, its boxes grown by radius; with q_later (N, 3) too, that gather made with "
+            "slack [m], then a later pass's pairs to q_later from its rows (the same "
+            "translation). Raises ValueError where an edge passes through a triangle at q.");
     mod.def("body_volumes", &body_volumes, nb::arg("q").noconvert(),
             nb::arg("tri_indices").noconvert(), nb::arg("body_particle_range").noconvert(),
             nb::arg("body_tri_range").noconvert(), nb::arg("body_volume_method").noconvert(),

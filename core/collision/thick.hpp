@@ -162,15 +162,24 @@ struct Stage {
     // whole gather), and the rows kept before the new ones
     const double* moved = nullptr;
     index first = 0;
+    // a swept gather's slack [m]: each particle's box grown by it and each pair's reach by
+    // twice it, so that its rows serve a later pass from the same q0 whose particles each
+    // stay within it of their swept paths (reuse_swept)
+    double slack = 0.0;
+    // a patch's crossing check (st.check too): the pairs of triangles it meets, each with a
+    // moved corner (collider_crossing); off, a patch makes none
+    bool check_patch = false;
 };
 
-/// Box of particle i over q0 and q0 + u (u = q - q0 - T), or q0 alone, into lo, hi.
+/// Box of particle i over q0 and q0 + u (u = q - q0 - T), grown by st.slack, or q0 alone,
+/// into lo, hi.
 inline void swept_box(const Stage& st, index i, double* lo, double* hi) {
+    const double grow = st.swept ? st.slack : 0.0;
     for (int k = 0; k < 3; ++k) {
         const double a = st.q0[3 * i + k];
         const double b = st.swept ? st.q[3 * i + k] - (&st.T.x)[k] : a;
-        lo[k] = std::min(a, b);
-        hi[k] = std::max(a, b);
+        lo[k] = std::min(a, b) - grow;
+        hi[k] = std::max(a, b) + grow;
     }
 }
 
@@ -423,7 +432,8 @@ inline void vertex_bounds(Batch& b) {
 /// that much along the straight path, so a pair whose distance D at q0 is over its reach
 /// stays more than h apart up to the response (which then has nothing to do for it), and
 /// more than 0 after its moves (a crossing needs 0): neither the bound nor the response
-/// needs it (as a pair whose boxes stay farther apart than the margin g >= h).
+/// needs it (as a pair whose boxes stay farther apart than the margin g >= h). With a
+/// slack (Stage::slack), twice the slack more (reuse_swept).
 inline void swept_reach(const Stage& st, Batch& b, int side) {
     const double h = st.m.soft_contacts.thickness;
     for (int p = 0; p < b.n; ++p) {
@@ -439,7 +449,7 @@ inline void swept_reach(const Stage& st, Batch& b, int side) {
                 const V3 r = u[k] - u[l];
                 most = std::max(most, dot(r, r));
             }
-        b.reach[p] = std::sqrt(most) + h;
+        b.reach[p] = std::sqrt(most) + h + 2.0 * st.slack;
     }
 }
 
@@ -650,7 +660,7 @@ inline index collect(const Stage& st) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
-            if (!patch && st.check && starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
+            if ((!patch || st.check_patch) && st.check && starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
                 (edge_through(st, t, tri, t2, tri2) || edge_through(st, t2, tri2, t, tri))) {
                 crossed = true;
                 return;
@@ -972,6 +982,70 @@ inline index gather(const Stage& st) {
         pairs = collect(st);
     }
     return pairs;
+}
+
+constexpr double kReuseMost = 0.25;  // the most particles (a share of all) a reuse gathers again
+
+/// A later pass's candidate pairs from an earlier swept gather's rows (w.pairs rows
+/// [0, count)): the earlier gather from the same q0 with the same T, over the positions
+/// `from` (N, 3), with slack st.slack = `slack`; this pass's own positions st.q, no slack.
+/// Returns the rows (kept first), or gather()'s codes.
+///
+/// Why the rows serve: with u = from - q0 - T, the earlier gather kept every pair whose
+/// particles' boxes over q0 and q0 + u, grown by the slack, meet grown by g, and whose
+/// distance D at q0 is at most h + M + 2 slack, M the most its particles' scaled moves
+/// can close it, max |b_a u_a - b_b u_b| over b in [0, 1]^2 (swept_reach). This pass
+/// moves particle k to q0 + T + a_k u'_k + e_k (u' = q - q0 - T, a_k in [0, 1], its
+/// response |e_k| <= h / 2). A particle whose u'_k lies within the slack of the segment
+/// [0, u_k], u'_k = c_k u_k + r_k (c_k in [0, 1], |r_k| <= slack), stays in its earlier box
+/// (q0 + b u_k + a_k r_k with b = a_k c_k in [0, 1]: in the box of the segment, grown by the
+/// slack), and for two such particles |a_a u'_a - a_b u'_b| <= |b_a u_a - b_b u_b| +
+/// 2 slack <= M + 2 slack: this pass's boxes and reach of a pair of them lie within the
+/// earlier gather's, so every pair of them this pass's own swept gather would keep is
+/// among the rows (with its distance at q0, the same). The particles outside (`moved`: each
+/// one's least |u'_k - c u_k| over c in [0, 1] over the slack) have their rows dropped and
+/// their pairs gathered afresh for this pass (a patch, as patch_list's: a hash of the
+/// triangles with a moved corner, looked up by every triangle, every pair with a moved
+/// particle kept by this pass's own swept boxes and reach), after the kept rows: no pair
+/// twice. No crossing check: the earlier gather made it at the same q0. A whole gather
+/// instead (st's, with its check) when more than kReuseMost of the particles moved or a
+/// moved particle of a body is no triangle's corner (a patch looks such a particle up in
+/// the hash of the moved triangles alone).
+inline index reuse_swept(const Stage& st, const double* from, double slack, index count) {
+    const Model& m = st.m;
+    const ContactBuffers& w = st.w;
+    double* moved = w.held;  // its first slot a flag per particle (hold()'s scratch till then)
+    index outside = 0;
+    bool lone = false;
+    for (index i = 0; i < m.particles.count; ++i) {
+        const V3 x0 = load(st.q0, i);
+        const V3 d = load(st.q, i) - x0 - st.T, u = load(from, i) - x0 - st.T;
+        const double uu = dot(u, u);
+        const double c = uu > 0.0 ? std::min(1.0, std::max(0.0, dot(d, u) / uu)) : 0.0;
+        const V3 r = d - c * u;
+        const bool out = !(dot(r, r) <= slack * slack);  // NaN: out
+        moved[8 * i] = out ? 1.0 : 0.0;
+        outside += out;
+        lone |= out && m.particles.body[i] >= 0 && w.vertex_owner[i] < 0;
+    }
+    if (outside == 0) return count;
+    if (lone || static_cast<double>(outside) > kReuseMost * static_cast<double>(m.particles.count))
+        return gather(st);
+    index* rows = w.pairs->data;
+    index kept = 0;
+    for (index p = 0; p < count; ++p) {
+        const index* row = rows + kSlots * p;
+        if (moved[8 * row[1]] != 0.0 || moved[8 * row[2]] != 0.0 || moved[8 * row[3]] != 0.0 ||
+            moved[8 * row[4]] != 0.0)
+            continue;
+        if (kept != p) std::memmove(rows + kSlots * kept, row, sizeof(index) * kSlots);
+        ++kept;
+    }
+    Stage part = st;
+    part.moved = moved;
+    part.first = kept;
+    part.slack = 0.0;
+    return gather(part);
 }
 
 constexpr int kBands = 64;  // the list's rows are ordered by band of build distance, R / 64 wide
@@ -1306,8 +1380,8 @@ inline Motion kept_motion(const Model& m, const double* q0, const double* q, con
 /// crossing check), their rows ordered by band of build distance, the build positions in
 /// w.q_build, w.list[0] their count and w.list_skin (s, 1 step served). Returns gather's
 /// value (the count, -1 for a crossing, below -1 no room); the list stays dropped unless it
-/// was built. Every builder of the list (the stage, the implicit solve's contacts, the
-/// collider crossing check) builds it here, so the stage can read it.
+/// was built. Every builder of the list (the stage, the implicit solve's contacts) builds
+/// it here, so the stage can read it.
 inline index build_list(const Stage& st, double s) {
     const ContactBuffers& w = st.w;
     Stage list = st;
@@ -1500,8 +1574,13 @@ inline index patch_list(const Stage& st, const Motion& mo, Motion& drift, bool& 
 /// corner.
 /// dt [s]: the step, for the velocities of the particles the bound held back (hold; 0: a
 /// pass from rest, none changed).
+/// slack [m]: a step that sweeps gathers with this slack (Stage::slack); with reuse (N, 3),
+/// a second pass from the same q0 (with the same T) after one that swept with that slack
+/// over the positions `reuse` (w.list[1] >= 0 and no list: its rows still in w.pairs),
+/// which takes its pairs from those rows where it sweeps (reuse_swept).
 inline index contacts(const Model& m, const double* q0, double* q, double* qd,
-                      const ContactBuffers& w, bool translate = true, double dt = 0.0) {
+                      const ContactBuffers& w, bool translate = true, double dt = 0.0,
+                      double slack = 0.0, const double* reuse = nullptr) {
     Stage st{m, q0, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
              m.soft_contacts.margin, m.soft_contacts.self_contact != 0};
     // 1. the common translation, the step's largest motion after it, the list's drift (its
@@ -1554,8 +1633,11 @@ inline index contacts(const Model& m, const double* q0, double* q, double* qd,
         if (pairs == -1) return -1;  // crossed at the start
         if (pairs < -1) return -1 - pairs;
     } else {
+        const index earlier = listed ? -1 : w.list[1];  // an earlier pass's swept rows
         w.list[0] = -1;
-        pairs = gather(st);
+        st.slack = slack;
+        pairs = reuse != nullptr && earlier >= 0 ? reuse_swept(st, reuse, slack, earlier)
+                                                 : gather(st);
         if (pairs == -1) return -1;
         if (pairs < -1) return -1 - pairs;
         w.list[1] = pairs;  // every row, their distances at q0

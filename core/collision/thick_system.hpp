@@ -43,8 +43,8 @@
 //    last push (loop::thick_with_colliders runs the stage around them). collider_crossing()
 //    looks, for the listed vertex-triangle pairs touching a particle that moved in the
 //    contacts, whether an edge of the pair's vertex (its ring of face neighbours) now
-//    passes through the pair's triangle; a step without a list builds one at its end, with
-//    the list's full crossing check.
+//    passes through the pair's triangle; in a step without a list, the gather's crossing
+//    check over the triangles with a corner that moved.
 #pragma once
 
 #include <vector>
@@ -318,10 +318,16 @@ inline index find_triangle(const Model& m, const index* corners) {
 /// j, a corner):
 /// whether an edge (i, j) of the pair's vertex passes through the pair's triangle (a pass
 /// over the list). Without it (the step took its pairs from swept boxes: its own motion
-/// was over half the margin) the list is built at q as the stage builds it, with its check
-/// of every edge against the triangles near it; the next step starts from it. Writes where
-/// into w.crossing: the edge's particle, and -1 - the triangle (a crossing the colliders
-/// made, which contact_failure's caller names as such).
+/// was over half the margin) the gather's crossing check at q over the pairs of triangles
+/// with a corner that moved (a patch, thick::Stage::check_patch: the hash of those
+/// triangles, looked up by every triangle, each pair of triangles whose boxes at q meet
+/// with a moved one tested both ways, every owned edge of each through the other). That
+/// finds every crossing at q with a moved particle at an end of the edge or a corner of
+/// the triangle; one among particles the contacts left where the solver put them is none
+/// the contacts made (the stage's bound kept them apart along the step from a start its
+/// gather checked). No list is built (the next step's near_pairs gathers what it needs).
+/// Writes where into w.crossing: the edge's particle, and -1 - the triangle (a crossing the
+/// colliders made, which contact_failure's caller names as such).
 inline bool collider_crossing(const Model& m, double* q, const double* before,
                               const ContactBuffers& w) {
     const index n = m.particles.count;
@@ -329,14 +335,19 @@ inline bool collider_crossing(const Model& m, double* q, const double* before,
     for (index i = 0; i < n && !any; ++i) any = moved(q, before, i);
     if (!any) return false;
     if (*w.list < 0) {
-        const thick::Stage at{m, q, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
-                              m.soft_contacts.margin, m.soft_contacts.self_contact != 0};
-        const index pairs = thick::build_list(at, m.soft_contacts.margin);
-        if (pairs == -1) {
+        thick::Stage at{m, q, q, w, {0.0, 0.0, 0.0}, 1.0 / m.soft_contacts.cell_size,
+                        0.0, m.soft_contacts.self_contact != 0};
+        at.swept = false;
+        at.keep = 0.0;  // no pair kept: the check alone (boxes not grown: g = 0)
+        double* flag = w.held;  // its first slot per particle (the stage's scratch, done)
+        for (index i = 0; i < n; ++i) flag[8 * i] = moved(q, before, i) ? 1.0 : 0.0;
+        at.moved = flag;
+        at.check_patch = true;
+        if (thick::gather(at) == -1) {
             w.crossing[1] = -1 - w.crossing[1];
             return true;
         }
-        return false;  // built; or no room: the next step's stage says so
+        return false;  // none; or no room: the next step's stage says so
     }
     if (m.slots.ring_start == nullptr) return false;
     for (index p = 0; p < *w.list; ++p) {
