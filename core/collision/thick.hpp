@@ -14,7 +14,10 @@
 //   2. Broad phase: a spatial hash of the triangles' boxes over their corners' q0 and
 //      q0 + u (each particle's box computed once a gather), grown by the margin g >= h
 //      (soft_contacts.margin); each triangle's box over the same points is looked up in it
-//      for the triangles after it, and each vertex-triangle and edge-edge pair is found
+//      for the triangles after it (a list's gather, its boxes over q0 alone, grows the
+//      hashed boxes by the largest half extent of a triangle's box too and reads only the
+//      cell of each triangle's box centre: each_triangle_at), and each vertex-triangle and
+//      edge-edge pair is found
 //      through the pair of triangles that own its primitives (collect()). Every pair whose
 //      boxes meet is a candidate, with its distance D at the step's start; in a step's swept
 //      boxes only where D is at most its reach, h plus the most its particles' moves, at
@@ -162,6 +165,10 @@ struct Stage {
     // whole gather), and the rows kept before the new ones
     const double* moved = nullptr;
     index first = 0;
+    // a gather over q0 alone (a list's): the largest half extent of a triangle's box along an
+    // axis (tri_boxes()); the hash's boxes grow by it too, so that each triangle looks up the
+    // one cell of its box's centre (each_triangle_at). Negative: box look-ups (a swept gather).
+    double half = -1.0;
 };
 
 /// Box of particle i over q0 and q0 + u (u = q - q0 - T), or q0 alone, into lo, hi.
@@ -204,13 +211,14 @@ inline bool boxes_meet(const double* lo, const double* hi, const double* lo2, co
     return !apart;
 }
 
-/// Hash of the triangles' boxes (over their corners' boxes, grown by g) into w.hash_*, the
-/// boxes themselves into w.tri_box (T, 6). Counts first; returns the entries needed, and
-/// stores no entry when they exceed the capacity (soft::hash_triangles' contract). Reads
-/// w.particle_box (fill_boxes).
-inline index build_hash(const Stage& st) {
+/// The triangles' boxes (over their corners' boxes) into w.tri_box (T, 6); returns the
+/// largest half extent of one along an axis [m], and the largest magnitude of a box's
+/// coordinate into `scale` [m]. Reads w.particle_box (fill_boxes).
+inline double tri_boxes(const Stage& st, double& scale) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
+    double half = 0.0;
+    scale = 0.0;
     for (index t = 0; t < m.triangles.count; ++t) {
         double* box = w.tri_box + 6 * t;
         const index* tri = m.triangles.indices + 3 * t;
@@ -219,8 +227,20 @@ inline index build_hash(const Stage& st) {
         for (int k = 0; k < 3; ++k) {
             box[k] = std::min(std::min(a[k], b[k]), c[k]);
             box[3 + k] = std::max(std::max(a[3 + k], b[3 + k]), c[3 + k]);
+            half = std::max(half, 0.5 * (box[3 + k] - box[k]));
+            scale = std::max(scale, std::max(std::fabs(box[k]), std::fabs(box[3 + k])));
         }
     }
+    return half;
+}
+
+/// Hash of the triangles' boxes (w.tri_box, tri_boxes()) grown by g, and by st.half too
+/// where it is not negative, into w.hash_*. Counts first; returns the entries needed, and
+/// stores no entry when they exceed the capacity (soft::hash_triangles' contract).
+inline index build_hash(const Stage& st) {
+    const Model& m = st.m;
+    const ContactBuffers& w = st.w;
+    const double grow = st.g + std::max(st.half, 0.0);
     return soft::hash_triangles(m, w, [&](index t, index* r) {
         const double* box = w.tri_box + 6 * t;
         const index* tri = m.triangles.indices + 3 * t;
@@ -231,8 +251,8 @@ inline index build_hash(const Stage& st) {
             return;
         }
         for (int k = 0; k < 3; ++k) {
-            r[k] = soft::cell_of((box[k] - st.g) * st.inv);
-            r[3 + k] = soft::cell_of((box[3 + k] + st.g) * st.inv);
+            r[k] = soft::cell_of((box[k] - grow) * st.inv);
+            r[3 + k] = soft::cell_of((box[3 + k] + grow) * st.inv);
         }
     });
 }
@@ -274,6 +294,42 @@ inline void each_triangle(const Stage& st, const double* lo, const double* hi, i
                     }
                 }
             }
+    for (int k = 0; k < n; ++k) visit(found[k]);
+}
+
+/// each_triangle for a triangle's box [lo, hi] in a gather whose hash grew its boxes by
+/// st.half >= 0 beyond g (a list's): the triangles t2 > `after` whose box grown by g meets
+/// [lo, hi], each once. Along each axis such a box reaches [lo, hi], so it reaches within
+/// half the extent of [lo, hi] (at most st.half) of its centre: t2's hashed box, grown by
+/// g + st.half, holds the centre, and so has an entry in the centre's cell. Only that cell's
+/// bucket is read (a box look-up reads every cell the box meets, and meets each triangle in
+/// most of them again); w.tri_mark still keeps a triangle that two cells' entries share a
+/// bucket under from being visited twice.
+template <class Visit>
+inline void each_triangle_at(const Stage& st, const double* lo, const double* hi, index after,
+                             index query, Visit visit) {
+    const ContactBuffers& w = st.w;
+    const index* entries = w.hash_entries->data;
+    index* mark = w.tri_mark;
+    const index h = soft::cell_hash(soft::cell_of(0.5 * (lo[0] + hi[0]) * st.inv),
+                                    soft::cell_of(0.5 * (lo[1] + hi[1]) * st.inv),
+                                    soft::cell_of(0.5 * (lo[2] + hi[2]) * st.inv), w.hash_table);
+    constexpr int kFound = 128;
+    index found[kFound];
+    int n = 0;
+    for (index e = w.hash_start[h + 1]; e-- > w.hash_start[h];) {
+        const index t = entries[e];
+        if (t <= after) break;  // the rest of the bucket is below too
+        const double* box = w.tri_box + 6 * t;
+        const bool fresh = mark[t] != query;
+        mark[t] = query;
+        found[n] = t;
+        n += fresh & boxes_meet(lo, hi, box, box + 3, st.g);
+        if (n == kFound) {
+            for (int k = 0; k < n; ++k) visit(found[k]);
+            n = 0;
+        }
+    }
     for (int k = 0; k < n; ++k) visit(found[k]);
 }
 
@@ -646,7 +702,7 @@ inline index collect(const Stage& st) {
         // a patch's hash holds the moved triangles alone: a moved t meets those after it,
         // any other t all of them, so each pair of triangles with a moved one meets once
         const index after = patch && !((w.tri_owns[t] >> 6) & 1) ? -1 : t;
-        each_triangle(st, box, box + 3, after, t, [&](index t2) {
+        auto visit = [&](index t2) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
@@ -673,7 +729,11 @@ inline index collect(const Stage& st) {
                     ee.push(v, apart & meet & involved(v));
                 }
             }
-        });
+        };
+        if (st.half >= 0.0)
+            each_triangle_at(st, box, box + 3, after, t, visit);
+        else
+            each_triangle(st, box, box + 3, after, t, visit);
         flush();
     }
     flush();
@@ -954,9 +1014,17 @@ inline bool any_bodies_near(const Stage& st) {
 /// Returns their count; -1 for a crossing; or, below -1, minus the entries the hash needed
 /// (less 1) when its buffer could not grow to them, or minus the pairs the list needed
 /// (less 1) when it could not grow to them, with w.list[2] = 1 (0 for the hash).
-inline index gather(const Stage& st) {
-    const ContactBuffers& w = st.w;
+inline index gather(const Stage& stage) {
+    const ContactBuffers& w = stage.w;
+    Stage st = stage;
     fill_boxes(st);
+    double scale = 0.0;
+    const double half = tri_boxes(st, scale);
+    // a list's gather looks up its boxes' centres (each_triangle_at), the hashed boxes grown
+    // by the largest half extent, and by a little more for the round-off of the centre, the
+    // grown bounds and the comparisons (relative 1e-9 of the growth, 1e-12 of the largest
+    // coordinate: far above the few rounding errors of a coordinate's size)
+    st.half = st.swept ? -1.0 : half + 1e-9 * (half + st.g) + 1e-12 * scale;
     const index needed = build_hash(st);
     if (needed > w.hash_entries->capacity) {
         HashEntries& entries = *w.hash_entries;
