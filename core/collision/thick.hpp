@@ -1333,29 +1333,64 @@ struct Fit {
 /// max_i |u_i - T_last| + |T - T_last| (u_i = q_i - q0_i), the residual max_i |q0_i - qb_i -
 /// C - A (qb_i - c)| with C the fit's estimate, and sigma from the fit's stretch; C out is
 /// the mean the pass found (for the next step's estimate). With translate false, T = 0.
+/// The pass runs every step a list serves: it takes its particles kLanes at a time, their
+/// coordinates gathered into lanes (a block's last particle repeated where a body ends
+/// inside it, with no mass: the largest values are unchanged), each lane keeping its own
+/// largest values and sums, so that the arithmetic runs in vector lanes; the lanes' sums
+/// are added at the end (a different order of the same terms: T and C differ from a
+/// particle-by-particle sum by round-off alone, mu and the residual not at all).
 inline Motion kept_motion(const Model& m, const double* q0, const double* q, const double* qb,
                           const Fit& fit, bool translate, double radius) {
+    constexpr int kLanes = 8;
     const double* A = fit.A();
     const V3 c = fit.c(), C = fit.C(), T_last = translate ? fit.T() : V3{0.0, 0.0, 0.0};
+    double mu_l[kLanes] = {}, resid_l[kLanes] = {}, mass_l[kLanes] = {};
+    double su[3][kLanes] = {}, se[3][kLanes] = {};
+    for (index b = 0; b < m.bodies.count; ++b) {
+        const index first = m.bodies.particle_range[2 * b],
+                    end = m.bodies.particle_range[2 * b + 1];
+        for (index i0 = first; i0 < end; i0 += kLanes) {
+            double x0[3][kLanes], xb[3][kLanes], du[3][kLanes], mi[kLanes];
+            for (int l = 0; l < kLanes; ++l) {
+                const bool in = i0 + l < end;
+                const index i = in ? i0 + l : end - 1;
+                for (int d = 0; d < 3; ++d) {
+                    x0[d][l] = q0[3 * i + d];
+                    xb[d][l] = qb[3 * i + d];
+                    du[d][l] = q[3 * i + d] - x0[d][l];
+                }
+                mi[l] = in && m.particles.inv_mass[i] != 0.0 ? m.particles.mass[i] : 0.0;
+            }
+            for (int l = 0; l < kLanes; ++l) {
+                const double rx = xb[0][l] - c.x, ry = xb[1][l] - c.y, rz = xb[2][l] - c.z;
+                const double ex = x0[0][l] - xb[0][l] - (A[0] * rx + A[1] * ry + A[2] * rz);
+                const double ey = x0[1][l] - xb[1][l] - (A[3] * rx + A[4] * ry + A[5] * rz);
+                const double ez = x0[2][l] - xb[2][l] - (A[6] * rx + A[7] * ry + A[8] * rz);
+                const double ux = du[0][l] - T_last.x, uy = du[1][l] - T_last.y,
+                             uz = du[2][l] - T_last.z;
+                const double fx = ex - C.x, fy = ey - C.y, fz = ez - C.z;
+                const double uu = ux * ux + uy * uy + uz * uz, ff = fx * fx + fy * fy + fz * fz;
+                mu_l[l] = mu_l[l] < uu ? uu : mu_l[l];
+                resid_l[l] = resid_l[l] < ff ? ff : resid_l[l];
+                mass_l[l] += mi[l];
+                su[0][l] += mi[l] * du[0][l];
+                su[1][l] += mi[l] * du[1][l];
+                su[2][l] += mi[l] * du[2][l];
+                se[0][l] += mi[l] * ex;
+                se[1][l] += mi[l] * ey;
+                se[2][l] += mi[l] * ez;
+            }
+        }
+    }
     double mass = 0.0, mu = 0.0, resid = 0.0;
     V3 sum_u{0.0, 0.0, 0.0}, sum_e{0.0, 0.0, 0.0};
-    for (index b = 0; b < m.bodies.count; ++b)
-        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
-             ++i) {
-            const V3 x0 = load(q0, i), xb = load(qb, i);
-            const V3 du = load(q, i) - x0;
-            const V3 r = xb - c;
-            const V3 e{x0.x - xb.x - (A[0] * r.x + A[1] * r.y + A[2] * r.z),
-                       x0.y - xb.y - (A[3] * r.x + A[4] * r.y + A[5] * r.z),
-                       x0.z - xb.z - (A[6] * r.x + A[7] * r.y + A[8] * r.z)};
-            const V3 u = du - T_last, f = e - C;
-            mu = std::max(mu, dot(u, u));
-            resid = std::max(resid, dot(f, f));
-            const double mi = m.particles.inv_mass[i] == 0.0 ? 0.0 : m.particles.mass[i];
-            mass += mi;
-            sum_u = sum_u + mi * du;
-            sum_e = sum_e + mi * e;
-        }
+    for (int l = 0; l < kLanes; ++l) {
+        mu = std::max(mu, mu_l[l]);
+        resid = std::max(resid, resid_l[l]);
+        mass += mass_l[l];
+        sum_u = sum_u + V3{su[0][l], su[1][l], su[2][l]};
+        sum_e = sum_e + V3{se[0][l], se[1][l], se[2][l]};
+    }
     Motion out;
     if (mass > 0.0 && translate) out.T = (1.0 / mass) * sum_u;
     const V3 dT = out.T - T_last;
