@@ -141,6 +141,55 @@ def test_gather_finds_every_pair_a_brute_force_finds(seed, self_contact, radius)
     assert between
 
 
+def unequal_cloths(seed, coarse_first):
+    """A cloth of 4 cm squares and, 15 mm over it, one of 3 mm squares (0.24 and 0.06 m
+    wide, each rumpled along z by seeded noise up to 2 mm), the coarse one added first or
+    the fine one: triangles 13 times larger than those near them. Returns the model and
+    the particles' (N,) membership of the fine cloth. Self-contact is off: the pairs are
+    those between the two cloths."""
+    rng = np.random.default_rng(seed)
+    coarse = sb.rectangle((0.24, 0.24), (6, 6), center=(0.12, 0.12, 0.0))
+    fine = sb.rectangle((0.06, 0.06), (20, 20), center=(0.09, 0.1, 0.015))
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("surface", self_contact=False, thickness=0.002)
+    for cloth in (coarse, fine) if coarse_first else (fine, coarse):
+        v = cloth.vertices.copy()
+        v[:, 2] += rng.uniform(-0.002, 0.002, len(v))
+        builder.add_cloth(sb.TriMesh(v, cloth.faces), mass=0.1, stiffness=50.0)
+    model = builder.finalize()
+    lo, hi = model.body_particle_range[1 if coarse_first else 0]
+    is_fine = np.zeros(len(model.particle_q), dtype=bool)
+    is_fine[lo:hi] = True
+    return model, is_fine
+
+
+@pytest.mark.parametrize("coarse_first", [False, True])
+@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("radius", [0.02, 0.035])
+def test_gather_finds_every_pair_between_triangles_of_unequal_sizes(seed, coarse_first, radius):
+    """The list's gather (its hash's boxes grown by the largest half extent of any triangle's
+    box, each triangle looking up the cell of its box's centre alone) where small triangles
+    lie near large ones, beyond their boxes too, the large ones first or the small ones (a
+    pair of triangles is looked up by the first of the two). Reference: the brute-force
+    enumeration of every pair (brute_pairs): the same pairs, the same distances to
+    1e-12 m, vertex-triangle and edge-edge pairs both ways. (Hashed boxes grown by each
+    triangle's own half extent instead, or by nothing beyond the radius, miss 1,000 to
+    3,000 of them with the coarse cloth first.)"""
+    model, is_fine = unequal_cloths(seed, coarse_first)
+    q = model.particle_q
+    assert not len(edge_crossings(q, model.tri_indices, unique_edges(model.tri_indices)))
+    found = core_pairs(model, q, radius)
+    brute = brute_pairs(model, q, radius)
+    assert not {k for k, d in brute.items() if abs(d - radius) < 1e-12}
+    assert set(found) == set(brute)
+    assert max(abs(found[k] - brute[k]) for k in brute) < 1e-12
+    assert {(k[0], bool(is_fine[k[1]])) for k in brute if k[0] == "vt"} == {
+        ("vt", True),
+        ("vt", False),
+    }
+    assert any(k[0] == "ee" for k in brute)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_gather_crossing_check_finds_a_crossing_wherever_there_is_one(seed):
     """The crossing check at the gather (an owned edge through a triangle whose box meets

@@ -14,7 +14,10 @@
 //   2. Broad phase: a spatial hash of the triangles' boxes over their corners' q0 and
 //      q0 + u (each particle's box computed once a gather), grown by the margin g >= h
 //      (soft_contacts.margin); each triangle's box over the same points is looked up in it
-//      for the triangles after it, and each vertex-triangle and edge-edge pair is found
+//      for the triangles after it (a list's gather, its boxes over q0 alone, grows the
+//      hashed boxes by the largest half extent of a triangle's box too and reads only the
+//      cell of each triangle's box centre: each_triangle_at), and each vertex-triangle and
+//      edge-edge pair is found
 //      through the pair of triangles that own its primitives (collect()). Every pair whose
 //      boxes meet is a candidate, with its distance D at the step's start; in a step's swept
 //      boxes only where D is at most its reach, h plus the most its particles' moves, at
@@ -169,6 +172,10 @@ struct Stage {
     // a patch's crossing check (st.check too): the pairs of triangles it meets, each with a
     // moved corner (collider_crossing); off, a patch makes none
     bool check_patch = false;
+    // a gather over q0 alone (a list's): the largest half extent of a triangle's box along an
+    // axis (tri_boxes()); the hash's boxes grow by it too, so that each triangle looks up the
+    // one cell of its box's centre (each_triangle_at). Negative: box look-ups (a swept gather).
+    double half = -1.0;
 };
 
 /// Box of particle i over q0 and q0 + u (u = q - q0 - T), grown by st.slack, or q0 alone,
@@ -213,13 +220,14 @@ inline bool boxes_meet(const double* lo, const double* hi, const double* lo2, co
     return !apart;
 }
 
-/// Hash of the triangles' boxes (over their corners' boxes, grown by g) into w.hash_*, the
-/// boxes themselves into w.tri_box (T, 6). Counts first; returns the entries needed, and
-/// stores no entry when they exceed the capacity (soft::hash_triangles' contract). Reads
-/// w.particle_box (fill_boxes).
-inline index build_hash(const Stage& st) {
+/// The triangles' boxes (over their corners' boxes) into w.tri_box (T, 6); returns the
+/// largest half extent of one along an axis [m], and the largest magnitude of a box's
+/// coordinate into `scale` [m]. Reads w.particle_box (fill_boxes).
+inline double tri_boxes(const Stage& st, double& scale) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
+    double half = 0.0;
+    scale = 0.0;
     for (index t = 0; t < m.triangles.count; ++t) {
         double* box = w.tri_box + 6 * t;
         const index* tri = m.triangles.indices + 3 * t;
@@ -228,8 +236,20 @@ inline index build_hash(const Stage& st) {
         for (int k = 0; k < 3; ++k) {
             box[k] = std::min(std::min(a[k], b[k]), c[k]);
             box[3 + k] = std::max(std::max(a[3 + k], b[3 + k]), c[3 + k]);
+            half = std::max(half, 0.5 * (box[3 + k] - box[k]));
+            scale = std::max(scale, std::max(std::fabs(box[k]), std::fabs(box[3 + k])));
         }
     }
+    return half;
+}
+
+/// Hash of the triangles' boxes (w.tri_box, tri_boxes()) grown by g, and by st.half too
+/// where it is not negative, into w.hash_*. Counts first; returns the entries needed, and
+/// stores no entry when they exceed the capacity (soft::hash_triangles' contract).
+inline index build_hash(const Stage& st) {
+    const Model& m = st.m;
+    const ContactBuffers& w = st.w;
+    const double grow = st.g + std::max(st.half, 0.0);
     return soft::hash_triangles(m, w, [&](index t, index* r) {
         const double* box = w.tri_box + 6 * t;
         const index* tri = m.triangles.indices + 3 * t;
@@ -240,8 +260,8 @@ inline index build_hash(const Stage& st) {
             return;
         }
         for (int k = 0; k < 3; ++k) {
-            r[k] = soft::cell_of((box[k] - st.g) * st.inv);
-            r[3 + k] = soft::cell_of((box[3 + k] + st.g) * st.inv);
+            r[k] = soft::cell_of((box[k] - grow) * st.inv);
+            r[3 + k] = soft::cell_of((box[3 + k] + grow) * st.inv);
         }
     });
 }
@@ -283,6 +303,42 @@ inline void each_triangle(const Stage& st, const double* lo, const double* hi, i
                     }
                 }
             }
+    for (int k = 0; k < n; ++k) visit(found[k]);
+}
+
+/// each_triangle for a triangle's box [lo, hi] in a gather whose hash grew its boxes by
+/// st.half >= 0 beyond g (a list's): the triangles t2 > `after` whose box grown by g meets
+/// [lo, hi], each once. Along each axis such a box reaches [lo, hi], so it reaches within
+/// half the extent of [lo, hi] (at most st.half) of its centre: t2's hashed box, grown by
+/// g + st.half, holds the centre, and so has an entry in the centre's cell. Only that cell's
+/// bucket is read (a box look-up reads every cell the box meets, and meets each triangle in
+/// most of them again); w.tri_mark still keeps a triangle that two cells' entries share a
+/// bucket under from being visited twice.
+template <class Visit>
+inline void each_triangle_at(const Stage& st, const double* lo, const double* hi, index after,
+                             index query, Visit visit) {
+    const ContactBuffers& w = st.w;
+    const index* entries = w.hash_entries->data;
+    index* mark = w.tri_mark;
+    const index h = soft::cell_hash(soft::cell_of(0.5 * (lo[0] + hi[0]) * st.inv),
+                                    soft::cell_of(0.5 * (lo[1] + hi[1]) * st.inv),
+                                    soft::cell_of(0.5 * (lo[2] + hi[2]) * st.inv), w.hash_table);
+    constexpr int kFound = 128;
+    index found[kFound];
+    int n = 0;
+    for (index e = w.hash_start[h + 1]; e-- > w.hash_start[h];) {
+        const index t = entries[e];
+        if (t <= after) break;  // the rest of the bucket is below too
+        const double* box = w.tri_box + 6 * t;
+        const bool fresh = mark[t] != query;
+        mark[t] = query;
+        found[n] = t;
+        n += fresh & boxes_meet(lo, hi, box, box + 3, st.g);
+        if (n == kFound) {
+            for (int k = 0; k < n; ++k) visit(found[k]);
+            n = 0;
+        }
+    }
     for (int k = 0; k < n; ++k) visit(found[k]);
 }
 
@@ -656,7 +712,7 @@ inline index collect(const Stage& st) {
         // a patch's hash holds the moved triangles alone: a moved t meets those after it,
         // any other t all of them, so each pair of triangles with a moved one meets once
         const index after = patch && !((w.tri_owns[t] >> 6) & 1) ? -1 : t;
-        each_triangle(st, box, box + 3, after, t, [&](index t2) {
+        auto visit = [&](index t2) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
@@ -683,7 +739,11 @@ inline index collect(const Stage& st) {
                     ee.push(v, apart & meet & involved(v));
                 }
             }
-        });
+        };
+        if (st.half >= 0.0)
+            each_triangle_at(st, box, box + 3, after, t, visit);
+        else
+            each_triangle(st, box, box + 3, after, t, visit);
         flush();
     }
     flush();
@@ -964,9 +1024,17 @@ inline bool any_bodies_near(const Stage& st) {
 /// Returns their count; -1 for a crossing; or, below -1, minus the entries the hash needed
 /// (less 1) when its buffer could not grow to them, or minus the pairs the list needed
 /// (less 1) when it could not grow to them, with w.list[2] = 1 (0 for the hash).
-inline index gather(const Stage& st) {
-    const ContactBuffers& w = st.w;
+inline index gather(const Stage& stage) {
+    const ContactBuffers& w = stage.w;
+    Stage st = stage;
     fill_boxes(st);
+    double scale = 0.0;
+    const double half = tri_boxes(st, scale);
+    // a list's gather looks up its boxes' centres (each_triangle_at), the hashed boxes grown
+    // by the largest half extent, and by a little more for the round-off of the centre, the
+    // grown bounds and the comparisons (relative 1e-9 of the growth, 1e-12 of the largest
+    // coordinate: far above the few rounding errors of a coordinate's size)
+    st.half = st.swept ? -1.0 : half + 1e-9 * (half + st.g) + 1e-12 * scale;
     const index needed = build_hash(st);
     if (needed > w.hash_entries->capacity) {
         HashEntries& entries = *w.hash_entries;
@@ -1339,29 +1407,64 @@ struct Fit {
 /// max_i |u_i - T_last| + |T - T_last| (u_i = q_i - q0_i), the residual max_i |q0_i - qb_i -
 /// C - A (qb_i - c)| with C the fit's estimate, and sigma from the fit's stretch; C out is
 /// the mean the pass found (for the next step's estimate). With translate false, T = 0.
+/// The pass runs every step a list serves: it takes its particles kLanes at a time, their
+/// coordinates gathered into lanes (a block's last particle repeated where a body ends
+/// inside it, with no mass: the largest values are unchanged), each lane keeping its own
+/// largest values and sums, so that the arithmetic runs in vector lanes; the lanes' sums
+/// are added at the end (a different order of the same terms: T and C differ from a
+/// particle-by-particle sum by round-off alone, mu and the residual not at all).
 inline Motion kept_motion(const Model& m, const double* q0, const double* q, const double* qb,
                           const Fit& fit, bool translate, double radius) {
+    constexpr int kLanes = 8;
     const double* A = fit.A();
     const V3 c = fit.c(), C = fit.C(), T_last = translate ? fit.T() : V3{0.0, 0.0, 0.0};
+    double mu_l[kLanes] = {}, resid_l[kLanes] = {}, mass_l[kLanes] = {};
+    double su[3][kLanes] = {}, se[3][kLanes] = {};
+    for (index b = 0; b < m.bodies.count; ++b) {
+        const index first = m.bodies.particle_range[2 * b],
+                    end = m.bodies.particle_range[2 * b + 1];
+        for (index i0 = first; i0 < end; i0 += kLanes) {
+            double x0[3][kLanes], xb[3][kLanes], du[3][kLanes], mi[kLanes];
+            for (int l = 0; l < kLanes; ++l) {
+                const bool in = i0 + l < end;
+                const index i = in ? i0 + l : end - 1;
+                for (int d = 0; d < 3; ++d) {
+                    x0[d][l] = q0[3 * i + d];
+                    xb[d][l] = qb[3 * i + d];
+                    du[d][l] = q[3 * i + d] - x0[d][l];
+                }
+                mi[l] = in && m.particles.inv_mass[i] != 0.0 ? m.particles.mass[i] : 0.0;
+            }
+            for (int l = 0; l < kLanes; ++l) {
+                const double rx = xb[0][l] - c.x, ry = xb[1][l] - c.y, rz = xb[2][l] - c.z;
+                const double ex = x0[0][l] - xb[0][l] - (A[0] * rx + A[1] * ry + A[2] * rz);
+                const double ey = x0[1][l] - xb[1][l] - (A[3] * rx + A[4] * ry + A[5] * rz);
+                const double ez = x0[2][l] - xb[2][l] - (A[6] * rx + A[7] * ry + A[8] * rz);
+                const double ux = du[0][l] - T_last.x, uy = du[1][l] - T_last.y,
+                             uz = du[2][l] - T_last.z;
+                const double fx = ex - C.x, fy = ey - C.y, fz = ez - C.z;
+                const double uu = ux * ux + uy * uy + uz * uz, ff = fx * fx + fy * fy + fz * fz;
+                mu_l[l] = mu_l[l] < uu ? uu : mu_l[l];
+                resid_l[l] = resid_l[l] < ff ? ff : resid_l[l];
+                mass_l[l] += mi[l];
+                su[0][l] += mi[l] * du[0][l];
+                su[1][l] += mi[l] * du[1][l];
+                su[2][l] += mi[l] * du[2][l];
+                se[0][l] += mi[l] * ex;
+                se[1][l] += mi[l] * ey;
+                se[2][l] += mi[l] * ez;
+            }
+        }
+    }
     double mass = 0.0, mu = 0.0, resid = 0.0;
     V3 sum_u{0.0, 0.0, 0.0}, sum_e{0.0, 0.0, 0.0};
-    for (index b = 0; b < m.bodies.count; ++b)
-        for (index i = m.bodies.particle_range[2 * b]; i < m.bodies.particle_range[2 * b + 1];
-             ++i) {
-            const V3 x0 = load(q0, i), xb = load(qb, i);
-            const V3 du = load(q, i) - x0;
-            const V3 r = xb - c;
-            const V3 e{x0.x - xb.x - (A[0] * r.x + A[1] * r.y + A[2] * r.z),
-                       x0.y - xb.y - (A[3] * r.x + A[4] * r.y + A[5] * r.z),
-                       x0.z - xb.z - (A[6] * r.x + A[7] * r.y + A[8] * r.z)};
-            const V3 u = du - T_last, f = e - C;
-            mu = std::max(mu, dot(u, u));
-            resid = std::max(resid, dot(f, f));
-            const double mi = m.particles.inv_mass[i] == 0.0 ? 0.0 : m.particles.mass[i];
-            mass += mi;
-            sum_u = sum_u + mi * du;
-            sum_e = sum_e + mi * e;
-        }
+    for (int l = 0; l < kLanes; ++l) {
+        mu = std::max(mu, mu_l[l]);
+        resid = std::max(resid, resid_l[l]);
+        mass += mass_l[l];
+        sum_u = sum_u + V3{su[0][l], su[1][l], su[2][l]};
+        sum_e = sum_e + V3{se[0][l], se[1][l], se[2][l]};
+    }
     Motion out;
     if (mass > 0.0 && translate) out.T = (1.0 / mass) * sum_u;
     const V3 dT = out.T - T_last;
