@@ -716,7 +716,8 @@ inline index collect(const Stage& st) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
             const double* box2 = w.tri_box + 6 * t2;
-            if ((!patch || st.check_patch) && st.check && starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
+            if ((!patch || st.check_patch) && st.check &&
+                starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
                 (edge_through(st, t, tri, t2, tri2) || edge_through(st, t2, tri2, t, tri))) {
                 crossed = true;
                 return;
