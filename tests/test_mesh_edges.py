@@ -558,19 +558,20 @@ def test_a_stiff_sheet_rests_on_a_smooth_sphere_mesh_as_on_the_sphere():
     centred it ends 0.0004 m off the axis, dropped 3 cm off it ends 2.8 cm off (a vertex
     resting on it goes back to where its path entered it each step). On the 1,280-triangle
     mesh of the same sphere the sheet rests on the mesh's corners and chords (they hold it
-    0.2-0.8 mm out, its vertices off the faces), and a corner's contact takes the contact
-    point back to where its path crossed its level, as a vertex contact does. Dropped
-    centred the sheet ends within 2 cm of the axis (the tessellation breaks the symmetry as
-    it lands; measured 0.008 m; vertices alone 0.027 m; before, 0.23 m: it slid off);
-    dropped 3 cm off it stays on the sphere's top, its centre within 0.1 m of the axis,
-    where the top is less than 24 degrees steep (measured 0.058 m; before, 0.45 m: on the
-    ground). Frictionless the mesh lets it slide off (measured 0.34 m): the contacts hold
-    positions back, the friction their velocities."""
+    0.2-0.8 mm out, its vertices off the faces), and a corner's and a chord's first push of
+    a step takes the contact point back to where its path crossed its level, as a vertex
+    contact does. Dropped 3 cm off, the sheet ends within 5 mm of where the analytic sphere
+    holds it (measured 3.03 cm against 2.84 cm; with the chords pushed straight out, 5.5
+    cm and still creeping downhill; before the corners were held too, 0.45 m: on the
+    ground). Dropped centred it ends within 1 cm of the axis (the tessellation breaks the
+    symmetry as it lands; measured 0.004 m; chords pushed straight out 0.007 m; before,
+    0.23 m: it slid off). Frictionless the mesh lets it slide off (measured 0.30 m): the
+    contacts hold positions back, the friction their velocities."""
     sphere = drape_offset(sb.ColliderSphere(center=DRAPE_CENTRE, radius=0.25, friction=0.1),
                           shift=0.03)  # fmt: skip
     assert abs(sphere - 0.03) < 0.01  # the analytic sphere holds it where it was
-    assert drape_offset(drape_sphere_mesh(0.1)) < 0.02
-    assert drape_offset(drape_sphere_mesh(0.1), shift=0.03) < 0.1
+    assert drape_offset(drape_sphere_mesh(0.1)) < 0.01
+    assert abs(drape_offset(drape_sphere_mesh(0.1), shift=0.03) - sphere) < 0.005
     assert drape_offset(drape_sphere_mesh(0.0)) > 0.2
 
 
