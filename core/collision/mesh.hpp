@@ -46,11 +46,12 @@
 //      which passes through the surface cuts a chord, across a smooth patch as across a
 //      ridge, whatever the edges' angles. Between successive crossings the points at 1/4,
 //      1/2 and 3/4 are tested with the inside test above; the deepest goes to its closest
-//      surface point plus the margin (along the direction to it; on its first push taken back
-//      along its path, below), and the edge is tested again (up to kRounds). A flat face cannot be
-//      cut between two outside vertices, and a chord under a concave edge alone cannot exist
-//      (a straight segment entering a valley leaves it on the inside), so 2 with the bent
-//      edges and 3 with the faces test for every crossing the two surfaces can have.
+//      surface point plus the margin (along the direction to it; on its first push taken
+//      back along its path, below), and the edge is tested again (up to kRounds). A flat
+//      face cannot be cut between two outside vertices, and a chord under a concave edge
+//      alone cannot exist (a straight segment entering a valley leaves it on the inside), so
+//      2 with the bent edges and 3 with the faces test for every crossing the two surfaces
+//      can have.
 // The soft side moves with barycentric weights w_k, mass-weighted (particle k by w_k / m_k /
 // sum_l w_l^2 / m_l times the contact point's move, cut where pinned particles carry most of
 // the weight: push()), and the contact point's velocity relative to the collider takes
@@ -60,8 +61,9 @@
 // entered: so a sheet resting on a smooth mesh's corners and chords is held there as on the
 // analytic shape. Such a move runs along the surface and may carry a neighbouring soft
 // edge, already cleared, back through it (pushed straight out, a contact only lifts its
-// particles): every soft triangle with a particle so moved is treated again after the
-// pass, with straight pushes only.
+// particles): after the pass, every soft edge at a particle so moved (by more than a quarter
+// of the margin, summed over the step's held pushes) is tested again as a chord, pushed
+// straight out (the balloon-ring scene's ring was otherwise cut).
 // Concave edges take part only in 2.
 #pragma once
 
@@ -456,6 +458,10 @@ inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
 constexpr double kFreeWeight = 0.25;  // push(): below it, the free particles' share is cut
 constexpr int kCrossings = 16;  // most crossings of one soft edge through the mesh kept
 constexpr int kRounds = 4;      // most pushes of one soft edge (chords) or triangle (caps)
+// held pushes' take-back of a particle [margins] up to which its soft edges are not tested
+// again: moved along the surface by less, an edge whose chord was pushed out to the margin
+// stays outside
+constexpr double kDragged = 0.25;
 
 /// Adds s to the ascending list s_out of count entries (at most kCrossings: then dropped).
 inline void add_crossing(double* s_out, int& count, double s) {
@@ -561,8 +567,7 @@ struct Frame {
 /// the move, not move / w, which folds the soft surface through itself as w goes to 0.
 /// `stick` (a ridge's, a cap's or a chord's first push of the step): the move also takes the
 /// contact point back along its path of the step, to where it crossed the level it goes to
-/// (below); `held` (when given) receives the squared length [m^2] of that take-back (0:
-/// none).
+/// (below); `held` (when given) receives the length [m] of that take-back (0: none).
 inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l, V3 x_local,
                  V3 move, V3 normal, bool resting, double* q, double* qd, V3& j,
                  colliders::Seen* seen, bool stick = false, double* held = nullptr) {
@@ -603,7 +608,7 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
             const double s = h0 > 0.0 ? h0 / (h0 - h1) : 0.0;
             const V3 back = (1.0 - s) * (path - dot(path, normal) * normal);
             move = move - back;
-            if (held != nullptr) *held = dot(back, back);
+            if (held != nullptr) *held = std::sqrt(dot(back, back));
         }
     }
     const double gain = free_weight < kFreeWeight ? free_weight / kFreeWeight : 1.0;
@@ -653,22 +658,55 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         root_box[d] = rb[d] - margin;
         root_box[3 + d] = rb[3 + d] + margin;
     }
-    // the particles a push took back along their path (push()'s `stick`): their moves
-    // along the surface may carry a neighbouring soft edge, already cleared, back into it
-    thread_local std::vector<unsigned char> flags;
-    thread_local std::vector<index> marked;
-    if (flags.size() < static_cast<size_t>(m.particles.count)) flags.resize(m.particles.count, 0);
+    // how far held pushes took each particle back along its path (push()'s `stick`; the
+    // contact points' take-backs summed, per particle) [m], and the particles with any: moves
+    // along the surface, which may carry a neighbouring soft edge, already cleared, back
+    // into it (kept across steps, all zero between calls)
+    thread_local std::vector<double> drag;
+    thread_local std::vector<index> dragged;
+    if (drag.size() < static_cast<size_t>(m.particles.count)) drag.resize(m.particles.count, 0.0);
     auto mark = [&](int n, const index* idx, double held) {
         if (!(held > 0.0)) return;
-        for (int a = 0; a < n; ++a)
-            if (flags[idx[a]] == 0) {
-                flags[idx[a]] = 1;
-                marked.push_back(idx[a]);
-            }
+        for (int a = 0; a < n; ++a) {
+            if (drag[idx[a]] == 0.0) dragged.push_back(idx[a]);
+            drag[idx[a]] += held;
+        }
     };
-    // soft triangle t's ridges, corners and caps, and chords; `hold`: their first pushes take
-    // the contact point back along its path (push()'s `stick`)
-    auto treat = [&](index t, bool hold) {
+    // a chord: the soft edge idx (local ends ls, updated) through the faces, at the `known`
+    // crossings (cut, ascending) or (known < 0) those found anew, pushed out at its deepest
+    // sample (up to kRounds); `hold`: its first push takes the contact point back along its
+    // path (push()'s `stick`). Returns whether it moved the edge.
+    auto chord = [&](const index* idx, V3* ls, double* cut, int known, bool hold) {
+        bool moved = false;
+        for (int round = 0; round <= kRounds; ++round) {
+            const int count = round == 0 && known >= 0
+                                  ? known
+                                  : segment_crossings(v, root, ls[0], ls[1], cut);
+            if (count == 0) break;
+            Nearest near;
+            const double at = deepest_inside(v, root, ls[0], ls[1], cut, count, near);
+            if (at < 0.0) break;  // grazing the surface
+            if (round == kRounds) {  // pushed in every round and still through
+                report(idx[0], idx[1], false);
+                break;
+            }
+            const V3 x = ls[0] + at * (ls[1] - ls[0]);
+            const double dist = std::sqrt(near.d2);
+            const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
+            const double w[2] = {1.0 - at, at};
+            double held = 0.0;
+            if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd, j,
+                      seen, hold && round == 0, &held)) {
+                report(idx[0], idx[1], false);  // both ends pinned
+                break;
+            }
+            mark(2, idx, held);
+            moved = true;
+        }
+        return moved;
+    };
+    // every soft triangle, its first pushes held (taken back along their paths)
+    for (index t = 0; t < m.triangles.count; ++t) {
         const index* tri = m.triangles.indices + 3 * t;
         V3 l[3];
         double lo[3], hi[3];
@@ -686,7 +724,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             }
         };
         place();
-        if (!boxes_meet(lo, hi, root_box)) return;
+        if (!boxes_meet(lo, hi, root_box)) continue;
         bool capped = false;  // a collider edge through the triangle pushed it this round
         bool pushed = false;  // anything moved the triangle's corners
         bool check = false;   // the round after kRounds: a cap still there is reported
@@ -784,7 +822,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         int cut_count[3] = {0, 0, 0};
         for (int round = 0; round <= kRounds; ++round) {
             check = round == kRounds;  // pushed in every round: only look whether one is left
-            first = round == 0 && hold;
+            first = round == 0;
             capped = false;
             // a mesh triangle wholly on one side of the soft triangle's plane can neither be
             // crossed by a soft edge nor have an edge through the soft triangle: most near a
@@ -821,46 +859,31 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             if (m.triangles.edge_owner[3 * t + a] == 0) continue;
             const index idx[2] = {tri[a], tri[(a + 1) % 3]};
             V3 ls[2] = {l[a], l[(a + 1) % 3]};
-            for (int round = 0; round <= kRounds; ++round) {
-                const int count = round == 0 && !pushed
-                                      ? cut_count[a]
-                                      : segment_crossings(v, root, ls[0], ls[1], cuts[a]);
-                if (count == 0) break;
-                Nearest near;
-                const double at = deepest_inside(v, root, ls[0], ls[1], cuts[a], count, near);
-                if (at < 0.0) break;  // grazing the surface
-                if (round == kRounds) {  // pushed in every round and still through
-                    report(idx[0], idx[1], false);
-                    break;
-                }
-                const V3 x = ls[0] + at * (ls[1] - ls[0]);
-                const double dist = std::sqrt(near.d2);
-                const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
-                const double w[2] = {1.0 - at, at};
-                double held = 0.0;
-                if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd,
-                          j, seen, hold && round == 0, &held)) {
-                    report(idx[0], idx[1], false);  // both ends pinned
-                    break;
-                }
-                mark(2, idx, held);
-                pushed = true;
-            }
+            pushed |= chord(idx, ls, cuts[a], pushed ? -1 : cut_count[a], true);
             l[a] = ls[0];
             l[(a + 1) % 3] = ls[1];
         }
-    };
-    // every soft triangle, its first pushes held (taken back along their paths); then each
-    // with a particle a held push moved along the surface, again with straight pushes (the
-    // edges it shares with triangles treated before that move are tested anew)
-    for (index t = 0; t < m.triangles.count; ++t) treat(t, true);
-    if (marked.empty()) return;
-    for (index t = 0; t < m.triangles.count; ++t) {
-        const index* tri = m.triangles.indices + 3 * t;
-        if (flags[tri[0]] != 0 || flags[tri[1]] != 0 || flags[tri[2]] != 0) treat(t, false);
     }
-    for (const index i : marked) flags[i] = 0;
-    marked.clear();
+    // then each soft edge with a particle that held pushes moved along the surface by more
+    // than kDragged margins (the edges it shares with triangles treated before that move)
+    // tested anew as a chord, pushed straight out
+    const double far = kDragged * margin;
+    bool any = false;
+    for (const index i : dragged) any |= drag[i] > far;
+    double cut[kCrossings];
+    for (index t = 0; t < m.triangles.count && any; ++t) {
+        const index* tri = m.triangles.indices + 3 * t;
+        for (int a = 0; a < 3; ++a) {
+            const index idx[2] = {tri[a], tri[(a + 1) % 3]};
+            if (m.triangles.edge_owner[3 * t + a] == 0 ||
+                (drag[idx[0]] <= far && drag[idx[1]] <= far))
+                continue;
+            V3 ls[2] = {to_local(r, load(q, idx[0]) - c), to_local(r, load(q, idx[1]) - c)};
+            chord(idx, ls, cut, -1, false);
+        }
+    }
+    for (const index i : dragged) drag[i] = 0.0;
+    dragged.clear();
 }
 
 /// The roots in [0, 1] of c0 + c1 t + c2 t^2 (at most 2, ascending, into t; returns how
