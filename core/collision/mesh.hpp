@@ -61,9 +61,9 @@
 // entered: so a sheet resting on a smooth mesh's corners and chords is held there as on the
 // analytic shape. Such a move runs along the surface and may carry a neighbouring soft
 // edge, already cleared, back through it (pushed straight out, a contact only lifts its
-// particles): after the pass, every soft edge at a particle so moved (by more than a quarter
-// of the margin, summed over the step's held pushes) is tested again as a chord, pushed
-// straight out (the balloon-ring scene's ring was otherwise cut).
+// particles): after the pass, every soft triangle at a particle so moved (by more than a
+// quarter of the margin, summed over the step's held pushes) is treated again, with
+// straight pushes only (the balloon-ring scene's ring was otherwise cut).
 // Concave edges take part only in 2.
 #pragma once
 
@@ -458,9 +458,9 @@ inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
 constexpr double kFreeWeight = 0.25;  // push(): below it, the free particles' share is cut
 constexpr int kCrossings = 16;  // most crossings of one soft edge through the mesh kept
 constexpr int kRounds = 4;      // most pushes of one soft edge (chords) or triangle (caps)
-// held pushes' take-back of a particle [margins] up to which its soft edges are not tested
-// again: moved along the surface by less, an edge whose chord was pushed out to the margin
-// stays outside
+// held pushes' take-back of a particle [margins] up to which its soft triangles are not
+// treated again: moved along the surface by less, an edge whose chord was pushed out to the
+// margin stays outside
 constexpr double kDragged = 0.25;
 
 /// Adds s to the ascending list s_out of count entries (at most kCrossings: then dropped).
@@ -705,8 +705,9 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         }
         return moved;
     };
-    // every soft triangle, its first pushes held (taken back along their paths)
-    for (index t = 0; t < m.triangles.count; ++t) {
+    // soft triangle t's ridges, corners and caps, and chords; `hold`: their first pushes take
+    // the contact point back along its path (push()'s `stick`)
+    auto treat = [&](index t, bool hold) {
         const index* tri = m.triangles.indices + 3 * t;
         V3 l[3];
         double lo[3], hi[3];
@@ -724,7 +725,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             }
         };
         place();
-        if (!boxes_meet(lo, hi, root_box)) continue;
+        if (!boxes_meet(lo, hi, root_box)) return;
         bool capped = false;  // a collider edge through the triangle pushed it this round
         bool pushed = false;  // anything moved the triangle's corners
         bool check = false;   // the round after kRounds: a cap still there is reported
@@ -822,7 +823,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         int cut_count[3] = {0, 0, 0};
         for (int round = 0; round <= kRounds; ++round) {
             check = round == kRounds;  // pushed in every round: only look whether one is left
-            first = round == 0;
+            first = round == 0 && hold;
             capped = false;
             // a mesh triangle wholly on one side of the soft triangle's plane can neither be
             // crossed by a soft edge nor have an edge through the soft triangle: most near a
@@ -859,28 +860,23 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             if (m.triangles.edge_owner[3 * t + a] == 0) continue;
             const index idx[2] = {tri[a], tri[(a + 1) % 3]};
             V3 ls[2] = {l[a], l[(a + 1) % 3]};
-            pushed |= chord(idx, ls, cuts[a], pushed ? -1 : cut_count[a], true);
+            pushed |= chord(idx, ls, cuts[a], pushed ? -1 : cut_count[a], hold);
             l[a] = ls[0];
             l[(a + 1) % 3] = ls[1];
         }
-    }
-    // then each soft edge with a particle that held pushes moved along the surface by more
-    // than kDragged margins (the edges it shares with triangles treated before that move)
-    // tested anew as a chord, pushed straight out
+    };
+    // every soft triangle, its first pushes held (taken back along their paths); then each
+    // with a particle that held pushes moved along the surface by more than kDragged margins
+    // (its edges shared with triangles treated before that move) again, with straight
+    // pushes
+    for (index t = 0; t < m.triangles.count; ++t) treat(t, true);
+    if (dragged.empty()) return;
     const double far = kDragged * margin;
     bool any = false;
     for (const index i : dragged) any |= drag[i] > far;
-    double cut[kCrossings];
     for (index t = 0; t < m.triangles.count && any; ++t) {
         const index* tri = m.triangles.indices + 3 * t;
-        for (int a = 0; a < 3; ++a) {
-            const index idx[2] = {tri[a], tri[(a + 1) % 3]};
-            if (m.triangles.edge_owner[3 * t + a] == 0 ||
-                (drag[idx[0]] <= far && drag[idx[1]] <= far))
-                continue;
-            V3 ls[2] = {to_local(r, load(q, idx[0]) - c), to_local(r, load(q, idx[1]) - c)};
-            chord(idx, ls, cut, -1, false);
-        }
+        if (drag[tri[0]] > far || drag[tri[1]] > far || drag[tri[2]] > far) treat(t, false);
     }
     for (const index i : dragged) drag[i] = 0.0;
     dragged.clear();
