@@ -635,12 +635,15 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
 /// Mesh collider k's edges and faces against the soft bodies' edges and triangles (the
 /// header's edge contacts), at the positions q (N, 3) the vertex contacts left; q, qd change
 /// in place, j gathers the impulse the collider receives [N s]. c, r, vc, wc: the collider's
-/// pose and velocities at the step's end.
-inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc,
-                          double e, double keep, double* q, double* qd, V3& j,
-                          colliders::Seen* seen, index* crossed = nullptr,
-                          const double* q_start = nullptr, V3 c0 = {0.0, 0.0, 0.0},
-                          const double* r0 = nullptr) {
+/// pose and velocities at the step's end. Kept out of line: inlined into the collider
+/// stage, its size slowed the vertex contacts of a mesh collider (even one without edge
+/// contacts) by about 10 % in benchmarks/mesh_collider.py.
+[[gnu::noinline]] inline void edge_contacts(const Model& m, index k, V3 c, const double* r,
+                                            V3 vc, V3 wc, double e, double keep, double* q,
+                                            double* qd, V3& j, colliders::Seen* seen,
+                                            index* crossed = nullptr,
+                                            const double* q_start = nullptr,
+                                            V3 c0 = {0.0, 0.0, 0.0}, const double* r0 = nullptr) {
     const index root = m.colliders.mesh_root[k];
     const View v{m};
     if (root < 0 || !v.has_sharp(root)) return;  // edge contacts off
