@@ -553,20 +553,25 @@ def drape_sphere_mesh(friction: float) -> sb.ColliderMesh:
 
 
 def test_a_stiff_sheet_rests_on_a_smooth_sphere_mesh():
-    """Issue 32 (cloth slid off smooth mesh colliders). Reference: dropped centred on the
-    analytic ColliderSphere (friction 0.1) the stiff drape sheet stays where it lands, by
-    symmetry (4e-8 m off the axis). On the 1,280-triangle mesh of the same sphere the sheet
-    rests on the mesh's corners and chords (they hold it 0.2-0.8 mm out, its vertices off
-    the faces), and a corner's contact takes the contact point back to where its path
-    crossed its level, as a mesh vertex's contact does. Dropped centred the sheet ends
-    within 2 cm of the axis (the tessellation breaks the symmetry as it lands; measured
-    0.008 m; vertices alone 0.027 m; before, 0.23 m: it slid off); dropped 3 cm off it
-    stays on the sphere's top, its centre within 0.1 m of the axis, where the top is less
-    than 24 degrees steep (measured 0.058 m; before, 0.45 m: on the ground). Frictionless
-    the mesh lets it slide off (measured 0.34 m). (The analytic sphere, which has no
-    static friction either, lets the sheet dropped 3 cm off slide off: 0.45 m.)"""
-    assert drape_offset(drape_sphere_mesh(0.1)) < 0.02
-    assert drape_offset(drape_sphere_mesh(0.1), shift=0.03) < 0.1
+    """Issue 32 (cloth slid off smooth mesh colliders). Reference: the stiff drape sheet
+    (friction 0.1) stays where it lands on top of a sphere, as a mesh vertex resting on a
+    mesh collider goes back to where its path entered it each step (dropped centred on the
+    analytic ColliderSphere it stays centred by symmetry). On the 1,280-triangle mesh of
+    the sphere the sheet rests on the mesh's corners and chords (they hold it 0.2-0.8 mm
+    out, its vertices off the faces), and a corner's and a chord's first push of a step
+    takes the contact point back to where its path crossed its level, as a vertex contact
+    does. Dropped 3 cm off the axis, the sheet ends within 5 mm of where it landed
+    (measured 3.03 cm; the sheet still sways: within 8 mm of the held sheet at every 0.2 s
+    up to 3.2 s; with the chords pushed straight out, 5.5 cm, having slid downhill, and
+    5.35 cm at 3.2 s; before the corners were held too, 0.45 m: on the ground). Dropped
+    centred it ends within 1 cm of the axis (the tessellation breaks the symmetry as it
+    lands; measured 0.004 m; chords pushed straight out 0.007 m; before, 0.23 m: it slid
+    off). Frictionless the mesh lets it slide off (measured 0.30 m): the contacts hold
+    positions back, the friction their velocities. (The analytic sphere, whose contacts
+    keep a particle's motion along its surface and which has no static friction, lets the
+    sheet dropped 3 cm off slide off: 0.45 m.)"""
+    assert drape_offset(drape_sphere_mesh(0.1)) < 0.01
+    assert abs(drape_offset(drape_sphere_mesh(0.1), shift=0.03) - 0.03) < 0.005
     assert drape_offset(drape_sphere_mesh(0.0)) > 0.2
 
 

@@ -46,20 +46,24 @@
 //      which passes through the surface cuts a chord, across a smooth patch as across a
 //      ridge, whatever the edges' angles. Between successive crossings the points at 1/4,
 //      1/2 and 3/4 are tested with the inside test above; the deepest goes to its closest
-//      surface point plus the margin (along the direction to it), and the edge is tested
-//      again (up to kRounds). A flat face cannot be
-//      cut between two outside vertices, and a chord under a concave edge alone cannot exist
-//      (a straight segment entering a valley leaves it on the inside), so 2 with the bent
-//      edges and 3 with the faces test for every crossing the two surfaces can have.
+//      surface point plus the margin (along the direction to it; on its first push taken
+//      back along its path, below), and the edge is tested again (up to kRounds). A flat
+//      face cannot be cut between two outside vertices, and a chord under a concave edge
+//      alone cannot exist (a straight segment entering a valley leaves it on the inside), so
+//      2 with the bent edges and 3 with the faces test for every crossing the two surfaces
+//      can have.
 // The soft side moves with barycentric weights w_k, mass-weighted (particle k by w_k / m_k /
 // sum_l w_l^2 / m_l times the contact point's move, cut where pinned particles carry most of
 // the weight: push()), and the contact point's velocity relative to the collider takes
 // restitution and friction as a vertex's does; the collider receives the opposite impulse.
-// A ridge's or a cap's first push of a step puts the contact point where its path of the step
-// crossed the level it is pushed to, as a vertex goes back to where its path entered: so a
-// sheet resting on a smooth mesh's corners is held there as on the analytic shape (the
-// chords' deepest sample is pushed straight out: taken back along its path it left soft
-// edges through the ring of the balloon-ring scene).
+// A ridge's, a cap's or a chord's first push of a step puts the contact point where its path
+// of the step crossed the level it is pushed to, as a vertex goes back to where its path
+// entered: so a sheet resting on a smooth mesh's corners and chords is held there as on the
+// analytic shape. Such a move runs along the surface and may carry a neighbouring soft
+// edge, already cleared, back through it (pushed straight out, a contact only lifts its
+// particles): after the pass, every soft triangle at a particle so moved (by more than a
+// quarter of the margin, summed over the step's held pushes) is treated again, with
+// straight pushes only (the balloon-ring scene's ring was otherwise cut).
 // Concave edges take part only in 2.
 #pragma once
 
@@ -454,6 +458,10 @@ inline bool segment_meets_triangle(V3 a, V3 b, V3 p0, V3 p1, V3 p2) {
 constexpr double kFreeWeight = 0.25;  // push(): below it, the free particles' share is cut
 constexpr int kCrossings = 16;  // most crossings of one soft edge through the mesh kept
 constexpr int kRounds = 4;      // most pushes of one soft edge (chords) or triangle (caps)
+// held pushes' take-back of a particle [margins] up to which its soft triangles are not
+// treated again: moved along the surface by less, an edge whose chord was pushed out to the
+// margin stays outside
+constexpr double kDragged = 0.25;
 
 /// Adds s to the ascending list s_out of count entries (at most kCrossings: then dropped).
 inline void add_crossing(double* s_out, int& count, double s) {
@@ -557,11 +565,12 @@ struct Frame {
 /// thickness stage holds in its second pass), the move and the velocity change are scaled by
 /// that sum over kFreeWeight: a free particle then moves at most about 1 / kFreeWeight times
 /// the move, not move / w, which folds the soft surface through itself as w goes to 0.
-/// `stick` (a ridge's or a cap's first push of the step): the move also takes the contact
-/// point back along its path of the step, to where it crossed the level it goes to (below).
+/// `stick` (a ridge's, a cap's or a chord's first push of the step): the move also takes the
+/// contact point back along its path of the step, to where it crossed the level it goes to
+/// (below); `held` (when given) receives the length [m] of that take-back (0: none).
 inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l, V3 x_local,
                  V3 move, V3 normal, bool resting, double* q, double* qd, V3& j,
-                 colliders::Seen* seen, bool stick = false) {
+                 colliders::Seen* seen, bool stick = false, double* held = nullptr) {
     const Model& m = f.m;
     double sum = 0.0, free_weight = 0.0;
     V3 vel{0.0, 0.0, 0.0};
@@ -585,7 +594,7 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
         // (resolve(); the analytic sphere and box likewise): of its motion into the
         // surface, the part along the surface after that crossing is undone; the part
         // along the normal is the push's. Pushed straight out instead, a sheet resting on
-        // a smooth mesh's corners (its caps) is never held back but by the friction on
+        // a smooth mesh's corners and chords is never held back but by the friction on
         // its velocity, and slides off where the analytic shape holds it.
         V3 x0{0.0, 0.0, 0.0}, x1{0.0, 0.0, 0.0};
         for (int k = 0; k < n; ++k) {
@@ -597,7 +606,9 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
         const double h0 = h1 - dot(path, normal);   // the start's
         if (h1 < 0.0 && h0 > h1) {  // it moved down through (or below) the level
             const double s = h0 > 0.0 ? h0 / (h0 - h1) : 0.0;
-            move = move - (1.0 - s) * (path - dot(path, normal) * normal);
+            const V3 back = (1.0 - s) * (path - dot(path, normal) * normal);
+            move = move - back;
+            if (held != nullptr) *held = std::sqrt(dot(back, back));
         }
     }
     const double gain = free_weight < kFreeWeight ? free_weight / kFreeWeight : 1.0;
@@ -624,12 +635,15 @@ inline bool push(const Frame& f, int n, const index* idx, const double* w, V3* l
 /// Mesh collider k's edges and faces against the soft bodies' edges and triangles (the
 /// header's edge contacts), at the positions q (N, 3) the vertex contacts left; q, qd change
 /// in place, j gathers the impulse the collider receives [N s]. c, r, vc, wc: the collider's
-/// pose and velocities at the step's end.
-inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc, V3 wc,
-                          double e, double keep, double* q, double* qd, V3& j,
-                          colliders::Seen* seen, index* crossed = nullptr,
-                          const double* q_start = nullptr, V3 c0 = {0.0, 0.0, 0.0},
-                          const double* r0 = nullptr) {
+/// pose and velocities at the step's end. Kept out of line: inlined into the collider
+/// stage, its size slowed the vertex contacts of a mesh collider (even one without edge
+/// contacts) by about 10 % in benchmarks/mesh_collider.py.
+[[gnu::noinline]] inline void edge_contacts(const Model& m, index k, V3 c, const double* r,
+                                            V3 vc, V3 wc, double e, double keep, double* q,
+                                            double* qd, V3& j, colliders::Seen* seen,
+                                            index* crossed = nullptr,
+                                            const double* q_start = nullptr,
+                                            V3 c0 = {0.0, 0.0, 0.0}, const double* r0 = nullptr) {
     const index root = m.colliders.mesh_root[k];
     const View v{m};
     if (root < 0 || !v.has_sharp(root)) return;  // edge contacts off
@@ -647,7 +661,56 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         root_box[d] = rb[d] - margin;
         root_box[3 + d] = rb[3 + d] + margin;
     }
-    for (index t = 0; t < m.triangles.count; ++t) {
+    // how far held pushes took each particle back along its path (push()'s `stick`; the
+    // contact points' take-backs summed, per particle) [m], and the particles with any: moves
+    // along the surface, which may carry a neighbouring soft edge, already cleared, back
+    // into it (kept across steps, all zero between calls)
+    thread_local std::vector<double> drag;
+    thread_local std::vector<index> dragged;
+    if (drag.size() < static_cast<size_t>(m.particles.count)) drag.resize(m.particles.count, 0.0);
+    auto mark = [&](int n, const index* idx, double held) {
+        if (!(held > 0.0)) return;
+        for (int a = 0; a < n; ++a) {
+            if (drag[idx[a]] == 0.0) dragged.push_back(idx[a]);
+            drag[idx[a]] += held;
+        }
+    };
+    // a chord: the soft edge idx (local ends ls, updated) through the faces, at the `known`
+    // crossings (cut, ascending) or (known < 0) those found anew, pushed out at its deepest
+    // sample (up to kRounds); `hold`: its first push takes the contact point back along its
+    // path (push()'s `stick`). Returns whether it moved the edge.
+    auto chord = [&](const index* idx, V3* ls, double* cut, int known, bool hold) {
+        bool moved = false;
+        for (int round = 0; round <= kRounds; ++round) {
+            const int count = round == 0 && known >= 0
+                                  ? known
+                                  : segment_crossings(v, root, ls[0], ls[1], cut);
+            if (count == 0) break;
+            Nearest near;
+            const double at = deepest_inside(v, root, ls[0], ls[1], cut, count, near);
+            if (at < 0.0) break;  // grazing the surface
+            if (round == kRounds) {  // pushed in every round and still through
+                report(idx[0], idx[1], false);
+                break;
+            }
+            const V3 x = ls[0] + at * (ls[1] - ls[0]);
+            const double dist = std::sqrt(near.d2);
+            const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
+            const double w[2] = {1.0 - at, at};
+            double held = 0.0;
+            if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd, j,
+                      seen, hold && round == 0, &held)) {
+                report(idx[0], idx[1], false);  // both ends pinned
+                break;
+            }
+            mark(2, idx, held);
+            moved = true;
+        }
+        return moved;
+    };
+    // soft triangle t's ridges, corners and caps, and chords; `hold`: their first pushes take
+    // the contact point back along its path (push()'s `stick`)
+    auto treat = [&](index t, bool hold) {
         const index* tri = m.triangles.indices + 3 * t;
         V3 l[3];
         double lo[3], hi[3];
@@ -665,7 +728,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             }
         };
         place();
-        if (!boxes_meet(lo, hi, root_box)) continue;
+        if (!boxes_meet(lo, hi, root_box)) return;
         bool capped = false;  // a collider edge through the triangle pushed it this round
         bool pushed = false;  // anything moved the triangle's corners
         bool check = false;   // the round after kRounds: a cap still there is reported
@@ -713,8 +776,10 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
                 const index idx[2] = {tri[a], tri[b]};
                 const double w[2] = {1.0 - s, s};
                 V3 ls[2] = {l[a], l[b]};
+                double held = 0.0;
                 if (push(f, 2, idx, w, ls, xm, (xm + margin * n) - xs, n, !inside, q, qd, j,
-                         seen, first)) {
+                         seen, first, &held)) {
+                    mark(2, idx, held);
                     l[a] = ls[0];
                     l[b] = ls[1];
                     pushed = true;
@@ -744,9 +809,11 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             if (!std::isfinite(best)) return;
             if (check) return report(tri[0], t, true);
             const double w[3] = {at.wa, at.wb, at.wc};
+            double held = 0.0;
             const bool moved = push(f, 3, tri, w, l, at.x, (best + margin) * nbest, nbest, false,
-                                    q, qd, j, seen, first);
+                                    q, qd, j, seen, first, &held);
             if (!moved) report(tri[0], t, true);  // every corner pinned
+            mark(3, tri, held);
             capped |= moved;
             pushed |= capped;
         };
@@ -759,7 +826,7 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
         int cut_count[3] = {0, 0, 0};
         for (int round = 0; round <= kRounds; ++round) {
             check = round == kRounds;  // pushed in every round: only look whether one is left
-            first = round == 0;
+            first = round == 0 && hold;
             capped = false;
             // a mesh triangle wholly on one side of the soft triangle's plane can neither be
             // crossed by a soft edge nor have an edge through the soft triangle: most near a
@@ -796,33 +863,26 @@ inline void edge_contacts(const Model& m, index k, V3 c, const double* r, V3 vc,
             if (m.triangles.edge_owner[3 * t + a] == 0) continue;
             const index idx[2] = {tri[a], tri[(a + 1) % 3]};
             V3 ls[2] = {l[a], l[(a + 1) % 3]};
-            for (int round = 0; round <= kRounds; ++round) {
-                const int count = round == 0 && !pushed
-                                      ? cut_count[a]
-                                      : segment_crossings(v, root, ls[0], ls[1], cuts[a]);
-                if (count == 0) break;
-                Nearest near;
-                const double at = deepest_inside(v, root, ls[0], ls[1], cuts[a], count, near);
-                if (at < 0.0) break;  // grazing the surface
-                if (round == kRounds) {  // pushed in every round and still through
-                    report(idx[0], idx[1], false);
-                    break;
-                }
-                const V3 x = ls[0] + at * (ls[1] - ls[0]);
-                const double dist = std::sqrt(near.d2);
-                const V3 n = dist > 0.0 ? (1.0 / dist) * (near.x - x) : near.n;
-                const double w[2] = {1.0 - at, at};
-                if (!push(f, 2, idx, w, ls, near.x, (near.x + margin * n) - x, n, false, q, qd,
-                          j, seen)) {
-                    report(idx[0], idx[1], false);  // both ends pinned
-                    break;
-                }
-                pushed = true;
-            }
+            pushed |= chord(idx, ls, cuts[a], pushed ? -1 : cut_count[a], hold);
             l[a] = ls[0];
             l[(a + 1) % 3] = ls[1];
         }
+    };
+    // every soft triangle, its first pushes held (taken back along their paths); then each
+    // with a particle that held pushes moved along the surface by more than kDragged margins
+    // (its edges shared with triangles treated before that move) again, with straight
+    // pushes
+    for (index t = 0; t < m.triangles.count; ++t) treat(t, true);
+    if (dragged.empty()) return;
+    const double far = kDragged * margin;
+    bool any = false;
+    for (const index i : dragged) any |= drag[i] > far;
+    for (index t = 0; t < m.triangles.count && any; ++t) {
+        const index* tri = m.triangles.indices + 3 * t;
+        if (drag[tri[0]] > far || drag[tri[1]] > far || drag[tri[2]] > far) treat(t, false);
     }
+    for (const index i : dragged) drag[i] = 0.0;
+    dragged.clear();
 }
 
 /// The roots in [0, 1] of c0 + c1 t + c2 t^2 (at most 2, ascending, into t; returns how
