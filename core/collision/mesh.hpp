@@ -58,8 +58,8 @@
 // restitution and friction as a vertex's does; the collider receives the opposite impulse.
 // A ridge's, a cap's or a chord's first push of a step puts the contact point where its path
 // of the step crossed the level it is pushed to, as a vertex goes back to where its path
-// entered: so a sheet resting on a smooth mesh's corners and chords is held there as on the
-// analytic shape. Such a move runs along the surface and may carry a neighbouring soft
+// entered: so a sheet resting on a smooth mesh's corners and chords is held where it rests,
+// as one resting on the mesh's faces by its vertices. Such a move runs along the surface and may carry a neighbouring soft
 // edge, already cleared, back through it (pushed straight out, a contact only lifts its
 // particles): after the pass, every soft triangle at a particle so moved (by more than a
 // quarter of the margin, summed over the step's held pushes) is treated again, with
