@@ -189,7 +189,8 @@ inline bool colliders_far(const Model& m, const double* cq, const double* crot, 
 }
 
 /// The thickness contacts with rigid colliders (contacts() below, the colliders at their
-/// step's-end poses). Where no collider can be involved and the step's motion would make
+/// step's-end poses). Where no collider can be involved (colliders_far, below) the stage
+/// alone: the colliders would change nothing. There, where the step's motion would make
 /// a stage without T sweep (a bound on its largest displacement over kMostSkin g / 2), the
 /// stage with its common translation T, as without colliders (a body falling far above
 /// the ground then finds no pair from its fall, and keeps its list; where the stage
@@ -200,9 +201,9 @@ inline bool colliders_far(const Model& m, const double* cq, const double* crot, 
 /// every straight path from q0 to one (the colliders' continuous tests), lies in the box
 /// of all particles' q0, q0 + T and q grown by h / 2 (a box is convex). Where that box is
 /// apart from every collider (colliders_far: each collider's reach, a mesh's margin
-/// included, outside it), the colliders catch no particle: they change nothing, no second
-/// pass runs, and the step is the no-collider path's, to the bit. Otherwise (and in the
-/// steps of small motion) the stage first, on the solver's positions (its bound keeps
+/// included, outside it), the colliders catch no particle: they change nothing, and the
+/// stage alone takes the step (a sweeping one with T: the no-collider path's step, to the
+/// bit). Otherwise the stage first, on the solver's positions (its bound keeps
 /// every pair from crossing along the step), without T: its bound then holds particles
 /// back toward their start, outside the colliders, where q0 + T may lie inside one (a
 /// sheet resting on the ground would follow a ball's fall onto it into the ground, be put
@@ -230,7 +231,6 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
                                   const double* q_start, const ContactBuffers& w,
                                   colliders::Seen* seen) {
     const index n = m.particles.count, n3 = 3 * m.particles.count;
-    copy(s.q, w.q_solved, n3);
     // the stage translated where no collider can be involved: the box of every particle's
     // q_start, q_start + T and q, grown by h / 2, apart from every collider. One pass: the
     // box of the start positions and the box of the displacements d_i = q_i - q_start_i
@@ -258,9 +258,8 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
         reach += e * e;
     }
     const bool sweeps = std::sqrt(reach) > 0.5 * thick::kMostSkin * m.soft_contacts.margin;
-    const bool far = n > 0 && sweeps &&
-                     colliders_far(m, s.collider_q, s.collider_rot, w.collider_v, w.collider_w,
-                                   lo, hi);
+    const bool far = n > 0 && colliders_far(m, s.collider_q, s.collider_rot, w.collider_v,
+                                            w.collider_w, lo, hi);
     // near a collider, the stage's swept gather grown by a slack of h / 16 (Stage::slack), so
     // that the second pass below takes its pairs from its rows where each particle stays
     // within that of its path from q_start to the solver's q (reuse_swept: the others' pairs
@@ -270,8 +269,10 @@ inline index thick_with_colliders(const Model& m, const RunParams& p, const Stat
     // 10,242 more than h / 5), while each h of slack would add half the pairs again
     const double slack = far ? 0.0 : m.soft_contacts.thickness / 16.0;
     w.list[1] = -1;  // no rows of this step yet
-    index needed = thick::contacts(m, q_start, s.q, s.qd, w, far, p.dt, slack);
-    if (needed != 0) return needed;
+    if (!far) copy(s.q, w.q_solved, n3);  // for the second pass and the crossing check
+    index needed = thick::contacts(m, q_start, s.q, s.qd, w, far && sweeps, p.dt, slack);
+    // far from every collider they catch nothing: the step is the stage's alone
+    if (needed != 0 || far) return needed;
     copy(s.q, w.q_collided, n3);
     index crossed[2] = {-1, -1};
     // the mass each collider caught, to share the second pass's reaction among several
