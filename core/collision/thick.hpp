@@ -16,7 +16,7 @@
 //      (soft_contacts.margin); each triangle's box over the same points is looked up in it
 //      for the triangles after it (a list's gather, its boxes over q0 alone, grows the
 //      hashed boxes by the largest half extent of a triangle's box too and reads only the
-//      cell of each triangle's box centre: each_triangle_at), and each vertex-triangle and
+//      cell of each triangle's box centre: each_triangle), and each vertex-triangle and
 //      edge-edge pair is found
 //      through the pair of triangles that own its primitives (collect()). Every pair whose
 //      boxes meet is a candidate, with its distance D at the step's start; in a step's swept
@@ -174,7 +174,7 @@ struct Stage {
     bool check_patch = false;
     // a gather over q0 alone (a list's): the largest half extent of a triangle's box along an
     // axis (tri_boxes()); the hash's boxes grow by it too, so that each triangle looks up the
-    // one cell of its box's centre (each_triangle_at). Negative: box look-ups (a swept gather).
+    // one cell of its box's centre (each_triangle). Negative: box look-ups (a swept gather).
     double half = -1.0;
 };
 
@@ -271,6 +271,11 @@ inline index build_hash(const Stage& st) {
 /// is read from its end down to the first entry at or below `after`; w.tri_mark[t2] holds
 /// the last query (`query`, unique to the caller's lookup) that saw t2, so a triangle met
 /// again in another cell of the range (or in a bucket two cells share) is skipped.
+/// In a gather whose hash grew its boxes by st.half >= 0 beyond g (a list's), only the cell
+/// of [lo, hi]'s centre is read: a box grown by g that meets [lo, hi] reaches, along each
+/// axis, within half the extent of [lo, hi] (at most st.half) of its centre, so t2's hashed
+/// box, grown by g + st.half, holds the centre and has an entry in the centre's cell (a box
+/// look-up reads every cell the box meets, and meets each triangle in most of them again).
 template <class Visit>
 inline void each_triangle(const Stage& st, const double* lo, const double* hi, index after,
                           index query, Visit visit) {
@@ -279,8 +284,12 @@ inline void each_triangle(const Stage& st, const double* lo, const double* hi, i
     index* mark = w.tri_mark;
     index r[6];
     for (int k = 0; k < 3; ++k) {
-        r[k] = soft::cell_of(lo[k] * st.inv);
-        r[3 + k] = soft::cell_of(hi[k] * st.inv);
+        if (st.half >= 0.0) {
+            r[k] = r[3 + k] = soft::cell_of(0.5 * (lo[k] + hi[k]) * st.inv);
+        } else {
+            r[k] = soft::cell_of(lo[k] * st.inv);
+            r[3 + k] = soft::cell_of(hi[k] * st.inv);
+        }
     }
     constexpr int kFound = 128;
     index found[kFound];  // the triangles met, gathered without a branch on each
@@ -303,42 +312,6 @@ inline void each_triangle(const Stage& st, const double* lo, const double* hi, i
                     }
                 }
             }
-    for (int k = 0; k < n; ++k) visit(found[k]);
-}
-
-/// each_triangle for a triangle's box [lo, hi] in a gather whose hash grew its boxes by
-/// st.half >= 0 beyond g (a list's): the triangles t2 > `after` whose box grown by g meets
-/// [lo, hi], each once. Along each axis such a box reaches [lo, hi], so it reaches within
-/// half the extent of [lo, hi] (at most st.half) of its centre: t2's hashed box, grown by
-/// g + st.half, holds the centre, and so has an entry in the centre's cell. Only that cell's
-/// bucket is read (a box look-up reads every cell the box meets, and meets each triangle in
-/// most of them again); w.tri_mark still keeps a triangle that two cells' entries share a
-/// bucket under from being visited twice.
-template <class Visit>
-inline void each_triangle_at(const Stage& st, const double* lo, const double* hi, index after,
-                             index query, Visit visit) {
-    const ContactBuffers& w = st.w;
-    const index* entries = w.hash_entries->data;
-    index* mark = w.tri_mark;
-    const index h = soft::cell_hash(soft::cell_of(0.5 * (lo[0] + hi[0]) * st.inv),
-                                    soft::cell_of(0.5 * (lo[1] + hi[1]) * st.inv),
-                                    soft::cell_of(0.5 * (lo[2] + hi[2]) * st.inv), w.hash_table);
-    constexpr int kFound = 128;
-    index found[kFound];
-    int n = 0;
-    for (index e = w.hash_start[h + 1]; e-- > w.hash_start[h];) {
-        const index t = entries[e];
-        if (t <= after) break;  // the rest of the bucket is below too
-        const double* box = w.tri_box + 6 * t;
-        const bool fresh = mark[t] != query;
-        mark[t] = query;
-        found[n] = t;
-        n += fresh & boxes_meet(lo, hi, box, box + 3, st.g);
-        if (n == kFound) {
-            for (int k = 0; k < n; ++k) visit(found[k]);
-            n = 0;
-        }
-    }
     for (int k = 0; k < n; ++k) visit(found[k]);
 }
 
@@ -741,10 +714,7 @@ inline index collect(const Stage& st) {
                 }
             }
         };
-        if (st.half >= 0.0)
-            each_triangle_at(st, box, box + 3, after, t, visit);
-        else
-            each_triangle(st, box, box + 3, after, t, visit);
+        each_triangle(st, box, box + 3, after, t, visit);
         flush();
     }
     flush();
@@ -1031,7 +1001,7 @@ inline index gather(const Stage& stage) {
     fill_boxes(st);
     double scale = 0.0;
     const double half = tri_boxes(st, scale);
-    // a list's gather looks up its boxes' centres (each_triangle_at), the hashed boxes grown
+    // a list's gather looks up its boxes' centres (each_triangle), the hashed boxes grown
     // by the largest half extent, and by a little more for the round-off of the centre, the
     // grown bounds and the comparisons (relative 1e-9 of the growth, 1e-12 of the largest
     // coordinate: far above the few rounding errors of a coordinate's size)
