@@ -223,13 +223,19 @@ def swept_scene(seed):
     and the ball 3 cm the other way, each particle off by up to 4 mm of seeded noise; the
     mass-weighted mean (the stage's common translation T) taken out. Returns the model, the
     start q0, the end q and the displacements after T, u (N, 3 each)."""
-    rng = np.random.default_rng(seed)
-    model = crumpled_scene(seed)
+    return slid_apart(crumpled_scene(seed), np.random.default_rng(seed))
+
+
+def slid_apart(model, rng):
+    """A step's end for `model`: its first body slides 3 cm along x and the rest 3 cm the
+    other way, each particle off by up to 4 mm of noise from `rng`; the mass-weighted mean
+    (the stage's common translation T) taken out. Returns the model, the start q0, the end
+    q and the displacements after T, u (N, 3 each)."""
     q0 = model.particle_q
-    cloth_end = model.body_particle_range[0][1]
+    first_end = model.body_particle_range[0][1]
     d = rng.uniform(-0.004, 0.004, q0.shape)
-    d[:cloth_end, 0] += 0.03
-    d[cloth_end:, 0] -= 0.03
+    d[:first_end, 0] += 0.03
+    d[first_end:, 0] -= 0.03
     mass = model.particle_mass
     u = d - (mass[:, None] * d).sum(axis=0) / mass.sum()
     return model, q0, q0 + d, u
@@ -316,15 +322,7 @@ def sliding_sheets(seed):
     for z in (0.0, 0.003):
         builder.add_cloth(sb.rectangle((0.2, 0.2), (12, 12), center=(0, 0, z)), mass=0.1,
                           stiffness=50.0)  # fmt: skip
-    model = builder.finalize()
-    q0 = model.particle_q
-    lower = model.body_particle_range[0][1]
-    d = rng.uniform(-0.004, 0.004, q0.shape)
-    d[:lower, 0] += 0.03
-    d[lower:, 0] -= 0.03
-    mass = model.particle_mass
-    u = d - (mass[:, None] * d).sum(axis=0) / mass.sum()
-    return model, q0, q0 + d, u
+    return slid_apart(builder.finalize(), rng)
 
 
 def later_pass(scene, seed, share):
