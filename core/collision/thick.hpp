@@ -571,6 +571,48 @@ inline bool starts_meet(const Stage& st, const double* box, const index* tri2,
     return boxes_meet(box, box + 3, at0, at0 + 3, 0.0);
 }
 
+/// Whether no pair of primitives of triangles t (corners tri) and t2 (corners tri2) that
+/// share no particle can be nearer than `limit` [m] at q0: a lower bound on every such pair's
+/// distance along one axis a, the gap between the two sides' projections on it (for points
+/// x, y, |y - x| >= a.(y - x) / |a|), over `limit`. A primitive is its particles' hull, so
+/// its projection lies within its particles'. Triangles with no common corner: the whole
+/// triangles' projections, a from t's centroid to t2's. One common corner s: a pair holds s
+/// on one side at most, so the bound is the lesser of t2 without s against t and t2
+/// against t without s, a between the midpoints of the edges opposite s. Two common corners
+/// (neighbours across an edge): not tried (the other common corner lies on both sides, so
+/// no such bound exceeds 0). A bound within 1e-6 of the limit does not count (the distances
+/// are measured otherwise). A static gather's pairs are kept below st.keep: one of two
+/// triangles over it has none (collect()).
+inline bool apart_beyond(const double* q0, const index* tri, const index* tri2, double limit) {
+    int shared = 0, s = -1, s2 = -1;
+    for (int k = 0; k < 3; ++k)
+        for (int l = 0; l < 3; ++l)
+            if (tri[k] == tri2[l]) {
+                ++shared;
+                s = k;
+                s2 = l;
+            }
+    if (shared > 1 || !(limit < std::numeric_limits<double>::infinity())) return false;
+    V3 p[3], r[3];
+    for (int k = 0; k < 3; ++k) {
+        p[k] = load(q0, tri[k]);
+        r[k] = load(q0, tri2[k]);
+    }
+    V3 a = (r[0] + r[1] + r[2]) - (p[0] + p[1] + p[2]);  // 3 x the centroids' difference
+    if (shared == 1) a = (r[0] + r[1] + r[2] - r[s2]) - (p[0] + p[1] + p[2] - p[s]);
+    double hi = -std::numeric_limits<double>::infinity(), hi_apart = hi;  // t: all, without s
+    double lo = std::numeric_limits<double>::infinity(), lo_apart = lo;   // t2: all, without s
+    for (int k = 0; k < 3; ++k) {
+        const double x = dot(a, p[k]), y = dot(a, r[k]);
+        hi = std::max(hi, x);
+        lo = std::min(lo, y);
+        if (k != s) hi_apart = std::max(hi_apart, x);
+        if (k != s2) lo_apart = std::min(lo_apart, y);
+    }
+    const double gap = shared == 0 ? lo - hi : std::min(lo_apart - hi, lo - hi_apart);
+    return gap > 0.0 && gap * gap > limit * limit * dot(a, a) * (1.0 + 1e-6);
+}
+
 /// The candidate pairs into w.pairs; returns their count, or -1 after writing a crossing
 /// found at q0 into w.crossing (particle, triangle). Every pair is found through the pair
 /// of triangles that own its primitives, once: each triangle t looks up the triangles
@@ -586,6 +628,9 @@ inline bool starts_meet(const Stage& st, const double* box, const index* tri2,
 /// A primitive's own triangle holds only pairs that share a vertex, so t2 = t is skipped. A
 /// particle of a body that is no triangle's corner looks up the triangles near it alone.
 /// Each pair's distance at q0 is measured (gap), and the pair kept when it is below keep.
+/// A gather over q0 alone passes over a pair of triangles shown farther apart than keep
+/// along one axis (apart_beyond): none of its pairs would be kept, and none of its edges
+/// crosses the other triangle (the rows and the check come out the same).
 inline index collect(const Stage& st) {
     const Model& m = st.m;
     const ContactBuffers& w = st.w;
@@ -688,6 +733,7 @@ inline index collect(const Stage& st) {
         auto visit = [&](index t2) {
             if (crossed || (!st.self && body == m.triangles.body[t2])) return;
             const index* tri2 = m.triangles.indices + 3 * t2;
+            if (!st.swept && apart_beyond(st.q0, tri, tri2, st.keep)) return;
             const double* box2 = w.tri_box + 6 * t2;
             if ((!patch || st.check_patch) && st.check &&
                 starts_meet(st, st.swept ? at0 : box, tri2, box2) &&
