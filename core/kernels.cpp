@@ -34,12 +34,16 @@ RunResult simulate_implicit(const Model& m, const Control& c, const RunParams& p
 
 void apply_preconditioner(const Model& m, const Control& c, double t, double h,
                           const ImplicitBuffers& w, const MultigridView* mg, const double* r,
-                          double* z) {
+                          double* z, const ContactBuffers* contacts) {
     forms::update(Eval{m, c, t, w.q0, w.v0, w.gas});
-    const thick_system::System no_contacts;  // the terms' matrix alone
-    implicit_solver::prepare(m, c, t, h, w, mg, no_contacts);
-    if (mg == nullptr) implicit_solver::jacobi_diagonal(m, c, h, w, no_contacts);
-    implicit_solver::precondition(m, mg, w.cg_diag, r, z, no_contacts);
+    thick_system::System pairs;  // none: the terms' matrix alone
+    if (contacts != nullptr) {
+        std::vector<double> rest(static_cast<size_t>(3 * m.particles.count), 0.0);
+        thick_system::begin(m, w.q0, rest.data(), h, *contacts, h, pairs);
+    }
+    implicit_solver::prepare(m, c, t, h, w, mg, pairs);
+    if (mg == nullptr) implicit_solver::jacobi_diagonal(m, c, h, w, pairs);
+    implicit_solver::precondition(m, mg, w.cg_diag, r, z, pairs);
 }
 
 void apply_multigrid(const MultigridView& mg, const double* r, double* z) {

@@ -44,10 +44,12 @@ struct KernelTable {
                                    const ImplicitParams&, const StateView&,
                                    const ImplicitBuffers&, const MultigridView* mg);
     /// z = P^-1 r for r, z (N, 3): the implicit solve's preconditioner for step h with its
-    /// blocks at w.q0 at time t (w.gas refreshed there); mg null: Jacobi.
+    /// blocks at w.q0 at time t (w.gas refreshed there); mg null: Jacobi. With contacts
+    /// (not null), the thickness contacts' pairs near at w.q0 (as a step from rest of h
+    /// takes them, gathered in those buffers) in it too.
     void (*apply_preconditioner)(const Model&, const Control&, double t, double h,
                                  const ImplicitBuffers& w, const MultigridView* mg,
-                                 const double* r, double* z);
+                                 const double* r, double* z, const ContactBuffers* contacts);
     /// z = V(r) for r, z (N, 3): one V-cycle of the Laplacian hierarchy from z = 0.
     void (*apply_multigrid)(const MultigridView& mg, const double* r, double* z);
     /// Advance a state by projective dynamics (p.iterations per step) on factor `a`,

@@ -158,6 +158,55 @@ def test_hybrid_preconditioner_is_spd_on_the_free_particles():
     assert np.linalg.eigvalsh(0.5 * (bf + bf.T)).min() > 0.0
 
 
+def crumpled_ball() -> tuple[sb.Model, sb.State, sb.Simulator]:
+    """A 642-vertex ball with self-contact, its gas drawn down under a 500 Pa ambient
+    pressure (the vacuum-packed ball of benchmarks/self_contact.py, smaller), after 0.3 s of
+    implicit Euler at 1/240 s (the simulator returned with it): folded, its sheets pressed
+    together h apart in many pairs."""
+    ambient = 500.0
+    nrt = ambient * 4.0 / 3.0 * np.pi * 0.5**3
+    builder = sb.ModelBuilder(gravity=(0, 0, 0))
+    builder.set_soft_contact("surface", self_contact=True, restitution=0.0, friction=0.1)
+    builder.add_soft_body(
+        sb.icosphere(3, radius=0.5), mass=1.0, stiffness=200.0, damping=0.5,
+        gas=sb.Gas.isothermal(
+            nrt, ambient_pressure=ambient, schedule=[(0.0, nrt), (0.2, 0.02 * nrt)]
+        ),
+    )  # fmt: skip
+    model = builder.finalize()
+    state = model.state()
+    sim = sb.Simulator(model, integrator="implicit_euler", dt=1 / 240)
+    sim.run(state, 72)
+    return model, state, sim
+
+
+def test_preconditioner_with_the_contact_pairs_is_spd():
+    """With the thickness contacts' pairs near at a crumpled ball's positions, the
+    multigrid preconditioner (its finest sweeps reading the pairs' blocks between particles,
+    each particle's pairs with one other particle summed into one block, forward over the
+    earlier particles, backward over all) is still symmetric to round-off (1e-12 relative)
+    and positive definite, as preconditioned CG requires; and the pairs change it (by more
+    than 1 % of its largest entry), so they are in it."""
+    model, state, sim = crumpled_ball()
+    core = sim.solver._core
+    control = control_data(model)
+    n = model.particle_count
+    h = 1 / 240
+    operators = []
+    for contacts in (False, True):
+
+        def apply(r, z, contacts=contacts):
+            z[:] = core.apply_preconditioner(
+                control, state.time, h, state.particle_q, r, contacts=contacts
+            )
+
+        operators.append(dense_operator(apply, n))
+    plain, b = operators
+    assert np.abs(b - plain).max() > 0.01 * np.abs(plain).max()
+    assert np.abs(b - b.T).max() <= 1e-12 * np.abs(b).max()
+    assert np.linalg.eigvalsh(0.5 * (b + b.T)).min() > 0.0
+
+
 def test_multigrid_and_jacobi_take_the_same_backward_euler_step():
     """Both preconditioners solve the same linear system of backward Euler, so with the
     CG tolerance at 1e-12 one second of a pinned, attached, falling ball agrees to 1e-8 m

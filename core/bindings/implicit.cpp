@@ -222,9 +222,11 @@ public:
     }
 
     /// z (N, 3) = P^-1 r: the preconditioner for step h [s] with its blocks at q (N, 3) at
-    /// time t [s] (the multigrid hierarchy's values must be set for h). For tests.
+    /// time t [s] (the multigrid hierarchy's values must be set for h); with contacts, the
+    /// thickness contacts' pairs near at q in it too (gathered in buffers of its own, so
+    /// the solver's pair list is left as it was). For tests.
     nb::ndarray<nb::numpy, double> apply_preconditioner(nb::handle control, double t, double h,
-                                                        ConstF64 q, ConstF64 r) {
+                                                        ConstF64 q, ConstF64 r, bool contacts) {
         const softbody::Model& m = model_.model();
         check_shape(q, "q", {m.particles.count, 3});
         check_shape(r, "r", {m.particles.count, 3});
@@ -232,12 +234,21 @@ public:
         CoreControl c(m, control);
         const size_t n3 = static_cast<size_t>(3 * m.particles.count);
         std::copy(q.data(), q.data() + n3, w_.q0);
+        std::optional<Buffers> own;
+        if (contacts) {
+            if (m.soft_contacts.mode != softbody::SoftContactMode::SURFACE ||
+                !(m.soft_contacts.thickness > 0.0))
+                fail("contacts needs surface soft contacts with a thickness");
+            own.emplace(m, 0, checked_capacity(m, std::nullopt));
+            own->allow_growth();
+        }
         double* z = new double[n3 > 0 ? n3 : 1];
         nb::capsule owner(z, [](void* p) noexcept { delete[] static_cast<double*>(p); });
         {
             nb::gil_scoped_release release;
-            softbody::kernels().apply_preconditioner(
-                m, c.view, t, h, w_, multigrid_ ? &multigrid_->view : nullptr, r.data(), z);
+            softbody::kernels().apply_preconditioner(m, c.view, t, h, w_,
+                                                     multigrid_ ? &multigrid_->view : nullptr,
+                                                     r.data(), z, own ? &own->contact : nullptr);
         }
         size_t shape[2] = {static_cast<size_t>(m.particles.count), 3};
         return nb::ndarray<nb::numpy, double>(z, 2, shape, owner);
@@ -306,9 +317,10 @@ void bind_implicit(nb::module_& mod) {
                      "Whether the last run's last step's contacts acted (BDF2's history).")
         .def("apply_preconditioner", &ImplicitSolver::apply_preconditioner,
              nb::arg("control"), nb::arg("t"), nb::arg("h"), nb::arg("q").noconvert(),
-             nb::arg("r").noconvert(),
+             nb::arg("r").noconvert(), nb::arg("contacts") = false,
              "z (N, 3) = P^-1 r, the solve's preconditioner for step h with its blocks at q "
-             "(N, 3); its hierarchy's values must be set for h.")
+             "(N, 3); its hierarchy's values must be set for h. contacts: the thickness "
+             "contacts' pairs near at q in it too.")
         .def("simulate", &ImplicitSolver::simulate, nb::arg("bdf2"), nb::arg("steps"),
              nb::arg("dt"), nb::arg("control"), nb::arg("state"), nb::arg("limits"),
              nb::arg("tolerance"), nb::arg("max_iterations"), nb::arg("history"),

@@ -66,11 +66,17 @@ struct System {
     std::vector<double> n;     // (P, 3) the gap's direction at x0
     std::vector<double> k;     // (P,) stiffness [N/m]
     std::vector<double> push;  // (P,) the force at x0, k (h + a - d) [N]
-    // the smoother's blocks between the pairs' particles, by particle: particle i's entries
-    // [ptr[i], ptr[i + 1]) name the other particle j, the pair, and h_s^2 k c_i c_j (the
-    // block of the system matrix is that times n n^T)
-    std::vector<index> ptr, other, pair;
-    std::vector<double> weight;
+    // the smoother's blocks between the pairs' particles, by particle, one per pair of
+    // particles (i, j) that share a pair: particle i's are [row[i], row[i + 1]), those to
+    // j < i before mid[i], those to j > i from it; col names j, block (3, 3) is
+    // sum h_s^2 k c_i c_j n n^T over the pairs that hold both (the system matrix's block is
+    // its negative)
+    std::vector<index> row, mid, col;
+    std::vector<double> block;
+    // their making: each pair's twelve entries (i, j) by particle i (ptr: the counting sort's
+    // starts; other: j; pair: 16 x the pair + 4 x i's place in it + j's), and each
+    // particle's last row and block (tag, slot)
+    std::vector<index> ptr, other, pair, tag, slot;
     index count = 0;
     void clear() {
         v.clear();
@@ -81,7 +87,10 @@ struct System {
         ptr.clear();
         other.clear();
         pair.clear();
-        weight.clear();
+        row.clear();
+        mid.clear();
+        col.clear();
+        block.clear();
         count = 0;
     }
 };
@@ -175,7 +184,11 @@ inline void begin(const Model& m, double* q0, const double* v0, double dt, const
         ++sys.count;
     }
     if (sys.count == 0) return;
-    // the blocks between the pairs' particles, by particle (a counting sort)
+    // the blocks between the pairs' particles: each pair's entries by particle (a counting
+    // sort), then each particle's entries to one other particle summed into one block (a
+    // crumpled sheet's particle shares a pair with another in several pairs: the smoother's
+    // three sweeps a CG iteration read each block once, not each entry), those to earlier
+    // particles first
     auto at = [](index k) { return static_cast<size_t>(k); };
     const index n = m.particles.count, entries = 12 * sys.count;
     sys.ptr.assign(at(n + 1), 0);
@@ -184,18 +197,47 @@ inline void begin(const Model& m, double* q0, const double* v0, double dt, const
     for (index i = 0; i < n; ++i) sys.ptr[at(i + 1)] += sys.ptr[at(i)];
     sys.other.resize(at(entries));
     sys.pair.resize(at(entries));
-    sys.weight.resize(at(entries));
     for (index p = 0; p < sys.count; ++p)
         for (int l = 0; l < 4; ++l)
             for (int o = 0; o < 4; ++o) {
                 if (o == l) continue;
                 const size_t e = at(sys.ptr[at(sys.v[4 * p + l])]++);
                 sys.other[e] = sys.v[4 * p + o];
-                sys.pair[e] = p;
-                sys.weight[e] = h_s * h_s * sys.k[p] * sys.c[4 * p + l] * sys.c[4 * p + o];
+                sys.pair[e] = 16 * p + 4 * l + o;  // the pair, i's place in it and j's
             }
     for (index i = n; i > 0; --i) sys.ptr[at(i)] = sys.ptr[at(i - 1)];  // back to the starts
     sys.ptr[0] = 0;
+    sys.row.resize(at(n + 1));
+    sys.mid.resize(at(n));
+    sys.col.clear();
+    sys.block.clear();
+    sys.tag.assign(at(n), -1);
+    sys.slot.resize(at(n));
+    index blocks = 0;
+    for (index i = 0; i < n; ++i) {
+        sys.row[at(i)] = blocks;
+        for (int later = 0; later < 2; ++later) {
+            for (index e = sys.ptr[at(i)]; e < sys.ptr[at(i + 1)]; ++e) {
+                const index j = sys.other[at(e)];
+                if ((j > i) != (later != 0)) continue;
+                if (sys.tag[at(j)] != i) {
+                    sys.tag[at(j)] = i;
+                    sys.slot[at(j)] = blocks++;
+                    sys.col.push_back(j);
+                    sys.block.resize(sys.block.size() + 9, 0.0);
+                }
+                const index code = sys.pair[at(e)], p = code / 16;
+                const double* u = sys.n.data() + 3 * p;
+                const double weight = h_s * h_s * sys.k[at(p)] * sys.c[at(4 * p + code / 4 % 4)] *
+                                      sys.c[at(4 * p + code % 4)];
+                double* b = sys.block.data() + 9 * sys.slot[at(j)];
+                for (int r = 0; r < 3; ++r)
+                    for (int k = 0; k < 3; ++k) b[3 * r + k] += weight * u[r] * u[k];
+            }
+            if (later == 0) sys.mid[at(i)] = blocks;
+        }
+    }
+    sys.row[at(n)] = blocks;
 }
 
 /// Calls pair(kind, v, c, g, d) for each pair nearer than reach (<= 2 h) at q0 (N, 3), for
@@ -272,11 +314,14 @@ inline void add_blocks(const System& sys, double h_s, double* block) {
 template <int kSide>
 inline void add_entries(const System& sys, const double* x, index i, V3& s) {
     if (sys.count == 0) return;
-    for (index e = sys.ptr[static_cast<size_t>(i)]; e < sys.ptr[static_cast<size_t>(i + 1)]; ++e) {
-        const index j = sys.other[static_cast<size_t>(e)];
-        if ((kSide < 0 && j > i) || (kSide > 0 && j < i)) continue;
-        const V3 n = normal(sys, sys.pair[static_cast<size_t>(e)]);
-        s = s - (sys.weight[static_cast<size_t>(e)] * dot(n, load(x, j))) * n;
+    const size_t at = static_cast<size_t>(i);
+    const index first = kSide > 0 ? sys.mid[at] : sys.row[at];
+    const index last = kSide < 0 ? sys.mid[at] : sys.row[at + 1];
+    for (index e = first; e < last; ++e) {
+        const V3 y = load(x, sys.col[static_cast<size_t>(e)]);
+        const double* b = sys.block.data() + 9 * e;
+        s = s - V3{b[0] * y.x + b[1] * y.y + b[2] * y.z, b[3] * y.x + b[4] * y.y + b[5] * y.z,
+                   b[6] * y.x + b[7] * y.y + b[8] * y.z};
     }
 }
 
