@@ -226,10 +226,11 @@ inline void begin(const Model& m, double* q0, const double* v0, double dt, const
                     sys.col.push_back(j);
                     sys.block.resize(sys.block.size() + 9, 0.0);
                 }
-                const index code = sys.pair[at(e)], p = code / 16;
+                const index code = sys.pair[at(e)], p = code >> 4;  // (shifts: code >= 0)
                 const double* u = sys.n.data() + 3 * p;
-                const double weight = h_s * h_s * sys.k[at(p)] * sys.c[at(4 * p + code / 4 % 4)] *
-                                      sys.c[at(4 * p + code % 4)];
+                const double weight = h_s * h_s * sys.k[at(p)] *
+                                      sys.c[at(4 * p + ((code >> 2) & 3))] *
+                                      sys.c[at(4 * p + (code & 3))];
                 double* b = sys.block.data() + 9 * sys.slot[at(j)];
                 for (int r = 0; r < 3; ++r)
                     for (int k = 0; k < 3; ++k) b[3 * r + k] += weight * u[r] * u[k];
