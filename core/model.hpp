@@ -471,7 +471,11 @@ struct RunParams {
     index substeps = 1;    // XPBD: substeps per step (iterations: its passes per substep)
     double relaxation = 1.0;  // XPBD: over-relaxation of the passes after a substep's first
     index steps = 0;
-    double t0 = 0.0, dt = 0.0;
+    // the time of step k of this run [s]: t0 + (step0 + k) dt, t0 the time of the state's
+    // clock origin and step0 the steps it took since (the bindings keep the origin across
+    // runs of one step dt, so that n runs of one step keep the same times as one of n)
+    double t0 = 0.0, dt = 0.0, step0 = 0.0;
+    double time_at(index k) const { return t0 + (step0 + static_cast<double>(k)) * dt; }
     double max_speed = 1e4;
     double ratio_min = 1e-3, ratio_max = 1e3;
     // Called before every step with the steps done so far; nonzero stops the run with

@@ -181,9 +181,32 @@ struct CheckedRun {
     softbody::RunParams params;
 };
 
+/// The run's clock from the state: its time origin t0 and the steps step0 taken since. A
+/// state a run of steps dt left (its _clock: the origin's time, the step count there, dt)
+/// whose time is still origin + (step_count - origin's count) dt, to the bit, goes on
+/// from that origin, so that its steps' times are those of one longer run; any other state
+/// (new, its time set by hand, or a run of another step) starts an origin at its time.
+inline void clock_from(nb::handle state, double dt, softbody::RunParams& p) {
+    const double time = nb::cast<double>(state.attr("time"));
+    p.t0 = time;
+    p.step0 = 0.0;
+    if (!nb::hasattr(state, "_clock")) return;
+    const nb::object clock = state.attr("_clock");
+    if (!nb::isinstance<nb::tuple>(clock) || nb::len(clock) != 3) return;
+    const nb::tuple origin = nb::borrow<nb::tuple>(clock);
+    const double t0 = nb::cast<double>(origin[0]), step_dt = nb::cast<double>(origin[2]);
+    const Index since = nb::cast<Index>(state.attr("step_count")) - nb::cast<Index>(origin[1]);
+    if (step_dt != dt || since < 0) return;
+    const double step0 = static_cast<double>(since);
+    if (t0 + step0 * dt != time) return;
+    p.t0 = t0;
+    p.step0 = step0;
+}
+
 /// A run's views of a softbody.State (its particle_q, particle_qd, collider_q,
 /// collider_rotation and collider_impulse arrays, written in place; its time the run's
-/// start) and of a RunLimits (max_speed, ratio_min, ratio_max), checked against the model.
+/// start, its clock's origin kept: clock_from) and of a RunLimits (max_speed, ratio_min,
+/// ratio_max), checked against the model.
 inline CheckedRun checked_run(const softbody::Model& m, Index steps, double dt, nb::handle state,
                               nb::handle limits) {
     if (steps < 0) fail("steps must be >= 0");
@@ -204,7 +227,7 @@ inline CheckedRun checked_run(const softbody::Model& m, Index steps, double dt, 
                  run.collider_rot.data(), run.collider_impulse.data(), run.gas_moles.data(),
                  run.gas_temperature.data(), run.vent_open.data()};
     run.params.steps = steps;
-    run.params.t0 = nb::cast<double>(state.attr("time"));
+    clock_from(state, dt, run.params);
     run.params.dt = dt;
     run.params.max_speed = nb::cast<double>(limits.attr("max_speed"));
     run.params.ratio_min = nb::cast<double>(limits.attr("ratio_min"));

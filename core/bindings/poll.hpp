@@ -38,13 +38,17 @@ public:
     RunPoll(const RunPoll&) = delete;
     RunPoll& operator=(const RunPoll&) = delete;
 
-    /// With the GIL, after the run: clock.time = p.t0 + steps_done p.dt and
-    /// clock.step_count += steps_done (clock None: nothing); then the exception that
-    /// stopped the run, if any, is raised.
+    /// With the GIL, after the run: clock.time = p.time_at(steps_done),
+    /// clock.step_count += steps_done and clock._clock = (p.t0, the step count at p.t0,
+    /// p.dt), the origin the next run goes on from (checked_run's clock_from; clock None:
+    /// nothing); then the exception that stopped the run, if any, is raised.
     void finish(nb::handle clock, const softbody::RunParams& p, const softbody::RunResult& r) {
         if (!clock.is_none()) {
-            clock.attr("time") = nb::float_(p.t0 + static_cast<double>(r.steps_done) * p.dt);
-            clock.attr("step_count") = clock.attr("step_count") + nb::int_(r.steps_done);
+            const nb::object count = clock.attr("step_count");
+            clock.attr("time") = nb::float_(p.time_at(r.steps_done));
+            clock.attr("step_count") = count + nb::int_(r.steps_done);
+            const nb::object origin_count = count - nb::int_(static_cast<long long>(p.step0));
+            clock.attr("_clock") = nb::make_tuple(p.t0, origin_count, p.dt);
         }
         if (type_ != nullptr) {
             PyErr_Restore(type_, value_, traceback_);

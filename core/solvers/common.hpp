@@ -398,7 +398,7 @@ inline RunResult run(const Model& m, const Control& c, const RunParams& p, const
     begin_run(m, c, p, s, contact);
     gas_state::begin(m, s.q, s, gas);
     const RunResult r = steps();
-    gas_state::finish(m, p.t0 + static_cast<double>(r.steps_done) * p.dt, s.q, s, gas);
+    gas_state::finish(m, p.time_at(r.steps_done), s.q, s, gas);
     return r;
 }
 

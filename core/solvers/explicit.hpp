@@ -247,7 +247,7 @@ inline RunResult simulate_symplectic_fused(const Model& m, const Control& c, con
     const bool flowing = gas_state::flowing(m, c);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
-        const double t = p.t0 + static_cast<double>(step_index) * p.dt;
+        const double t = p.time_at(step_index);
         forms::eval_forces<forms::Which::kBody>(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);
         RunResult r = loop::check_volumes(m, w.gas.volume, p.ratio_min, p.ratio_max);
         if (r.status != OK) {
@@ -285,7 +285,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     const bool flowing = gas_state::flowing(m, c);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
-        const double t = p.t0 + static_cast<double>(step_index) * p.dt;
+        const double t = p.time_at(step_index);
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);
         if (flowing) gas_state::save_start(m, s, w.gas);
@@ -309,7 +309,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     return {OK, p.steps, -1, 0.0};
 }
 
-/// Advance s.q, s.qd (and the gas state) by p.steps steps of p.dt from p.t0. On a particle
+/// Advance s.q, s.qd (and the gas state) by p.steps steps of p.dt from p.time_at(0). On a particle
 /// failure the state goes back to the failing step's start; on a volume failure it is the
 /// state whose volume failed. NEED_HASH (value: the entries needed) also leaves the state
 /// at the failing step's start.

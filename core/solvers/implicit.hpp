@@ -387,7 +387,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     thick_system::System contact;  // the thickness contacts in each step's solve
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
-        const double t = p.t0 + static_cast<double>(step_index) * p.dt;
+        const double t = p.time_at(step_index);
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);
         forms::eval_forces(m, c, t, s.q, s.qd, w.gas, w.lanes, w.f);

@@ -365,7 +365,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     contacts::Pairs pairs;  // the thickness contacts in each step's iterations
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
-        const double t = p.t0 + static_cast<double>(step_index) * p.dt;
+        const double t = p.time_at(step_index);
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);
         volume::evaluate(m, s.q, volumes_only);
@@ -390,7 +390,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
 
 /// Advance s.q, s.qd (and the gas state: solvers/gas_state.hpp, forward Euler with the
 /// rates at each step's start, so the iterations' forces at the step's end see the gas
-/// there) by p.steps steps of p.dt from p.t0, p.iterations iterations each. The checks,
+/// there) by p.steps steps of p.dt from p.time_at(0), p.iterations iterations each. The checks,
 /// contacts and restores are the explicit loop's (solvers/explicit.hpp).
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,
                           const StateView& s, const Factor& a, const ProjectiveBuffers& w) {

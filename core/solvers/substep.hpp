@@ -118,7 +118,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     double* theta = gas_state::slot(m, w.gas, gas_state::kTheta);
     for (index step_index = 0; step_index < p.steps; ++step_index) {
         if (stop_requested(p, step_index)) return {STOPPED, step_index, -1, 0.0};
-        const double t = p.t0 + static_cast<double>(step_index) * p.dt;
+        const double t = p.time_at(step_index);
         loop::copy(s.q, w.q0, n3);
         loop::copy(s.qd, w.v0, n3);
         if (flowing) gas_state::save_start(m, s, w.gas);
@@ -158,7 +158,7 @@ inline RunResult run_steps(const Model& m, const Control& c, const RunParams& p,
     return {OK, p.steps, -1, 0.0};
 }
 
-/// Advance s.q, s.qd (and the gas state) by p.steps steps of p.dt from p.t0, each of
+/// Advance s.q, s.qd (and the gas state) by p.steps steps of p.dt from p.time_at(0), each of
 /// p.substeps substeps with p.iterations constraint passes. On a failure the state goes
 /// back to the failing step's start (a volume that fails at a step's start: that state).
 inline RunResult simulate(const Model& m, const Control& c, const RunParams& p,

@@ -98,7 +98,11 @@ class State:
     particle_qd: np.ndarray
     """Particle velocities [m/s], shape (N, 3), float64, C-contiguous."""
     time: float = 0.0
-    """Simulated time [s]."""
+    """Simulated time [s]. A run goes on from the clock origin of the run before it (its
+    step k at origin + (steps since the origin + k) dt, as one longer run would time it) while
+    the time is the one that run left and the step the same; set by hand, or with another
+    step, the time starts a new origin. So n runs of one step time their steps as one run of
+    n steps does, to the bit."""
     step_count: int = 0
     """Number of steps taken since the state was made."""
     collider_q: np.ndarray | None = None
@@ -229,6 +233,8 @@ class State:
             None if self.history is None else self.history.copy(),
         )
         object.__setattr__(out, "_version", self.version)
+        if "_clock" in self.__dict__:  # the runs' clock origin (see time)
+            object.__setattr__(out, "_clock", self.__dict__["_clock"])
         return out
 
     def __repr__(self) -> str:
