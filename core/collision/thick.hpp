@@ -1069,6 +1069,21 @@ inline index gather(const Stage& stage) {
     return pairs;
 }
 
+/// The first `count` rows (kSlots each) without those with a particle flagged in moved
+/// (moved[8 i] != 0), the others kept in their order at the front; returns how many.
+inline index drop_moved(index* rows, index count, const double* moved) {
+    index kept = 0;
+    for (index p = 0; p < count; ++p) {
+        const index* row = rows + kSlots * p;
+        if (moved[8 * row[1]] != 0.0 || moved[8 * row[2]] != 0.0 || moved[8 * row[3]] != 0.0 ||
+            moved[8 * row[4]] != 0.0)
+            continue;
+        if (kept != p) std::memmove(rows + kSlots * kept, row, sizeof(index) * kSlots);
+        ++kept;
+    }
+    return kept;
+}
+
 constexpr double kReuseMost = 0.25;  // the most particles (a share of all) a reuse gathers again
 
 /// A later pass's candidate pairs from an earlier swept gather's rows (w.pairs rows
@@ -1116,16 +1131,7 @@ inline index reuse_swept(const Stage& st, const double* from, double slack, inde
     if (outside == 0) return count;
     if (lone || static_cast<double>(outside) > kReuseMost * static_cast<double>(m.particles.count))
         return gather(st);
-    index* rows = w.pairs->data;
-    index kept = 0;
-    for (index p = 0; p < count; ++p) {
-        const index* row = rows + kSlots * p;
-        if (moved[8 * row[1]] != 0.0 || moved[8 * row[2]] != 0.0 || moved[8 * row[3]] != 0.0 ||
-            moved[8 * row[4]] != 0.0)
-            continue;
-        if (kept != p) std::memmove(rows + kSlots * kept, row, sizeof(index) * kSlots);
-        ++kept;
-    }
+    const index kept = drop_moved(w.pairs->data, count, moved);
     Stage part = st;
     part.moved = moved;
     part.first = kept;
@@ -1586,16 +1592,7 @@ inline index patch_list(const Stage& st, const Motion& mo, Motion& drift, bool& 
         return 0;  // w.q_build is built again whole
     whole = false;
     // the rows between particles that stayed, in their order
-    index* rows = w.pairs->data;
-    index kept = 0;
-    for (index p = 0; p < w.list[0]; ++p) {
-        const index* row = rows + kSlots * p;
-        if (moved[8 * row[1]] != 0.0 || moved[8 * row[2]] != 0.0 || moved[8 * row[3]] != 0.0 ||
-            moved[8 * row[4]] != 0.0)
-            continue;
-        if (kept != p) std::memmove(rows + kSlots * kept, row, sizeof(index) * kSlots);
-        ++kept;
-    }
+    const index kept = drop_moved(w.pairs->data, w.list[0], moved);
     Stage part = st;
     part.q0 = w.q_build;
     part.swept = false;
